@@ -1,0 +1,174 @@
+//! Bounding-volume hierarchy over triangle AABBs: the broad phase of
+//! collision detection (DESIGN "collision detection"). Built once per mesh;
+//! the cloth's is refitted every step with the same topology, the rigid
+//! body's lives in body space and never changes.
+//!
+//! Nodes are stored so that both children come after their parent, as a
+//! consecutive pair, so a reverse sweep refits bottom-up; the flat layout is
+//! what a GPU traversal reads too.
+
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn of_points(points: &[Vec3]) -> Aabb {
+        points.iter().fold(Aabb::EMPTY, |b, p| b.grow(*p))
+    }
+
+    pub fn grow(self, p: Vec3) -> Aabb {
+        Aabb {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    pub fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Whether a box of half-size `r` around `p` overlaps this one.
+    pub fn near(&self, p: Vec3, r: f32) -> bool {
+        (p + r).cmpge(self.min).all() && (p - r).cmple(self.max).all()
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Node {
+    pub bounds: Aabb,
+    /// Leaf: first index into `Bvh::order`; internal: index of the left child
+    /// (the right one is `first + 1`).
+    pub first: u32,
+    /// Primitives in a leaf; 0 for an internal node.
+    pub count: u32,
+}
+
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    pub nodes: Vec<Node>,
+    /// Primitive indices in leaf order.
+    pub order: Vec<u32>,
+}
+
+const LEAF_SIZE: usize = 4;
+
+impl Bvh {
+    /// Median split on the longest axis of the centroid bounds.
+    pub fn build(boxes: &[Aabb]) -> Bvh {
+        let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+        let mut nodes = vec![Node {
+            bounds: Aabb::EMPTY,
+            first: 0,
+            count: boxes.len() as u32,
+        }];
+        let mut todo = vec![(0usize, 0usize, boxes.len())];
+        while let Some((node, start, end)) = todo.pop() {
+            let prims = &mut order[start..end];
+            let bounds = prims
+                .iter()
+                .fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
+            nodes[node].bounds = bounds;
+            if prims.len() <= LEAF_SIZE {
+                nodes[node].first = start as u32;
+                nodes[node].count = prims.len() as u32;
+                continue;
+            }
+            let centers = prims
+                .iter()
+                .fold(Aabb::EMPTY, |b, &i| b.grow(boxes[i as usize].center()));
+            let extent = centers.max - centers.min;
+            let axis = if extent.x >= extent.y && extent.x >= extent.z {
+                0
+            } else if extent.y >= extent.z {
+                1
+            } else {
+                2
+            };
+            let mid = prims.len() / 2;
+            prims.select_nth_unstable_by(mid, |&a, &b| {
+                let ca = boxes[a as usize].center()[axis];
+                let cb = boxes[b as usize].center()[axis];
+                ca.total_cmp(&cb).then(a.cmp(&b))
+            });
+            let left = nodes.len();
+            nodes.push(Node {
+                bounds: Aabb::EMPTY,
+                first: 0,
+                count: 0,
+            });
+            nodes.push(nodes[left]);
+            nodes[node].first = left as u32;
+            nodes[node].count = 0;
+            todo.push((left, start, start + mid));
+            todo.push((left + 1, start + mid, end));
+        }
+        Bvh { nodes, order }
+    }
+
+    /// Recompute every node's bounds from new primitive boxes (same topology).
+    pub fn refit(&mut self, boxes: &[Aabb]) {
+        for k in (0..self.nodes.len()).rev() {
+            let node = self.nodes[k];
+            let bounds = if node.count > 0 {
+                let range = node.first as usize..(node.first + node.count) as usize;
+                self.order[range]
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]))
+            } else {
+                let l = node.first as usize;
+                self.nodes[l].bounds.union(self.nodes[l + 1].bounds)
+            };
+            self.nodes[k].bounds = bounds;
+        }
+    }
+
+    /// Calls `visit` for every primitive whose box overlaps the box of
+    /// half-size `r` around `p`.
+    pub fn query(&self, p: Vec3, r: f32, mut visit: impl FnMut(u32)) {
+        if self.order.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            if !node.bounds.near(p, r) {
+                continue;
+            }
+            if node.count > 0 {
+                for &i in &self.order[node.first as usize..(node.first + node.count) as usize] {
+                    visit(i);
+                }
+            } else {
+                stack[top] = node.first;
+                stack[top + 1] = node.first + 1;
+                top += 2;
+            }
+        }
+    }
+}
+
+/// The bounding box of each triangle.
+pub fn triangle_boxes(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Aabb> {
+    triangles
+        .iter()
+        .map(|t| Aabb::of_points(&t.map(|i| positions[i as usize])))
+        .collect()
+}

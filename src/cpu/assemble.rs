@@ -1,0 +1,104 @@
+//! Stage "assemble": the linearised backward Euler system (thesis eqs. 1–3
+//! with the velocity Jacobian D):
+//!   (M − hD − h²K) v' = M v + h f − h D v.
+//! Springs carry Rayleigh damping D = −αM + βK, whose force D v cancels
+//! from the right-hand side; contacts add their own K_c and D_c.
+//! Mirrors wgsl/assemble.wgsl: per-vertex gathers over the adjacency, then
+//! the contacts.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::cpu::GRAIN;
+use crate::cpu::collide::Contact;
+use crate::cpu::contact::Response;
+use crate::cpu::pcg::BlockMatrix;
+use crate::scene::Cloth;
+
+/// Scalars of one step.
+#[derive(Clone, Copy, Debug)]
+pub struct StepParams {
+    pub dt: f32,
+    pub gravity: Vec3,
+    /// Rayleigh α (1/s) and β (s).
+    pub damping_mass: f32,
+    pub damping_stiffness: f32,
+}
+
+/// Springs and gravity: A's diagonal and spring blocks, and b.
+pub fn springs_and_inertia(
+    cloth: &Cloth,
+    p: &StepParams,
+    v: &[Vec3],
+    spring_forces: &[Vec3],
+    spring_blocks: &[Mat3],
+    a: &mut BlockMatrix,
+    b: &mut [Vec3],
+) {
+    let h = p.dt;
+    let m = cloth.vertex_mass;
+    // A_ij = −(h² + hβ) K_s; A_ii = (1 + hα) m I + (h² + hβ) Σ K_s.
+    let k_scale = h * h + h * p.damping_stiffness;
+    let mass_diag = Mat3::from_diagonal(Vec3::splat((1.0 + h * p.damping_mass) * m));
+    let adj = &cloth.adjacency;
+    a.off
+        .par_iter_mut()
+        .with_min_len(GRAIN)
+        .zip(spring_blocks)
+        .for_each(|(o, k)| *o = -k_scale * *k);
+    a.diag
+        .par_iter_mut()
+        .with_min_len(GRAIN)
+        .zip(b.par_iter_mut())
+        .enumerate()
+        .for_each(|(i, (d, bi))| {
+            let mut k_sum = Mat3::ZERO;
+            let mut f = m * p.gravity;
+            for k in adj.range(i) {
+                let s = adj.spring[k] as usize;
+                k_sum += spring_blocks[s];
+                // spring_forces[s] acts on the spring's first vertex.
+                let sign = if cloth.springs[s][0] as usize == i {
+                    1.0
+                } else {
+                    -1.0
+                };
+                f += sign * spring_forces[s];
+            }
+            *d = mass_diag + k_scale * k_sum;
+            *bi = m * v[i] + h * f;
+        });
+}
+
+/// Adds every contact: b_k += h β_k (f − D_c (v_rel − u)) and
+/// A_kl += −β_k β_l (h D_c + h² K_c), the off-diagonal pairs landing on
+/// the spring along each edge of the cloth triangle.
+pub fn contacts(
+    cloth: &Cloth,
+    dt: f32,
+    v: &[Vec3],
+    contacts: &[Contact],
+    responses: &[Response],
+    a: &mut BlockMatrix,
+    b: &mut [Vec3],
+) {
+    let h = dt;
+    for (c, r) in contacts.iter().zip(responses) {
+        let block = -(h * r.damping + h * h * r.stiffness);
+        let cloth_velocity = c.relative_velocity(v) - c.velocity_offset;
+        let rhs = h * (r.force - r.damping * cloth_velocity);
+        let count = c.vertex_count();
+        for k in 0..count {
+            let i = c.vertices[k] as usize;
+            b[i] += c.beta[k] * rhs;
+            a.diag[i] += c.beta[k] * c.beta[k] * block;
+        }
+        if let Some(t) = c.cloth_triangle {
+            let edge_springs = cloth.triangle_springs[t as usize];
+            for (e, &s) in edge_springs.iter().enumerate() {
+                let (k, l) = (e, (e + 1) % 3);
+                a.off[s as usize] += c.beta[k] * c.beta[l] * block;
+            }
+        }
+    }
+}

@@ -1,0 +1,253 @@
+//! Stage "collide": contact detection in both directions (thesis 2.2–2.3),
+//! with a BVH broad phase. Mirrors wgsl/collide.wgsl.
+//!
+//! (a) vertex–face: each cloth vertex x against the rigid triangles.
+//! (b) face–vertex: each rigid vertex p against the cloth triangles.
+//! The proximity test is the same: the projection onto the triangle's plane
+//! falls inside it and the signed distance d = (x − a)·n lies in
+//! (−max_depth, ε); of several candidates the one with the smallest
+//! |d̃| = ε − d wins (ties: the lower triangle index, so the result does not
+//! depend on traversal order).
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::bvh::{Bvh, triangle_boxes};
+use crate::cpu::GRAIN;
+use crate::cpu::rigid::RigidFrame;
+use crate::math::{barycentric, inside_triangle};
+use crate::scene::{Cloth, RigidBody};
+
+/// One contact, in the form every model and the assembly share.
+///
+/// The cloth vertices carry coefficients β such that
+/// - the force on cloth vertex k is β_k f, where f acts on the penetrating point;
+/// - the penetration depth moves as ∂d̃/∂x_k = β_k nᵀ;
+/// - the relative velocity is v_rel = Σ β_k v_k + u.
+///
+/// (a) one vertex i, β = 1, u = −(rigid surface velocity);
+/// (b) a cloth triangle, β = −w (its barycentric weights), u = the rigid
+///     vertex's velocity. Then blocks enter the system as β_k β_l K_c, which
+///     is the thesis's w_k w_l K_c.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    pub vertices: [u32; 3],
+    pub beta: [f32; 3],
+    /// The cloth triangle of a face–vertex contact.
+    pub cloth_triangle: Option<u32>,
+    /// Rigid triangle (vertex–face) or rigid vertex (face–vertex).
+    pub rigid_feature: u32,
+    /// Unit normal of the surface, pointing to the side the penetrating
+    /// point should be pushed towards.
+    pub normal: Vec3,
+    /// Signed distance d of the penetrating point above the surface.
+    pub distance: f32,
+    /// d̃ = d − ε < 0.
+    pub depth: f32,
+    pub velocity_offset: Vec3,
+}
+
+impl Contact {
+    /// The thesis's collision vector c = n d̃ (network input).
+    pub fn collision_vector(&self) -> Vec3 {
+        self.normal * self.depth
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        if self.cloth_triangle.is_some() { 3 } else { 1 }
+    }
+
+    pub fn relative_velocity(&self, v: &[Vec3]) -> Vec3 {
+        (0..self.vertex_count()).fold(self.velocity_offset, |acc, k| {
+            acc + self.beta[k] * v[self.vertices[k] as usize]
+        })
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Tolerances {
+    pub thickness: f32,
+    pub max_depth: f32,
+}
+
+impl Tolerances {
+    /// How far from a triangle's box a point can be and still be a candidate.
+    pub fn reach(&self) -> f32 {
+        self.thickness.max(self.max_depth)
+    }
+}
+
+/// The narrow-phase test: `Some((d, barycentrics))` when `p` is in contact
+/// with triangle (a, b, c) of unit normal n.
+pub fn point_triangle(p: Vec3, tri: [Vec3; 3], n: Vec3, tol: Tolerances) -> Option<(f32, Vec3)> {
+    let d = (p - tri[0]).dot(n);
+    if !(d > -tol.max_depth && d < tol.thickness) {
+        return None;
+    }
+    let w = barycentric(p, tri[0], tri[1], tri[2])?;
+    inside_triangle(w).then_some((d, w))
+}
+
+/// The candidate that wins (larger d, then lower index).
+#[derive(Clone, Copy, Debug)]
+pub struct Best {
+    pub triangle: u32,
+    pub distance: f32,
+    pub weights: Vec3,
+    /// The triangle's unit normal (in the space the query ran in).
+    pub normal: Vec3,
+}
+
+impl Best {
+    pub fn keep(best: &mut Option<Best>, cand: Best) {
+        let better = match best {
+            None => true,
+            Some(b) => {
+                cand.distance > b.distance
+                    || (cand.distance == b.distance && cand.triangle < b.triangle)
+            }
+        };
+        if better {
+            *best = Some(cand);
+        }
+    }
+}
+
+/// The rigid triangle closest to cloth vertex `x` (body-space BVH query).
+pub fn best_rigid_triangle(
+    body: &RigidBody,
+    frame: &RigidFrame,
+    x: Vec3,
+    tol: Tolerances,
+) -> Option<Best> {
+    let p = frame.to_body(x);
+    let mut best = None;
+    body.bvh.query(p, tol.reach(), |t| {
+        let tri = body.mesh.triangles[t as usize].map(|i| body.mesh.vertices[i as usize]);
+        let n = body.face_normals[t as usize];
+        if let Some((d, w)) = point_triangle(p, tri, n, tol) {
+            Best::keep(
+                &mut best,
+                Best {
+                    triangle: t,
+                    distance: d,
+                    weights: w,
+                    normal: n,
+                },
+            );
+        }
+    });
+    best
+}
+
+/// The unit normal of cloth triangle t turned to face away from the rigid
+/// vertex's outward normal: the cloth is two-sided, and a rigid vertex
+/// pushes it along its own outward direction.
+pub fn cloth_normal(cloth: &Cloth, x: &[Vec3], t: u32, rigid_normal: Vec3) -> Vec3 {
+    let [a, b, c] = cloth.triangles[t as usize].map(|i| x[i as usize]);
+    let n = (b - a).cross(c - a).normalize_or_zero();
+    if n.dot(rigid_normal) > 0.0 { -n } else { n }
+}
+
+/// The cloth triangle closest to rigid vertex `p` (cloth BVH query).
+pub fn best_cloth_triangle(
+    cloth: &Cloth,
+    cloth_bvh: &Bvh,
+    x: &[Vec3],
+    p: Vec3,
+    rigid_normal: Vec3,
+    tol: Tolerances,
+) -> Option<Best> {
+    let mut best = None;
+    cloth_bvh.query(p, tol.reach(), |t| {
+        let tri = cloth.triangles[t as usize].map(|i| x[i as usize]);
+        let n = cloth_normal(cloth, x, t, rigid_normal);
+        if n == Vec3::ZERO {
+            return;
+        }
+        if let Some((d, w)) = point_triangle(p, tri, n, tol) {
+            Best::keep(
+                &mut best,
+                Best {
+                    triangle: t,
+                    distance: d,
+                    weights: w,
+                    normal: n,
+                },
+            );
+        }
+    });
+    best
+}
+
+/// (a) vertex–face contacts, one per cloth vertex at most, in vertex order.
+pub fn vertex_face(
+    body: &RigidBody,
+    frame: &RigidFrame,
+    x: &[Vec3],
+    tol: Tolerances,
+) -> Vec<Contact> {
+    x.par_iter()
+        .with_min_len(GRAIN / 8)
+        .enumerate()
+        .filter_map(|(i, &xi)| {
+            let b = best_rigid_triangle(body, frame, xi, tol)?;
+            let i = i as u32;
+            Some(Contact {
+                vertices: [i, i, i],
+                beta: [1.0, 0.0, 0.0],
+                cloth_triangle: None,
+                rigid_feature: b.triangle,
+                normal: frame.rotation * b.normal,
+                distance: b.distance,
+                depth: b.distance - tol.thickness,
+                velocity_offset: -frame.velocity,
+            })
+        })
+        .collect()
+}
+
+/// (b) face–vertex contacts, one per rigid vertex at most, in vertex order.
+pub fn face_vertex(
+    cloth: &Cloth,
+    cloth_bvh: &Bvh,
+    x: &[Vec3],
+    frame: &RigidFrame,
+    tol: Tolerances,
+) -> Vec<Contact> {
+    frame
+        .vertices
+        .par_iter()
+        .with_min_len(GRAIN / 8)
+        .zip(&frame.vertex_normals)
+        .enumerate()
+        .filter_map(|(k, (&p, &np))| {
+            let b = best_cloth_triangle(cloth, cloth_bvh, x, p, np, tol)?;
+            let tri = cloth.triangles[b.triangle as usize];
+            Some(Contact {
+                vertices: tri,
+                beta: (-b.weights).to_array(),
+                cloth_triangle: Some(b.triangle),
+                rigid_feature: k as u32,
+                normal: b.normal,
+                distance: b.distance,
+                depth: b.distance - tol.thickness,
+                velocity_offset: frame.velocity,
+            })
+        })
+        .collect()
+}
+
+/// Broad phase for (b): the cloth hierarchy refitted to positions `x`.
+pub fn refit_cloth(cloth: &Cloth, bvh: &mut Bvh, x: &[Vec3]) {
+    bvh.refit(&triangle_boxes(x, &cloth.triangles));
+}
+
+/// How deep cloth vertices are inside the rigid surface (thickness not
+/// counted): the largest −d over vertex–face proximities, 0 if none.
+pub fn max_penetration(contacts: &[Contact]) -> f32 {
+    contacts
+        .iter()
+        .filter(|c| c.cloth_triangle.is_none())
+        .fold(0.0f32, |m, c| m.max(-c.distance))
+}

@@ -1,0 +1,200 @@
+//! Stage "contact": the collision models, the force each contact exerts and
+//! its Jacobian blocks. Mirrors wgsl/contact.wgsl.
+//!
+//! Every model is a function of the network's inputs, the collision vector
+//! c = n d̃ (d̃ < 0) and the relative velocity v_rel, and returns the force on
+//! the penetrating point with its Jacobians ∂f/∂c and ∂f/∂v_rel. The chain
+//! rule into the system is the same for all of them (with n held fixed
+//! during the step, ∂c/∂x_k = β_k n nᵀ):
+//!   K_c = (∂f/∂c) n nᵀ,  D_c = ∂f/∂v_rel,
+//! each then made symmetric negative semidefinite so A stays SPD.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::config::{ContactConfig, ModelKind};
+use crate::cpu::collide::Contact;
+use crate::math::{outer, project_nsd, symmetric_part};
+
+/// A force and its Jacobians with respect to c and v_rel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceJacobian {
+    pub force: Vec3,
+    pub d_c: Mat3,
+    pub d_v: Mat3,
+}
+
+impl ForceJacobian {
+    const ZERO: ForceJacobian = ForceJacobian {
+        force: Vec3::ZERO,
+        d_c: Mat3::ZERO,
+        d_v: Mat3::ZERO,
+    };
+
+    fn scaled(self, s: f32) -> ForceJacobian {
+        ForceJacobian {
+            force: self.force * s,
+            d_c: self.d_c * s,
+            d_v: self.d_v * s,
+        }
+    }
+}
+
+/// Friction-model coefficients, in the network's input order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coefficients {
+    pub kn: f32,
+    pub kd: f32,
+    pub kt: f32,
+    pub mu: f32,
+}
+
+/// Naive penalty force (thesis eq. 6): f = −c_n d̃ n, which with c = n d̃ is
+/// simply −c_n c; the velocity plays no part.
+pub fn naive(c: Vec3, stiffness: f32) -> ForceJacobian {
+    ForceJacobian {
+        force: -stiffness * c,
+        d_c: Mat3::from_diagonal(Vec3::splat(-stiffness)),
+        d_v: Mat3::ZERO,
+    }
+}
+
+/// The friction model of thesis eqs. 8–9 (after Xu et al.), unscaled: g
+/// with f = s g. From c: |c| = −d̃, n = −c/|c|. With ḋ = −(v_rel·n) the
+/// approach speed and ṫ = v_rel − (v_rel·n) n the tangential velocity,
+///   F_c = max(0, −k_n d̃ + k_d ḋ)                        (eq. 8, no pulling)
+///   g   = F_c n − min(k_t |ṫ|, μ F_c) ṫ/|ṫ|             (eq. 9)
+/// Stick: k_t|ṫ| ≤ μF_c, friction −k_t ṫ (ṫ = 0 lands here: no friction).
+/// Slip: Coulomb friction −μ F_c t̂. Jacobians are exact in each branch,
+/// including the turning of n with c.
+pub fn friction(c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
+    let r = c.length();
+    if r == 0.0 {
+        return ForceJacobian::ZERO; // d̃ = 0: on the surface, no force.
+    }
+    let c_hat = c / r;
+    let n = -c_hat;
+    let p = Mat3::IDENTITY - outer(c_hat, c_hat); // projector onto the tangent plane
+    let approach = v.dot(c_hat); // ḋ = −v·n
+    let f_c = k.kn * r + k.kd * approach;
+    if f_c <= 0.0 {
+        return ForceJacobian::ZERO; // separating faster than the spring pushes
+    }
+    // ∂F_c/∂c = k_n ĉᵀ + k_d vᵀP / r; ∂F_c/∂v = k_d ĉᵀ (rows, stored as vectors).
+    let dfc_dc = k.kn * c_hat + k.kd * (p * v) / r;
+    let dfc_dv = k.kd * c_hat;
+    // Normal part F_c n = −F_c ĉ.
+    let mut force = f_c * n;
+    let mut d_c = -outer(c_hat, dfc_dc) - (f_c / r) * p;
+    let mut d_v = -outer(c_hat, dfc_dv);
+    // ṫ = P v; ∂ṫ/∂v = P; ∂ṫ/∂c = −((ĉ·v) P + ĉ (P v)ᵀ) / r.
+    let t_dot = p * v;
+    let dt_dc = -(approach * p + outer(c_hat, p * v)) / r;
+    let speed = t_dot.length();
+    if k.kt * speed <= k.mu * f_c {
+        force -= k.kt * t_dot;
+        d_c -= k.kt * dt_dc;
+        d_v -= k.kt * p;
+    } else {
+        let t_hat = t_dot / speed;
+        let turn = (Mat3::IDENTITY - outer(t_hat, t_hat)) * (1.0 / speed); // ∂t̂/∂ṫ
+        force -= k.mu * f_c * t_hat;
+        d_c -= k.mu * (outer(t_hat, dfc_dc) + f_c * turn * dt_dc);
+        d_v -= k.mu * (outer(t_hat, dfc_dv) + f_c * turn * p);
+    }
+    ForceJacobian { force, d_c, d_v }
+}
+
+/// A collision model with its coefficients, as selected for a run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Model {
+    Naive {
+        stiffness: f32,
+    },
+    Friction {
+        scale: f32,
+        coefficients: Coefficients,
+    },
+}
+
+impl Model {
+    pub fn new(kind: ModelKind, c: &ContactConfig) -> Model {
+        match kind {
+            ModelKind::Naive => Model::Naive {
+                stiffness: c.naive_stiffness,
+            },
+            ModelKind::Friction => Model::Friction {
+                scale: c.force_scale,
+                coefficients: Coefficients {
+                    kn: c.kn,
+                    kd: c.kd,
+                    kt: c.kt,
+                    mu: c.mu,
+                },
+            },
+        }
+    }
+
+    /// Force on the penetrating point and its Jacobians, in force units.
+    pub fn evaluate(&self, c: Vec3, v_rel: Vec3) -> ForceJacobian {
+        match self {
+            Model::Naive { stiffness } => naive(c, *stiffness),
+            Model::Friction {
+                scale,
+                coefficients,
+            } => friction(c, v_rel, coefficients).scaled(*scale),
+        }
+    }
+}
+
+/// What one contact adds to the implicit system.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Response {
+    /// Force on the penetrating point (cloth vertex k receives β_k f).
+    pub force: Vec3,
+    /// K_c, symmetric negative semidefinite.
+    pub stiffness: Mat3,
+    /// D_c, symmetric negative semidefinite.
+    pub damping: Mat3,
+}
+
+/// The chain rule into the system: K_c = (∂f/∂c) n nᵀ and D_c = ∂f/∂v_rel,
+/// each projected to the nearest symmetric NSD matrix.
+///
+/// One correction first: Coulomb friction has a constant magnitude while
+/// sliding, so its Jacobian along the sliding direction t̂ is zero and a
+/// linearised step would apply μF_c explicitly, reversing the sliding within
+/// the step (a 0.2 g vertex under 3.5 N gains 175 m/s in 10 ms). D_c is
+/// therefore floored along t̂ at the secant η = −(f·t̂)/|ṫ|, the damping that
+/// takes the tangential force to zero with the tangential velocity (lagged
+/// friction, as in IPC). In the stick branch the floor is already met.
+pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
+    let t_dot = v_rel - v_rel.dot(normal) * normal;
+    let speed = t_dot.length();
+    let mut damping = symmetric_part(fj.d_v);
+    if speed > 0.0 {
+        let t_hat = t_dot / speed;
+        let secant = -fj.force.dot(t_hat) / speed;
+        let deficit = secant + t_hat.dot(damping * t_hat);
+        if deficit > 0.0 {
+            damping -= deficit * outer(t_hat, t_hat);
+        }
+    }
+    Response {
+        force: fj.force,
+        stiffness: project_nsd(fj.d_c * outer(normal, normal)),
+        damping: project_nsd(damping),
+    }
+}
+
+/// Evaluates the model for every contact at velocities `v`.
+pub fn respond(model: &Model, contacts: &[Contact], v: &[Vec3], out: &mut Vec<Response>) {
+    contacts
+        .par_iter()
+        .map(|c| {
+            let v_rel = c.relative_velocity(v);
+            let fj = model.evaluate(c.collision_vector(), v_rel);
+            response(&fj, c.normal, v_rel)
+        })
+        .collect_into_vec(out);
+}

@@ -1,0 +1,251 @@
+//! The CPU reference path: each module is one stage of the step, the plain
+//! statement of its equation and the twin of the WGSL file of the same name.
+//! [`CpuSim`] holds the per-scene state and runs the stages in order.
+
+pub mod assemble;
+pub mod collide;
+pub mod contact;
+pub mod integrate;
+pub mod pcg;
+pub mod rigid;
+pub mod springs;
+
+use std::time::Instant;
+
+use glam::{Mat3, Vec3};
+
+use crate::bvh::{Bvh, triangle_boxes};
+use crate::scene::Scene;
+use assemble::StepParams;
+use collide::{Contact, Tolerances};
+use contact::{Model, Response};
+use pcg::{BlockMatrix, PcgOutcome, PcgScratch};
+use rigid::RigidFrame;
+
+/// Smallest slice a rayon task gets: below this, splitting costs more than
+/// the work (a 32² cloth's vectors stay on one thread).
+pub const GRAIN: usize = 2048;
+
+/// The stages of one step, in order; `stage_ms` in reports uses these names.
+pub const STAGES: [&str; 8] = [
+    "rigid",
+    "collide",
+    "contact",
+    "springs",
+    "assemble",
+    "pcg",
+    "integrate",
+    "measure",
+];
+
+/// What one step did.
+#[derive(Clone, Debug, Default)]
+pub struct StepStats {
+    pub pcg: PcgOutcome,
+    pub contacts: usize,
+    /// Deepest cloth vertex inside the rigid surface after the step, m.
+    pub max_penetration: f32,
+    /// Seconds spent in each of [`STAGES`].
+    pub stage_seconds: [f64; STAGES.len()],
+}
+
+/// Cloth state: positions, velocities, time.
+#[derive(Clone, Debug)]
+pub struct State {
+    pub x: Vec<Vec3>,
+    pub v: Vec<Vec3>,
+    pub time: f64,
+    pub step: u64,
+}
+
+pub struct CpuSim {
+    pub scene: Scene,
+    pub state: State,
+    pub model: Model,
+    params: StepParams,
+    tolerances: Tolerances,
+    cloth_bvh: Bvh,
+    frame: RigidFrame,
+    contacts: Vec<Contact>,
+    responses: Vec<Response>,
+    spring_forces: Vec<Vec3>,
+    spring_blocks: Vec<Mat3>,
+    matrix: BlockMatrix,
+    rhs: Vec<Vec3>,
+    scratch: PcgScratch,
+}
+
+impl CpuSim {
+    pub fn new(scene: Scene) -> CpuSim {
+        let cfg = &scene.config;
+        let cloth = &scene.cloth;
+        let n = cloth.vertex_count();
+        let state = State {
+            x: cloth.rest_positions.clone(),
+            v: vec![Vec3::ZERO; n],
+            time: 0.0,
+            step: 0,
+        };
+        let params = StepParams {
+            dt: cfg.solver.dt,
+            gravity: Vec3::from_array(cfg.solver.gravity),
+            damping_mass: cfg.cloth.damping_mass,
+            damping_stiffness: cfg.cloth.damping_stiffness,
+        };
+        CpuSim {
+            model: Model::new(cfg.model, &cfg.contact),
+            tolerances: Tolerances {
+                thickness: cfg.contact.thickness,
+                max_depth: cfg.contact.max_depth,
+            },
+            cloth_bvh: Bvh::build(&triangle_boxes(&cloth.rest_positions, &cloth.triangles)),
+            frame: RigidFrame::default(),
+            contacts: Vec::new(),
+            responses: Vec::new(),
+            spring_forces: vec![Vec3::ZERO; cloth.springs.len()],
+            spring_blocks: vec![Mat3::ZERO; cloth.springs.len()],
+            matrix: BlockMatrix::new(n, cloth.springs.len()),
+            rhs: vec![Vec3::ZERO; n],
+            scratch: PcgScratch::default(),
+            params,
+            state,
+            scene,
+        }
+    }
+
+    /// The contacts the last step responded to.
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts
+    }
+
+    /// The system the last step solved.
+    pub fn system(&self) -> (&BlockMatrix, &[Vec3]) {
+        (&self.matrix, &self.rhs)
+    }
+
+    /// The rigid body as placed by the last step.
+    pub fn rigid_frame(&self) -> Option<&RigidFrame> {
+        self.scene.rigid.as_ref().map(|_| &self.frame)
+    }
+
+    /// One backward Euler step. The rigid body is first moved to the end of
+    /// the step, so contacts are found against where it will be.
+    pub fn step(&mut self) -> StepStats {
+        let mut stats = StepStats::default();
+        let mut clock = Instant::now();
+        let mut lap = |stage: usize, stats: &mut StepStats| {
+            let now = Instant::now();
+            stats.stage_seconds[stage] += (now - clock).as_secs_f64();
+            clock = now;
+        };
+        let cloth = &self.scene.cloth;
+        let h = self.params.dt;
+        let t_end = (self.state.time + h as f64) as f32;
+        let State { x, v, .. } = &mut self.state;
+
+        self.contacts.clear();
+        if let Some(body) = &self.scene.rigid {
+            rigid::transform(body, t_end, &mut self.frame);
+            lap(0, &mut stats);
+            collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
+            self.contacts = collide::vertex_face(body, &self.frame, x, self.tolerances);
+            self.contacts.extend(collide::face_vertex(
+                cloth,
+                &self.cloth_bvh,
+                x,
+                &self.frame,
+                self.tolerances,
+            ));
+            lap(1, &mut stats);
+        }
+        contact::respond(&self.model, &self.contacts, v, &mut self.responses);
+        lap(2, &mut stats);
+        springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks);
+        lap(3, &mut stats);
+        assemble::springs_and_inertia(
+            cloth,
+            &self.params,
+            v,
+            &self.spring_forces,
+            &self.spring_blocks,
+            &mut self.matrix,
+            &mut self.rhs,
+        );
+        assemble::contacts(
+            cloth,
+            h,
+            v,
+            &self.contacts,
+            &self.responses,
+            &mut self.matrix,
+            &mut self.rhs,
+        );
+        lap(4, &mut stats);
+        // v holds the initial guess (last velocity; pinned entries are 0).
+        let cfg = &self.scene.config.solver;
+        stats.pcg = pcg::solve(
+            &self.matrix,
+            &cloth.adjacency,
+            &cloth.pinned,
+            &self.rhs,
+            v,
+            cfg.cg_iters,
+            cfg.cg_tol,
+            &mut self.scratch,
+        );
+        lap(5, &mut stats);
+        integrate::integrate(cloth, h, x, v);
+        lap(6, &mut stats);
+        if let Some(body) = &self.scene.rigid {
+            let after = collide::vertex_face(body, &self.frame, x, self.tolerances);
+            stats.max_penetration = collide::max_penetration(&after);
+        }
+        lap(7, &mut stats);
+
+        stats.contacts = self.contacts.len();
+        self.state.time += h as f64;
+        self.state.step += 1;
+        stats
+    }
+
+    /// Kinetic, gravitational and elastic energy (J), in f64.
+    pub fn energy(&self) -> Energy {
+        let cloth = &self.scene.cloth;
+        let m = cloth.vertex_mass as f64;
+        let g = Vec3::from_array(self.scene.config.solver.gravity).as_dvec3();
+        let kinetic = self
+            .state
+            .v
+            .iter()
+            .map(|v| 0.5 * m * v.as_dvec3().length_squared())
+            .sum();
+        let gravity = self.state.x.iter().map(|x| -m * g.dot(x.as_dvec3())).sum();
+        Energy {
+            kinetic,
+            gravity,
+            elastic: springs::potential_energy(cloth, &self.state.x),
+        }
+    }
+
+    /// True when every position and velocity is finite.
+    pub fn is_finite(&self) -> bool {
+        self.state
+            .x
+            .iter()
+            .chain(&self.state.v)
+            .all(|p| p.is_finite())
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Energy {
+    pub kinetic: f64,
+    pub gravity: f64,
+    pub elastic: f64,
+}
+
+impl Energy {
+    pub fn total(&self) -> f64 {
+        self.kinetic + self.gravity + self.elastic
+    }
+}

@@ -1,0 +1,46 @@
+//! Stage "rigid": places the kinematic body at time t. Mirrors wgsl/rigid.wgsl.
+
+use glam::{Quat, Vec3};
+use rayon::prelude::*;
+
+use crate::cpu::GRAIN;
+use crate::scene::RigidBody;
+
+/// The rigid body in world space at one instant.
+#[derive(Clone, Debug, Default)]
+pub struct RigidFrame {
+    pub rotation: Quat,
+    pub translation: Vec3,
+    /// Velocity of every point of the body (it only translates).
+    pub velocity: Vec3,
+    pub vertices: Vec<Vec3>,
+    pub vertex_normals: Vec<Vec3>,
+}
+
+impl RigidFrame {
+    /// World → body space.
+    pub fn to_body(&self, p: Vec3) -> Vec3 {
+        self.rotation.inverse() * (p - self.translation)
+    }
+}
+
+pub fn transform(body: &RigidBody, t: f32, frame: &mut RigidFrame) {
+    frame.rotation = body.rotation;
+    frame.translation = body.translation(t);
+    frame.velocity = body.motion.velocity(t);
+    let (r, tr) = (frame.rotation, frame.translation);
+    frame.vertices.resize(body.mesh.vertices.len(), Vec3::ZERO);
+    frame
+        .vertex_normals
+        .resize(body.mesh.vertices.len(), Vec3::ZERO);
+    frame
+        .vertices
+        .par_iter_mut()
+        .with_min_len(GRAIN)
+        .zip(frame.vertex_normals.par_iter_mut())
+        .zip(body.mesh.vertices.par_iter().zip(&body.vertex_normals))
+        .for_each(|((x, n), (xb, nb))| {
+            *x = r * *xb + tr;
+            *n = r * *nb;
+        });
+}

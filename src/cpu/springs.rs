@@ -1,0 +1,58 @@
+//! Stage "springs": force and stiffness block of every spring (thesis 2.2,
+//! eqs. 4–5). Mirrors wgsl/springs.wgsl: one output per spring, which the
+//! assembly gathers per vertex.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::cpu::GRAIN;
+use crate::math::outer;
+use crate::scene::Cloth;
+
+/// Force on the spring's first vertex i (the second gets the opposite) and
+/// the block K_s = ∂f_i/∂x_j, so K_ii −= K_s and K_ij += K_s (eq. 5).
+///
+/// With Δx = x_j − x_i, l = |Δx|, d = Δx / l:
+/// f_i = E (l − L) d and K_s = E [ (L/l) d dᵀ + (1 − L/l) I ] (eq. 4,
+/// rewritten with the unit direction). Under compression (l < L) the
+/// matrix keeps 1 − L/l at 0 so K stays negative semidefinite and the
+/// implicit system positive definite; the force is never clamped.
+pub fn spring(xi: Vec3, xj: Vec3, rest: f32, stiffness: f32) -> (Vec3, Mat3) {
+    let dx = xj - xi;
+    let l = dx.length();
+    if l <= f32::MIN_POSITIVE {
+        // Coincident endpoints: no direction, hence no force; the block
+        // stays isotropic so the system is still well posed.
+        return (Vec3::ZERO, Mat3::ZERO);
+    }
+    let d = dx / l;
+    let ratio = rest / l;
+    let force = stiffness * (l - rest) * d;
+    let block = stiffness * (ratio * outer(d, d) + (1.0 - ratio).max(0.0) * Mat3::IDENTITY);
+    (force, block)
+}
+
+/// Evaluates every spring at positions `x`.
+pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Mat3]) {
+    forces
+        .par_iter_mut()
+        .with_min_len(GRAIN)
+        .zip(blocks.par_iter_mut())
+        .zip(cloth.springs.par_iter().zip(&cloth.rest_lengths))
+        .for_each(|((f, k), (&[i, j], &rest))| {
+            (*f, *k) = spring(x[i as usize], x[j as usize], rest, cloth.stiffness);
+        });
+}
+
+/// Elastic potential ½ E (l − L)² summed over all springs.
+pub fn potential_energy(cloth: &Cloth, x: &[Vec3]) -> f64 {
+    cloth
+        .springs
+        .par_iter()
+        .zip(&cloth.rest_lengths)
+        .map(|(&[i, j], &rest)| {
+            let l = (x[j as usize] - x[i as usize]).length() as f64;
+            0.5 * cloth.stiffness as f64 * (l - rest as f64).powi(2)
+        })
+        .sum()
+}

@@ -1,0 +1,20 @@
+//! wgcloth: an implicit mass-spring cloth simulator with a moving rigid
+//! body and learned collision response, after Yahya (2023), "Collision
+//! resolution for cloth simulations using machine learning".
+//!
+//! - [`config`]: the run configuration (TOML and flags), validated.
+//! - [`scene`]: cloth grid, springs, rigid body and its motion.
+//! - [`cpu`]: the reference step, one module per stage.
+//! - [`run`]: running a scene and reporting on it.
+
+pub mod bvh;
+pub mod config;
+pub mod cpu;
+pub mod error;
+pub mod math;
+pub mod run;
+pub mod scene;
+
+pub use config::Config;
+pub use error::{Error, Result};
+pub use scene::Scene;

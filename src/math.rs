@@ -1,0 +1,162 @@
+//! Small 3-D helpers shared by every stage: outer products, barycentric
+//! coordinates, and the projection that keeps contact blocks symmetric
+//! negative semidefinite so the implicit system stays SPD (DESIGN "physics").
+
+use glam::{Mat3, Vec3};
+
+/// a bᵀ.
+pub fn outer(a: Vec3, b: Vec3) -> Mat3 {
+    Mat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// (M + Mᵀ) / 2.
+pub fn symmetric_part(m: Mat3) -> Mat3 {
+    (m + m.transpose()) * 0.5
+}
+
+/// Barycentric coordinates (u, v, w) of the projection of `p` onto the plane
+/// of triangle (a, b, c), so that proj = u a + v b + w c. `None` for a
+/// degenerate triangle.
+pub fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<Vec3> {
+    let e0 = b - a;
+    let e1 = c - a;
+    let ep = p - a;
+    let d00 = e0.dot(e0);
+    let d01 = e0.dot(e1);
+    let d11 = e1.dot(e1);
+    let d20 = ep.dot(e0);
+    let d21 = ep.dot(e1);
+    let denom = d00 * d11 - d01 * d01;
+    if denom <= f32::EPSILON * d00 * d11 {
+        return None;
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    Some(Vec3::new(1.0 - v - w, v, w))
+}
+
+/// True when all barycentric coordinates lie in [0, 1] (thesis 2.3).
+pub fn inside_triangle(bary: Vec3) -> bool {
+    bary.min_element() >= 0.0 && bary.max_element() <= 1.0
+}
+
+/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations:
+/// returns the eigenvalues and the matrix whose columns are the eigenvectors.
+/// Jacobi is branch-light and fixed-cost, which is why the GPU twin uses it too.
+pub fn symmetric_eigen(m: Mat3) -> (Vec3, Mat3) {
+    let mut a = m.to_cols_array_2d(); // a[col][row]; symmetric, so either reads.
+    let mut v = [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..8 {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if off <= 1e-14 * diag || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
+            let apq = a[p][q];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A ← Jᵀ A J on rows/cols p, q.
+            for k in 0..3 {
+                let akp = a[k][p];
+                let akq = a[k][q];
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let apk = a[p][k];
+                let aqk = a[q][k];
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in &mut v {
+                let vp = row[p];
+                let vq = row[q];
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let values = Vec3::new(a[0][0], a[1][1], a[2][2]);
+    // v[row][col] holds eigenvector `col` in its column.
+    let vectors = Mat3::from_cols(
+        Vec3::new(v[0][0], v[1][0], v[2][0]),
+        Vec3::new(v[0][1], v[1][1], v[2][1]),
+        Vec3::new(v[0][2], v[1][2], v[2][2]),
+    );
+    (values, vectors)
+}
+
+/// The nearest symmetric negative semidefinite matrix (Frobenius norm):
+/// symmetric part, then positive eigenvalues clamped to zero. Every contact
+/// block passes through here before it enters K or D.
+pub fn project_nsd(m: Mat3) -> Mat3 {
+    let (values, q) = symmetric_eigen(symmetric_part(m));
+    let clamped = values.min(Vec3::ZERO);
+    q * Mat3::from_diagonal(clamped) * q.transpose()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sym(seed: u32) -> Mat3 {
+        // A deterministic, irregular symmetric matrix.
+        let f = |k: u32| ((seed * 7919 + k * 104_729) % 2003) as f32 / 1001.0 - 1.0;
+        let m = Mat3::from_cols(
+            Vec3::new(f(1), f(2), f(3)),
+            Vec3::new(f(4), f(5), f(6)),
+            Vec3::new(f(7), f(8), f(9)),
+        );
+        symmetric_part(m)
+    }
+
+    #[test]
+    fn eigen_reconstructs_and_is_orthonormal() {
+        for seed in 0..200 {
+            let m = sym(seed);
+            let (l, q) = symmetric_eigen(m);
+            let back = q * Mat3::from_diagonal(l) * q.transpose();
+            assert!((back - m).abs().to_cols_array().iter().all(|e| *e < 1e-5));
+            let qtq = q.transpose() * q - Mat3::IDENTITY;
+            assert!(qtq.abs().to_cols_array().iter().all(|e| *e < 1e-5));
+        }
+    }
+
+    #[test]
+    fn nsd_projection_is_nsd_and_idempotent() {
+        for seed in 0..200 {
+            let p = project_nsd(sym(seed));
+            let (l, _) = symmetric_eigen(p);
+            assert!(l.max_element() < 1e-5, "{l:?}");
+            let pp = project_nsd(p);
+            assert!((pp - p).abs().to_cols_array().iter().all(|e| *e < 1e-5));
+        }
+        // An already-NSD matrix is unchanged.
+        let n = Vec3::new(0.3, -0.4, 0.5).normalize();
+        let k = outer(n, n) * -7.0;
+        assert!(
+            (project_nsd(k) - k)
+                .abs()
+                .to_cols_array()
+                .iter()
+                .all(|e| *e < 1e-5)
+        );
+    }
+
+    #[test]
+    fn barycentric_inside_and_outside() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        let w = barycentric(Vec3::new(0.25, 0.25, 3.0), a, b, c).unwrap();
+        assert!((w - Vec3::new(0.5, 0.25, 0.25)).length() < 1e-6);
+        assert!(inside_triangle(w));
+        let w = barycentric(Vec3::new(1.0, 1.0, 0.0), a, b, c).unwrap();
+        assert!(!inside_triangle(w));
+        assert!(barycentric(Vec3::ZERO, a, a, a).is_none());
+    }
+}

@@ -1,0 +1,85 @@
+//! A scene: the cloth and the optional rigid body built from a validated
+//! [`Config`]. Immutable during a run; the per-step state lives with the
+//! backend that steps it.
+
+pub mod cloth;
+pub mod mesh;
+pub mod rigid;
+
+use glam::{Quat, Vec3};
+
+use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
+use crate::error::{Error, Result};
+pub use cloth::Cloth;
+pub use mesh::TriMesh;
+pub use rigid::{Motion, RigidBody};
+
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub config: Config,
+    pub cloth: Cloth,
+    pub rigid: Option<RigidBody>,
+}
+
+fn quat(r: &Rotation) -> Quat {
+    Quat::from_axis_angle(Vec3::from_array(r.axis).normalize(), r.degrees.to_radians())
+}
+
+impl Scene {
+    pub fn new(config: &Config) -> Result<Scene> {
+        config.validate()?;
+        let c = &config.cloth;
+        let [nx, ny] = c.grid;
+        let pinned: Vec<u32> = match c.pins {
+            Pins::TopCorners => vec![0, nx - 1],
+            Pins::TopEdge => (0..nx).collect(),
+            Pins::None => vec![],
+        };
+        let (rot, center, [w, h]) = (quat(&c.rotation), Vec3::from_array(c.center), c.size);
+        let cloth = Cloth::grid(nx, ny, c.mass, c.stiffness, &pinned, |u, v| {
+            center + rot * Vec3::new((u - 0.5) * w, (0.5 - v) * h, 0.0)
+        });
+
+        let rigid = match config.scene {
+            SceneKind::Hang => None,
+            SceneKind::Sphere => {
+                let r = &config.rigid;
+                let mesh = match r.shape {
+                    Shape::Sphere => TriMesh::icosphere(r.radius, r.subdivisions),
+                    Shape::Box => TriMesh::cuboid(Vec3::from_array(r.half_extents), r.subdivisions),
+                    Shape::Plane => TriMesh::plane(r.plane_size, r.subdivisions),
+                    Shape::Obj => {
+                        let path = r.mesh.as_ref().ok_or_else(|| {
+                            Error::config("rigid.mesh", "shape `obj` needs a mesh file")
+                        })?;
+                        TriMesh::load_obj(path)?.scaled(r.scale)
+                    }
+                };
+                let m = &r.motion;
+                let motion = match m.kind {
+                    MotionKind::Static => Motion::Static,
+                    MotionKind::Linear => Motion::Linear {
+                        velocity: Vec3::from_array(m.velocity),
+                    },
+                    MotionKind::Sinusoid => Motion::Sinusoid {
+                        axis: Vec3::from_array(m.axis).normalize(),
+                        amplitude: m.amplitude,
+                        period: m.period,
+                        phase: m.phase_deg.to_radians(),
+                    },
+                };
+                Some(RigidBody::new(
+                    mesh,
+                    quat(&r.rotation),
+                    Vec3::from_array(r.position),
+                    motion,
+                ))
+            }
+        };
+        Ok(Scene {
+            config: config.clone(),
+            cloth,
+            rigid,
+        })
+    }
+}
