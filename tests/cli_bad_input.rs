@@ -1,0 +1,465 @@
+//! The `wgcloth` binary on bad input: every case must exit with code 2,
+//! say what is wrong in one `error:` line naming the bad field or file,
+//! and never panic. Two tiny valid runs check the happy path and the
+//! `--report` JSON. Every run is `--grid 4 --steps 2` so the file is fast.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Flags that keep a run tiny if validation ever lets it through.
+const TINY: &[&str] = &["--grid", "4", "--steps", "2"];
+
+fn wgcloth(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_wgcloth"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("failed to start the wgcloth binary")
+}
+
+/// `run --backend cpu --grid 4 --steps 2` followed by `extra` (whose own
+/// `--grid` replaces the tiny one: clap rejects a repeated flag).
+fn run_tiny(extra: &[&str]) -> Output {
+    let mut args = vec!["run", "--backend", "cpu"];
+    if extra.contains(&"--grid") {
+        args.extend_from_slice(&["--steps", "2"]);
+    } else {
+        args.extend_from_slice(TINY);
+    }
+    args.extend_from_slice(extra);
+    wgcloth(&args)
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Stderr lines that matter: not empty, not the environment's
+/// `XDG_RUNTIME_DIR` complaint.
+fn stderr_lines(out: &Output) -> Vec<String> {
+    stderr(out)
+        .trim()
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with("XDG_RUNTIME_DIR"))
+        .map(String::from)
+        .collect()
+}
+
+fn describe(case: &str, out: &Output) -> String {
+    format!(
+        "case `{case}`: exit {:?}\n--- stderr ---\n{}\n--- stdout ---\n{}",
+        out.status.code(),
+        stderr(out),
+        String::from_utf8_lossy(&out.stdout)
+    )
+}
+
+fn assert_exit_2_no_panic(case: &str, out: &Output) {
+    assert!(
+        !stderr(out).contains("panicked"),
+        "panicked\n{}",
+        describe(case, out)
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "expected exit code 2\n{}",
+        describe(case, out)
+    );
+}
+
+/// One of our own errors: exit 2, no panic, exactly one `error:` line
+/// that contains every string of `all_of` and at least one of `any_of`
+/// (when `any_of` is not empty). Returns the line.
+fn expect_error(case: &str, out: &Output, all_of: &[&str], any_of: &[&str]) -> String {
+    assert_exit_2_no_panic(case, out);
+    let lines = stderr_lines(out);
+    assert_eq!(
+        lines.len(),
+        1,
+        "expected exactly one stderr line\n{}",
+        describe(case, out)
+    );
+    let line = &lines[0];
+    assert!(
+        line.starts_with("error:"),
+        "the line should start with `error:`\n{}",
+        describe(case, out)
+    );
+    for s in all_of {
+        assert!(
+            line.contains(s),
+            "the error should name `{s}`\n{}",
+            describe(case, out)
+        );
+    }
+    assert!(
+        any_of.is_empty() || any_of.iter().any(|s| line.contains(s)),
+        "the error should name one of {any_of:?}\n{}",
+        describe(case, out)
+    );
+    line.clone()
+}
+
+/// A bad flag value that clap accepts but validation must reject: the
+/// error names the dotted config field or the flag.
+fn expect_field_error(extra: &[&str], field: &str, flag: &str) {
+    let case = extra.join(" ");
+    let out = run_tiny(extra);
+    expect_error(&case, &out, &[], &[field, flag]);
+}
+
+/// A clap usage error: exit 2, no panic, and the first line names `what`.
+fn expect_clap_error(case: &str, out: &Output, what: &str) {
+    assert_exit_2_no_panic(case, out);
+    let lines = stderr_lines(out);
+    let first = lines.first().map(String::as_str).unwrap_or("");
+    assert!(
+        first.starts_with("error:") && first.contains(what),
+        "the first stderr line should be an `error:` naming `{what}`\n{}",
+        describe(case, out)
+    );
+}
+
+/// A fresh directory for one test's files.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!(
+            "wgcloth-cli-bad-input-{}-{test}",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("create temp dir");
+        TempDir(dir)
+    }
+
+    fn file(&self, name: &str, contents: &str) -> PathBuf {
+        let path = self.0.join(name);
+        std::fs::write(&path, contents).expect("write temp file");
+        path
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("temp path is UTF-8")
+}
+
+/// A closed tetrahedron with outward winding.
+const TETRAHEDRON: &str = "\
+v 0 0 0
+v 0.2 0 0
+v 0 0.2 0
+v 0 0 0.2
+f 1 3 2
+f 1 2 4
+f 1 4 3
+f 2 3 4
+";
+
+// ---------------------------------------------------------------- flags
+
+#[test]
+fn grid_1_is_rejected() {
+    expect_field_error(&["--grid", "1"], "cloth.grid", "--grid");
+}
+
+#[test]
+fn grid_0_is_rejected() {
+    expect_field_error(&["--grid", "0"], "cloth.grid", "--grid");
+}
+
+#[test]
+fn dt_0_is_rejected() {
+    expect_field_error(&["--dt", "0"], "solver.dt", "--dt");
+}
+
+#[test]
+fn dt_negative_is_rejected() {
+    // One token, so the value certainly reaches validation.
+    expect_field_error(&["--dt=-0.01"], "solver.dt", "--dt");
+}
+
+#[test]
+fn dt_negative_as_separate_token_is_rejected_by_name() {
+    // `--dt -0.01` is how a user writes it: the negative number must be
+    // taken as the flag's value (and rejected as `solver.dt`), not read as
+    // an unknown short flag `-0`.
+    expect_field_error(&["--dt", "-0.01"], "solver.dt", "--dt");
+}
+
+#[test]
+fn dt_nan_is_rejected() {
+    expect_field_error(&["--dt", "nan"], "solver.dt", "--dt");
+}
+
+#[test]
+fn dt_inf_is_rejected() {
+    expect_field_error(&["--dt", "inf"], "solver.dt", "--dt");
+}
+
+#[test]
+fn cg_iters_0_is_rejected() {
+    expect_field_error(&["--cg-iters", "0"], "solver.cg_iters", "--cg-iters");
+}
+
+#[test]
+fn cg_tol_negative_is_rejected() {
+    expect_field_error(&["--cg-tol=-1"], "solver.cg_tol", "--cg-tol");
+}
+
+#[test]
+fn cg_tol_negative_as_separate_token_is_rejected_by_name() {
+    expect_field_error(&["--cg-tol", "-1"], "solver.cg_tol", "--cg-tol");
+}
+
+#[test]
+fn steps_not_a_number_is_a_usage_error() {
+    let out = wgcloth(&["run", "--grid", "4", "--steps", "not-a-number"]);
+    expect_clap_error("--steps not-a-number", &out, "--steps");
+}
+
+#[test]
+fn unknown_model_is_a_usage_error() {
+    let out = run_tiny(&["--model", "bogus"]);
+    expect_clap_error("--model bogus", &out, "--model");
+}
+
+#[test]
+fn unknown_backend_is_a_usage_error() {
+    let out = wgcloth(&["run", "--grid", "4", "--steps", "2", "--backend", "bogus"]);
+    expect_clap_error("--backend bogus", &out, "--backend");
+}
+
+#[test]
+fn unknown_scene_is_a_usage_error() {
+    let out = run_tiny(&["--scene", "bogus"]);
+    expect_clap_error("--scene bogus", &out, "--scene");
+}
+
+#[test]
+fn unknown_subcommand_is_a_usage_error() {
+    let out = wgcloth(&["simulate", "--grid", "4"]);
+    expect_clap_error("simulate", &out, "simulate");
+}
+
+#[test]
+fn backend_gpu_is_unsupported() {
+    let out = wgcloth(&["run", "--grid", "4", "--steps", "2", "--backend", "gpu"]);
+    expect_error("--backend gpu", &out, &["--backend", "gpu"], &[]);
+}
+
+// ----------------------------------------------------------------- TOML
+
+#[test]
+fn missing_config_file() {
+    let dir = TempDir::new("missing_config");
+    let path = dir.path("does-not-exist.toml");
+    let out = run_tiny(&["--config", s(&path)]);
+    expect_error("missing --config", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn toml_syntax_error() {
+    let dir = TempDir::new("toml_syntax");
+    let path = dir.file("config.toml", "[cloth\nmass = 1.0\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    expect_error("TOML syntax error", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn toml_unknown_field() {
+    let dir = TempDir::new("toml_unknown_field");
+    let path = dir.file("config.toml", "[cloth]\nmas = 1.0\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    // `mas` is on line 2 (the line number must not be off by one when the
+    // offending key starts its line).
+    expect_error(
+        "TOML unknown field",
+        &out,
+        &[s(&path), "`mas`", "line 2"],
+        &[],
+    );
+}
+
+#[test]
+fn toml_wrong_type() {
+    let dir = TempDir::new("toml_wrong_type");
+    let path = dir.file("config.toml", "[cloth]\nmass = \"heavy\"\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    // toml's message names the type, not the key; the line locates it.
+    expect_error("TOML wrong type", &out, &[s(&path), "line 2"], &[]);
+}
+
+#[test]
+fn toml_negative_mass() {
+    let dir = TempDir::new("toml_negative_mass");
+    let path = dir.file("config.toml", "[cloth]\nmass = -1.0\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    expect_error("cloth.mass = -1", &out, &["cloth.mass"], &[]);
+}
+
+#[test]
+fn toml_zero_stiffness() {
+    let dir = TempDir::new("toml_zero_stiffness");
+    let path = dir.file("config.toml", "[cloth]\nstiffness = 0.0\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    expect_error("cloth.stiffness = 0", &out, &["cloth.stiffness"], &[]);
+}
+
+#[test]
+fn toml_negative_kn_with_friction() {
+    let dir = TempDir::new("toml_negative_kn");
+    let path = dir.file("config.toml", "[contact]\nkn = -1.0\n");
+    let out = run_tiny(&["--model", "friction", "--config", s(&path)]);
+    expect_error("contact.kn = -1, friction", &out, &["contact.kn"], &[]);
+}
+
+#[test]
+fn toml_zero_naive_stiffness_with_naive() {
+    let dir = TempDir::new("toml_zero_naive_stiffness");
+    let path = dir.file("config.toml", "[contact]\nnaive_stiffness = 0.0\n");
+    let out = run_tiny(&["--model", "naive", "--config", s(&path)]);
+    expect_error(
+        "contact.naive_stiffness = 0, naive",
+        &out,
+        &["contact.naive_stiffness"],
+        &[],
+    );
+}
+
+#[test]
+fn toml_zero_dt() {
+    let dir = TempDir::new("toml_zero_dt");
+    let path = dir.file("config.toml", "[solver]\ndt = 0.0\n");
+    let out = run_tiny(&["--config", s(&path)]);
+    expect_error("solver.dt = 0", &out, &["solver.dt"], &[]);
+}
+
+// ------------------------------------------------------------------ OBJ
+
+#[test]
+fn missing_mesh_file() {
+    let dir = TempDir::new("missing_mesh");
+    let path = dir.path("does-not-exist.obj");
+    let out = run_tiny(&["--scene", "sphere", "--mesh", s(&path)]);
+    expect_error("missing --mesh", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn obj_non_finite_vertex() {
+    let dir = TempDir::new("obj_nan");
+    let path = dir.file(
+        "mesh.obj",
+        "v nan 0 0\nv 0.2 0 0\nv 0 0.2 0\nv 0 0 0.2\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    );
+    let out = run_tiny(&["--scene", "sphere", "--mesh", s(&path)]);
+    expect_error("OBJ vertex nan", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn obj_face_index_out_of_range() {
+    let dir = TempDir::new("obj_out_of_range");
+    let path = dir.file("mesh.obj", "v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\nf 1 2 7\n");
+    let out = run_tiny(&["--scene", "sphere", "--mesh", s(&path)]);
+    expect_error("OBJ face index 7 of 3", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn obj_without_faces() {
+    let dir = TempDir::new("obj_no_faces");
+    let path = dir.file("mesh.obj", "v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\n");
+    let out = run_tiny(&["--scene", "sphere", "--mesh", s(&path)]);
+    expect_error("OBJ with no faces", &out, &[s(&path)], &[]);
+}
+
+#[test]
+fn mesh_with_hang_scene() {
+    let dir = TempDir::new("mesh_hang");
+    let path = dir.file("mesh.obj", TETRAHEDRON);
+    let out = run_tiny(&["--scene", "hang", "--mesh", s(&path)]);
+    expect_error("--mesh with --scene hang", &out, &["--mesh"], &[]);
+}
+
+// ------------------------------------------------------------- positive
+
+#[test]
+fn tiny_run_writes_report_json() {
+    let dir = TempDir::new("report");
+    let report = dir.path("report.json");
+    let out = run_tiny(&["--scene", "sphere", "--report", s(&report)]);
+    assert!(
+        !stderr(&out).contains("panicked"),
+        "{}",
+        describe("report", &out)
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", describe("report", &out));
+    let text = std::fs::read_to_string(&report).expect("report file written");
+    let json: serde_json::Value = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("report is not valid JSON ({e}):\n{text}"));
+    let obj = json.as_object().expect("report is a JSON object");
+    for key in [
+        "backend",
+        "adapter",
+        "model",
+        "scene",
+        "grid",
+        "steps",
+        "ms_per_step",
+        "max_penetration",
+        "finite",
+        "cg_iterations_mean",
+        "cg_residual_max",
+        "contacts_mean",
+    ] {
+        assert!(obj.contains_key(key), "report lacks `{key}`:\n{text}");
+    }
+    assert_eq!(json["grid"], serde_json::json!([4, 4]), "{text}");
+    assert_eq!(json["steps"], serde_json::json!(2), "{text}");
+    assert_eq!(json["finite"], serde_json::json!(true), "{text}");
+}
+
+#[test]
+fn tiny_run_with_config_and_mesh_succeeds() {
+    let dir = TempDir::new("config_and_mesh");
+    let mesh = dir.file("tet.obj", TETRAHEDRON);
+    let config = dir.file(
+        "config.toml",
+        "model = \"naive\"\n[cloth]\nmass = 0.3\n[solver]\ndt = 0.005\n",
+    );
+    // The default backend (auto) may print a notice; only the outcome matters.
+    let out = wgcloth(&[
+        "run",
+        "--grid",
+        "4",
+        "--steps",
+        "2",
+        "--config",
+        s(&config),
+        "--mesh",
+        s(&mesh),
+    ]);
+    assert!(
+        !stderr(&out).contains("panicked"),
+        "{}",
+        describe("config and mesh", &out)
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        describe("config and mesh", &out)
+    );
+}

@@ -1,0 +1,49 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use glam::{Mat3, Vec3};
+
+/// Central finite-difference Jacobian of f: R³ → R³ at x.
+pub fn fd_jacobian(x: Vec3, step: f32, f: impl Fn(Vec3) -> Vec3) -> Mat3 {
+    let col = |k: usize| {
+        let mut e = Vec3::ZERO;
+        e[k] = step;
+        (f(x + e) - f(x - e)) / (2.0 * step)
+    };
+    Mat3::from_cols(col(0), col(1), col(2))
+}
+
+pub fn frobenius(m: Mat3) -> f32 {
+    m.to_cols_array().iter().map(|e| e * e).sum::<f32>().sqrt()
+}
+
+/// Asserts |a − b| ≤ rel |b| + abs (Frobenius), naming the case.
+pub fn assert_close(a: Mat3, b: Mat3, rel: f32, abs: f32, what: &str) {
+    let err = frobenius(a - b);
+    assert!(
+        err <= rel * frobenius(b) + abs,
+        "{what}: error {err:.3e} vs |J| {:.3e}\n got {a:?}\n want {b:?}",
+        frobenius(b)
+    );
+}
+
+/// A small deterministic generator (xorshift), so tests need no crate.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_f32(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next_f32()
+    }
+
+    pub fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
+        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+    }
+}

@@ -1,0 +1,236 @@
+//! Every analytic Jacobian against central finite differences.
+
+mod common;
+
+use common::{Rng, assert_close, fd_jacobian};
+use glam::{Mat3, Quat, Vec3};
+use wgcloth::cpu::collide::{self, Contact, Tolerances};
+use wgcloth::cpu::contact::{Coefficients, ForceJacobian, Model, friction, naive};
+use wgcloth::cpu::rigid::{RigidFrame, transform};
+use wgcloth::cpu::springs::spring;
+use wgcloth::math::outer;
+use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
+
+#[test]
+fn spring_block_matches_finite_differences_when_stretched() {
+    let mut rng = Rng(7);
+    for _ in 0..50 {
+        let xi = rng.vec3(-1.0, 1.0);
+        let dir = rng.vec3(-1.0, 1.0).normalize();
+        let rest = rng.range(0.05, 0.2);
+        let xj = xi + dir * rest * rng.range(1.05, 1.5);
+        let (_, block) = spring(xi, xj, rest, 500.0);
+        // K_s = ∂f_i/∂x_j and ∂f_i/∂x_i = −K_s (thesis eq. 5).
+        let d_xj = fd_jacobian(xj, 1e-4, |y| spring(xi, y, rest, 500.0).0);
+        let d_xi = fd_jacobian(xi, 1e-4, |y| spring(y, xj, rest, 500.0).0);
+        assert_close(block, d_xj, 2e-3, 1e-2, "∂f_i/∂x_j stretched");
+        assert_close(-block, d_xi, 2e-3, 1e-2, "∂f_i/∂x_i stretched");
+    }
+}
+
+#[test]
+fn spring_block_under_compression_drops_only_the_negative_isotropic_term() {
+    let mut rng = Rng(11);
+    for _ in 0..50 {
+        let xi = rng.vec3(-1.0, 1.0);
+        let dir = rng.vec3(-1.0, 1.0).normalize();
+        let rest = rng.range(0.05, 0.2);
+        let l = rest * rng.range(0.5, 0.95);
+        let xj = xi + dir * l;
+        let (_, block) = spring(xi, xj, rest, 500.0);
+        let fd = fd_jacobian(xj, 1e-3, |y| spring(xi, y, rest, 500.0).0);
+        // The exact derivative has E (1 − L/l) I < 0 on top of the clamped block.
+        let dropped = 500.0 * (1.0 - rest / l) * Mat3::IDENTITY;
+        assert_close(block + dropped, fd, 5e-3, 5e-2, "∂f_i/∂x_j compressed");
+        // What is kept is symmetric positive semidefinite (K_s = E (L/l) d dᵀ).
+        let (values, _) = wgcloth::math::symmetric_eigen(block);
+        assert!(values.min_element() > -1e-3, "{values:?}");
+    }
+}
+
+fn coefficients() -> Coefficients {
+    Coefficients {
+        kn: 1000.0,
+        kd: 10.0,
+        kt: 100.0,
+        mu: 0.5,
+    }
+}
+
+/// Checks ∂g/∂c and ∂g/∂v of a model at (c, v) against finite differences.
+fn check_model(eval: impl Fn(Vec3, Vec3) -> ForceJacobian, c: Vec3, v: Vec3, what: &str) {
+    let fj = eval(c, v);
+    let d_c = fd_jacobian(c, 1e-5, |y| eval(y, v).force);
+    let d_v = fd_jacobian(v, 1e-4, |y| eval(c, y).force);
+    assert_close(fj.d_c, d_c, 5e-3, 1e-1, &format!("{what}: ∂f/∂c"));
+    assert_close(fj.d_v, d_v, 5e-3, 1e-2, &format!("{what}: ∂f/∂v"));
+}
+
+/// A unit normal, a unit tangent, and c = n d̃.
+fn frame(rng: &mut Rng, depth: f32) -> (Vec3, Vec3, Vec3) {
+    let n = rng.vec3(-1.0, 1.0).normalize();
+    let t = n.any_orthonormal_vector();
+    let t = Quat::from_axis_angle(n, rng.range(0.0, 6.28)) * t;
+    (n, t, n * depth)
+}
+
+#[test]
+fn naive_force_jacobian_matches_finite_differences() {
+    let mut rng = Rng(3);
+    for _ in 0..20 {
+        let depth = -rng.range(0.001, 0.05);
+        let (n, _, c) = frame(&mut rng, depth);
+        check_model(|c, _| naive(c, 300.0), c, rng.vec3(-1.0, 1.0), "naive");
+        // f = −c_n d̃ n pushes out along n (thesis eq. 6).
+        assert!(naive(c, 300.0).force.dot(n) > 0.0);
+    }
+}
+
+#[test]
+fn friction_jacobians_match_finite_differences_in_every_regime() {
+    let k = coefficients();
+    let mut rng = Rng(5);
+    for _ in 0..30 {
+        let depth = -rng.range(0.01, 0.05);
+        let (n, t, c) = frame(&mut rng, depth);
+        let f_c = |v: Vec3| k.kn * -depth + k.kd * -v.dot(n);
+
+        // Stick: small tangential speed, friction = −k_t ṫ.
+        let v = -0.05 * n + 0.01 * t;
+        assert!(k.kt * 0.01 < 0.5 * k.mu * f_c(v));
+        let g = friction(c, v, &k).force;
+        assert!((g - (f_c(v) * n - k.kt * 0.01 * t)).length() < 1e-3 * g.length());
+        check_model(|c, v| friction(c, v, &k), c, v, "friction stick");
+
+        // Slip: Coulomb friction −μ F_c t̂.
+        let v = -0.05 * n + 1.0 * t;
+        assert!(k.kt * 1.0 > 2.0 * k.mu * f_c(v));
+        let g = friction(c, v, &k).force;
+        assert!((g - f_c(v) * (n - k.mu * t)).length() < 1e-3 * g.length());
+        check_model(|c, v| friction(c, v, &k), c, v, "friction slip");
+
+        // Separated: leaving fast enough that eq. 8 would pull; no force at all.
+        let v = 5.0 * n + 0.3 * t;
+        assert!(f_c(v) < 0.0);
+        let fj = friction(c, v, &k);
+        assert_eq!(fj.force, Vec3::ZERO);
+        check_model(|c, v| friction(c, v, &k), c, v, "friction separated");
+    }
+}
+
+/// A sphere of radius 0.2 at the origin and a 9×9 cloth patch at height z0,
+/// moving rigidly at `u`; returns the contacts of both directions.
+fn sphere_and_patch(
+    z0: f32,
+    u: Vec3,
+) -> (Cloth, RigidBody, RigidFrame, Vec<Contact>, Vec<Contact>) {
+    let body = RigidBody::new(
+        TriMesh::icosphere(0.2, 3),
+        Quat::IDENTITY,
+        Vec3::ZERO,
+        Motion::Linear { velocity: u },
+    );
+    let mut frame = RigidFrame::default();
+    transform(&body, 0.0, &mut frame);
+    let cloth = Cloth::grid(9, 9, 0.1, 100.0, &[], |a, b| {
+        Vec3::new((a - 0.5) * 0.2, (0.5 - b) * 0.2, z0)
+    });
+    let bvh = wgcloth::bvh::Bvh::build(&wgcloth::bvh::triangle_boxes(
+        &cloth.rest_positions,
+        &cloth.triangles,
+    ));
+    let tol = Tolerances {
+        thickness: 0.025,
+        max_depth: 0.025,
+    };
+    let vf = collide::vertex_face(&body, &frame, &cloth.rest_positions, tol);
+    let fv = collide::face_vertex(&cloth, &bvh, &cloth.rest_positions, &frame, tol);
+    (cloth, body, frame, vf, fv)
+}
+
+/// The chain rule of the assembly, checked on real contacts: with the
+/// surface frame (n, barycentric weights) frozen over the step, the force on
+/// cloth vertex k, β_k f(c(x), v_rel(v)), has ∂/∂x_l = β_k β_l (∂f/∂c) n nᵀ
+/// and ∂/∂v_l = β_k β_l ∂f/∂v_rel.
+fn check_chain_rule(contact: &Contact, x0: &[Vec3], model: &Model, v: &[Vec3]) {
+    let count = contact.vertex_count();
+    let n = contact.normal;
+    // d(x) = (Σ β_l x_l)·n + const, reproducing the detected distance at x0.
+    let lin = |x: &[Vec3]| {
+        (0..count).fold(Vec3::ZERO, |a, l| {
+            a + contact.beta[l] * x[contact.vertices[l] as usize]
+        })
+    };
+    let offset = contact.depth - lin(x0).dot(n);
+    let force_on = |k: usize, x: &[Vec3], v: &[Vec3]| {
+        let depth = lin(x).dot(n) + offset;
+        contact.beta[k]
+            * model
+                .evaluate(n * depth, contact.relative_velocity(v))
+                .force
+    };
+    let fj = model.evaluate(contact.collision_vector(), contact.relative_velocity(v));
+    for k in 0..count {
+        for l in 0..count {
+            let vl = contact.vertices[l] as usize;
+            let moved = |field: &[Vec3], y: Vec3| {
+                let mut f = field.to_vec();
+                f[vl] = y;
+                f
+            };
+            let kx = fd_jacobian(x0[vl], 1e-5, |y| force_on(k, &moved(x0, y), v));
+            let kv = fd_jacobian(v[vl], 1e-4, |y| force_on(k, x0, &moved(v, y)));
+            let bb = contact.beta[k] * contact.beta[l];
+            assert_close(
+                bb * fj.d_c * outer(n, n),
+                kx,
+                5e-3,
+                1e-1,
+                &format!("K block ({k},{l})"),
+            );
+            assert_close(bb * fj.d_v, kv, 5e-3, 1e-2, &format!("D block ({k},{l})"));
+        }
+    }
+}
+
+#[test]
+fn contact_chain_rule_matches_finite_differences_in_both_directions() {
+    let friction_model = Model::Friction {
+        scale: 0.5,
+        coefficients: coefficients(),
+    };
+    let naive_model = Model::Naive { stiffness: 800.0 };
+    let (cloth, _, _, vf, fv) = sphere_and_patch(0.19, Vec3::ZERO);
+    assert!(
+        !vf.is_empty() && !fv.is_empty(),
+        "both directions must find contacts"
+    );
+    for c in vf.iter().take(6).chain(fv.iter().take(6)) {
+        let t = c.normal.any_orthonormal_vector();
+        for (tangential_speed, regime) in [(1.0, "slip"), (1e-4, "stick")] {
+            // Cloth moving so that v_rel approaches at 5 cm/s and slides along t.
+            let target = -0.05 * c.normal + tangential_speed * t;
+            let beta_sum: f32 = c.beta[..c.vertex_count()].iter().sum();
+            let v = vec![(target - c.velocity_offset) / beta_sum; cloth.vertex_count()];
+            assert!((c.relative_velocity(&v) - target).length() < 1e-5);
+            for model in [&friction_model, &naive_model] {
+                check_chain_rule(c, &cloth.rest_positions, model, &v);
+            }
+            let g = friction_model.evaluate(c.collision_vector(), target).force;
+            let normal = g.dot(c.normal);
+            let tangential = (g - normal * c.normal).length();
+            assert!(normal > 0.0, "contact force pushes out");
+            let coulomb = 0.5 * normal; // μ F_c, scaled like g
+            match regime {
+                "slip" => assert!(
+                    (tangential - coulomb).abs() < 1e-3 * coulomb,
+                    "{regime}: {tangential} vs {coulomb}"
+                ),
+                _ => assert!(
+                    tangential < 0.5 * coulomb,
+                    "{regime}: {tangential} vs {coulomb}"
+                ),
+            }
+        }
+    }
+}
