@@ -98,7 +98,9 @@ pub fn symmetric_eigen(m: Mat3) -> (Vec3, Mat3) {
 pub fn project_nsd(m: Mat3) -> Mat3 {
     let (values, q) = symmetric_eigen(symmetric_part(m));
     let clamped = values.min(Vec3::ZERO);
-    q * Mat3::from_diagonal(clamped) * q.transpose()
+    // Exactly symmetric, not just to rounding: one block serves both
+    // (i, j) and (j, i) of the system matrix.
+    symmetric_part(q * Mat3::from_diagonal(clamped) * q.transpose())
 }
 
 #[cfg(test)]
