@@ -38,18 +38,18 @@ struct RunArgs {
     #[arg(long, default_value = "auto")]
     backend: Backend,
     /// N×N particles.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     grid: Option<u32>,
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", allow_negative_numbers = true)]
     steps: Option<u64>,
     /// Time step in seconds.
-    #[arg(long, value_name = "H")]
+    #[arg(long, value_name = "H", allow_negative_numbers = true)]
     dt: Option<f32>,
     /// Maximum PCG iterations per step.
-    #[arg(long, value_name = "I")]
+    #[arg(long, value_name = "I", allow_negative_numbers = true)]
     cg_iters: Option<u32>,
     /// PCG relative tolerance; 0 runs every iteration.
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
     cg_tol: Option<f32>,
     /// TOML configuration; flags override its values.
     #[arg(long, value_name = "FILE.toml")]

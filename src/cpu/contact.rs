@@ -158,20 +158,30 @@ pub struct Response {
     pub damping: Mat3,
 }
 
-/// The chain rule into the system: K_c = (∂f/∂c) n nᵀ and D_c = ∂f/∂v_rel,
-/// each projected to the nearest symmetric NSD matrix.
+/// The chain rule into the system, K_c = (∂f/∂c) n nᵀ and D_c = ∂f/∂v_rel,
+/// made safe for PCG in three moves:
 ///
-/// One correction first: Coulomb friction has a constant magnitude while
-/// sliding, so its Jacobian along the sliding direction t̂ is zero and a
-/// linearised step would apply μF_c explicitly, reversing the sliding within
-/// the step (a 0.2 g vertex under 3.5 N gains 175 m/s in 10 ms). D_c is
-/// therefore floored along t̂ at the secant η = −(f·t̂)/|ṫ|, the damping that
-/// takes the tangential force to zero with the tangential velocity (lagged
-/// friction, as in IPC). In the stick branch the floor is already met.
+/// 1. Normal–tangential cross terms are dropped: each block keeps its
+///    n-n part and its tangent-plane part. Sliding friction grows with the
+///    normal load (a t̂ nᵀ term); symmetrised, that term would turn
+///    tangential acceleration into a normal kick and make sliding cloth
+///    bounce off the surface. K_c thus keeps min(0, nᵀ(∂f/∂c)n) n nᵀ.
+/// 2. Coulomb friction has a constant magnitude while sliding, so its
+///    Jacobian along the sliding direction t̂ is zero and a linearised step
+///    would apply μF_c explicitly, reversing the sliding within the step
+///    (a 0.2 g vertex under 3.5 N gains 175 m/s in 10 ms). D_c is floored
+///    along t̂ at the secant η = −(f·t̂)/|ṫ|, the damping that takes the
+///    tangential force to zero with the tangential velocity (lagged
+///    friction, as in IPC). In the stick branch the floor is already met.
+/// 3. What remains is projected to the nearest symmetric NSD matrix.
 pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
-    let t_dot = v_rel - v_rel.dot(normal) * normal;
+    let nn = outer(normal, normal);
+    let tangent_plane = Mat3::IDENTITY - nn;
+    let normal_stiffness = normal.dot(fj.d_c * normal).min(0.0);
+    let mut damping =
+        normal.dot(fj.d_v * normal) * nn + tangent_plane * symmetric_part(fj.d_v) * tangent_plane;
+    let t_dot = tangent_plane * v_rel;
     let speed = t_dot.length();
-    let mut damping = symmetric_part(fj.d_v);
     if speed > 0.0 {
         let t_hat = t_dot / speed;
         let secant = -fj.force.dot(t_hat) / speed;
@@ -182,7 +192,7 @@ pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
     }
     Response {
         force: fj.force,
-        stiffness: project_nsd(fj.d_c * outer(normal, normal)),
+        stiffness: normal_stiffness * nn,
         damping: project_nsd(damping),
     }
 }

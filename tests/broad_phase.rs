@@ -1,0 +1,119 @@
+//! The BVH broad phase finds exactly the contacts an all-pairs search finds.
+
+mod common;
+
+use common::Rng;
+use glam::{Quat, Vec3};
+use wgcloth::bvh::{Bvh, triangle_boxes};
+use wgcloth::cpu::collide::{self, Best, Tolerances, cloth_normal, point_triangle};
+use wgcloth::cpu::rigid::{RigidFrame, transform};
+use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
+
+fn brute_rigid(body: &RigidBody, frame: &RigidFrame, x: Vec3, tol: Tolerances) -> Option<Best> {
+    let p = frame.to_body(x);
+    let mut best = None;
+    for (t, tri) in body.mesh.triangles.iter().enumerate() {
+        let n = body.face_normals[t];
+        if let Some((d, w)) = point_triangle(p, tri.map(|i| body.mesh.vertices[i as usize]), n, tol)
+        {
+            Best::keep(
+                &mut best,
+                Best {
+                    triangle: t as u32,
+                    distance: d,
+                    weights: w,
+                    normal: n,
+                },
+            );
+        }
+    }
+    best
+}
+
+fn brute_cloth(cloth: &Cloth, x: &[Vec3], p: Vec3, np: Vec3, tol: Tolerances) -> Option<Best> {
+    let mut best = None;
+    for (t, tri) in cloth.triangles.iter().enumerate() {
+        let n = cloth_normal(cloth, x, t as u32, np);
+        if let Some((d, w)) = point_triangle(p, tri.map(|i| x[i as usize]), n, tol) {
+            Best::keep(
+                &mut best,
+                Best {
+                    triangle: t as u32,
+                    distance: d,
+                    weights: w,
+                    normal: n,
+                },
+            );
+        }
+    }
+    best
+}
+
+#[test]
+fn bvh_contacts_equal_all_pairs_contacts() {
+    let mut rng = Rng(99);
+    let tol = Tolerances {
+        thickness: 0.025,
+        max_depth: 0.05,
+    };
+    let (mut total_vf, mut total_fv) = (0, 0);
+    for trial in 0..12 {
+        let mesh = match trial % 3 {
+            0 => TriMesh::icosphere(rng.range(0.1, 0.3), 2),
+            1 => TriMesh::cuboid(rng.vec3(0.05, 0.25), 4),
+            _ => TriMesh::plane([0.8, 0.8], 6),
+        };
+        let rotation = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
+        let body = RigidBody::new(mesh, rotation, rng.vec3(-0.05, 0.05), Motion::Static);
+        let mut frame = RigidFrame::default();
+        transform(&body, 0.0, &mut frame);
+        // A crumpled 16×16 cloth through the body: a grid with random jitter.
+        let cloth = Cloth::grid(16, 16, 1.0, 1.0, &[], |u, v| {
+            Vec3::new(u - 0.5, 0.5 - v, 0.0) * 0.7
+        });
+        let x: Vec<Vec3> = cloth
+            .rest_positions
+            .iter()
+            .map(|p| *p + rng.vec3(-0.06, 0.06))
+            .collect();
+        let mut bvh = Bvh::build(&triangle_boxes(&cloth.rest_positions, &cloth.triangles));
+        collide::refit_cloth(&cloth, &mut bvh, &x); // refit, as in a step
+
+        let vf = collide::vertex_face(&body, &frame, &x, tol);
+        let expect_vf: Vec<(u32, u32, f32)> = x
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &xi)| {
+                brute_rigid(&body, &frame, xi, tol).map(|b| (i as u32, b.triangle, b.distance))
+            })
+            .collect();
+        let got_vf: Vec<(u32, u32, f32)> = vf
+            .iter()
+            .map(|c| (c.vertices[0], c.rigid_feature, c.distance))
+            .collect();
+        assert_eq!(got_vf, expect_vf, "vertex–face, trial {trial}");
+
+        let fv = collide::face_vertex(&cloth, &bvh, &x, &frame, tol);
+        let expect_fv: Vec<(u32, u32, f32)> = frame
+            .vertices
+            .iter()
+            .zip(&frame.vertex_normals)
+            .enumerate()
+            .filter_map(|(k, (&p, &np))| {
+                brute_cloth(&cloth, &x, p, np, tol).map(|b| (k as u32, b.triangle, b.distance))
+            })
+            .collect();
+        let got_fv: Vec<(u32, u32, f32)> = fv
+            .iter()
+            .map(|c| (c.rigid_feature, c.cloth_triangle.unwrap(), c.distance))
+            .collect();
+        assert_eq!(got_fv, expect_fv, "face–vertex, trial {trial}");
+        total_vf += vf.len();
+        total_fv += fv.len();
+    }
+    // The configurations must actually collide for the comparison to mean anything.
+    assert!(
+        total_vf > 50 && total_fv > 50,
+        "{total_vf} vertex–face, {total_fv} face–vertex"
+    );
+}
