@@ -70,7 +70,7 @@ fn check_model(eval: impl Fn(Vec3, Vec3) -> ForceJacobian, c: Vec3, v: Vec3, wha
 fn frame(rng: &mut Rng, depth: f32) -> (Vec3, Vec3, Vec3) {
     let n = rng.vec3(-1.0, 1.0).normalize();
     let t = n.any_orthonormal_vector();
-    let t = Quat::from_axis_angle(n, rng.range(0.0, 6.28)) * t;
+    let t = Quat::from_axis_angle(n, rng.range(0.0, std::f32::consts::TAU)) * t;
     (n, t, n * depth)
 }
 

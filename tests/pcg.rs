@@ -63,6 +63,7 @@ fn dense_free_system(
 }
 
 /// Solves by Cholesky; panics if the matrix is not symmetric positive definite.
+#[allow(clippy::needless_range_loop)] // textbook index form reads best here
 fn cholesky_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
     let m = b.len();
     for i in 0..m {
@@ -183,8 +184,10 @@ fn pcg_matches_direct_solve_on_random_spd_systems() {
 #[test]
 fn real_step_matrices_are_spd_and_pcg_matches_direct_solve() {
     for model in [ModelKind::Friction, ModelKind::Naive] {
-        let mut config = Config::default();
-        config.model = model;
+        let mut config = Config {
+            model,
+            ..Default::default()
+        };
         config.cloth.grid = [10, 10];
         let mut sim = CpuSim::new(Scene::new(&config).unwrap());
         let mut checked = 0;
@@ -192,7 +195,7 @@ fn real_step_matrices_are_spd_and_pcg_matches_direct_solve() {
             let v_before = sim.state.v.clone();
             let stats = sim.step();
             // Check the system of every 10th step that had contacts.
-            if stats.contacts > 0 && sim.state.step % 10 == 0 {
+            if stats.contacts > 0 && sim.state.step.is_multiple_of(10) {
                 let (a, b) = sim.system();
                 check_against_direct(a, &sim.scene.cloth, b, &v_before);
                 checked += 1;

@@ -6,8 +6,10 @@ use wgcloth::cpu::CpuSim;
 use wgcloth::{Config, Scene};
 
 fn hang_config(grid: u32) -> Config {
-    let mut c = Config::default();
-    c.scene = SceneKind::Hang;
+    let mut c = Config {
+        scene: SceneKind::Hang,
+        ..Default::default()
+    };
     c.cloth.grid = [grid, grid];
     c
 }
@@ -47,8 +49,10 @@ fn hanging_cloth_comes_to_rest_with_exact_pins_and_never_gains_energy() {
 #[test]
 fn thesis_scene_keeps_cloth_out_of_the_sphere_for_a_full_period() {
     for model in [ModelKind::Friction, ModelKind::Naive] {
-        let mut c = Config::default();
-        c.model = model;
+        let mut c = Config {
+            model,
+            ..Default::default()
+        };
         c.cloth.grid = [32, 32];
         let period = c.rigid.motion.period;
         let steps = (period / c.solver.dt).round() as u64;
@@ -75,9 +79,11 @@ fn thesis_scene_keeps_cloth_out_of_the_sphere_for_a_full_period() {
 /// A 0.2 m cloth patch lying on a plane tilted by `tilt` about z, with
 /// Coulomb coefficient μ = 0.5; returns the simulator.
 fn patch_on_incline(tilt: f32) -> CpuSim {
-    let mut c = Config::default();
-    c.scene = SceneKind::Sphere;
-    c.model = ModelKind::Friction;
+    let mut c = Config {
+        scene: SceneKind::Sphere,
+        model: ModelKind::Friction,
+        ..Default::default()
+    };
     let r = &mut c.rigid;
     r.shape = Shape::Plane;
     r.plane_size = [20.0, 20.0];

@@ -114,7 +114,7 @@ impl Cloth {
         for r in 0..ny - 1 {
             for c in 0..nx - 1 {
                 let (a, b, cc, d) = (id(c, r), id(c + 1, r), id(c, r + 1), id(c + 1, r + 1));
-                if (r + c) % 2 == 0 {
+                if (r + c).is_multiple_of(2) {
                     triangles.push([a, cc, b]);
                     triangles.push([b, cc, d]);
                 } else {
