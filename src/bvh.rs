@@ -165,6 +165,40 @@ impl Bvh {
     }
 }
 
+impl Bvh {
+    /// Calls `visit` for every primitive whose box the ray o + t d (t ≥ 0)
+    /// passes through.
+    pub fn query_ray(&self, origin: Vec3, dir: Vec3, mut visit: impl FnMut(u32)) {
+        if self.order.is_empty() {
+            return;
+        }
+        let inv = dir.recip();
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            let (t0, t1) = (
+                (node.bounds.min - origin) * inv,
+                (node.bounds.max - origin) * inv,
+            );
+            let (enter, exit) = (t0.min(t1).max_element(), t0.max(t1).min_element());
+            if exit < enter.max(0.0) {
+                continue;
+            }
+            if node.count > 0 {
+                for &i in &self.order[node.first as usize..(node.first + node.count) as usize] {
+                    visit(i);
+                }
+            } else {
+                stack[top] = node.first;
+                stack[top + 1] = node.first + 1;
+                top += 2;
+            }
+        }
+    }
+}
+
 /// The bounding box of each triangle.
 pub fn triangle_boxes(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Aabb> {
     triangles

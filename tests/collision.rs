@@ -117,3 +117,42 @@ fn bvh_contacts_equal_all_pairs_contacts() {
         "{total_vf} vertex–face, {total_fv} face–vertex"
     );
 }
+
+#[test]
+fn penetration_depth_is_exact_for_a_box_and_close_for_a_sphere() {
+    let mut rng = Rng(5);
+    let half = Vec3::new(0.2, 0.1, 0.3);
+    let rotation = Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+    let offset = Vec3::new(0.5, -0.2, 0.1);
+    let boxed = RigidBody::new(TriMesh::cuboid(half, 3), rotation, offset, Motion::Static);
+    let mut frame = RigidFrame::default();
+    transform(&boxed, 0.0, &mut frame);
+    for _ in 0..500 {
+        let local = rng.vec3(-0.5, 0.5);
+        let expected = (half - local.abs()).min_element().max(0.0);
+        let got = collide::penetration_depth(&boxed, &frame, rotation * local + offset);
+        assert!(
+            (got - expected).abs() < 1e-5,
+            "box point {local}: {got} vs {expected}"
+        );
+    }
+    // No depth limit: the centre of a 0.3 m sphere is ~0.3 m deep, far beyond
+    // the contact band.
+    let sphere = RigidBody::new(
+        TriMesh::icosphere(0.3, 3),
+        Quat::IDENTITY,
+        Vec3::ZERO,
+        Motion::Static,
+    );
+    transform(&sphere, 0.0, &mut frame);
+    for _ in 0..500 {
+        let p = rng.vec3(-0.4, 0.4);
+        let expected = (0.3 - p.length()).max(0.0);
+        let got = collide::penetration_depth(&sphere, &frame, p);
+        // Facets lie inside the true sphere by up to r (1 − cos θ) ≈ 3 mm.
+        assert!(
+            (got - expected).abs() < 4e-3,
+            "sphere point {p}: {got} vs {expected}"
+        );
+    }
+}
