@@ -140,50 +140,34 @@ impl Bvh {
 
     /// Calls `visit` for every primitive whose box overlaps the box of
     /// half-size `r` around `p`.
-    pub fn query(&self, p: Vec3, r: f32, mut visit: impl FnMut(u32)) {
-        if self.order.is_empty() {
-            return;
-        }
-        let mut stack = [0u32; 64];
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let node = self.nodes[stack[top] as usize];
-            if !node.bounds.near(p, r) {
-                continue;
-            }
-            if node.count > 0 {
-                for &i in &self.order[node.first as usize..(node.first + node.count) as usize] {
-                    visit(i);
-                }
-            } else {
-                stack[top] = node.first;
-                stack[top + 1] = node.first + 1;
-                top += 2;
-            }
-        }
+    pub fn query(&self, p: Vec3, r: f32, visit: impl FnMut(u32)) {
+        self.traverse(|b| b.near(p, r), visit);
     }
-}
 
-impl Bvh {
     /// Calls `visit` for every primitive whose box the ray o + t d (t ≥ 0)
     /// passes through.
-    pub fn query_ray(&self, origin: Vec3, dir: Vec3, mut visit: impl FnMut(u32)) {
+    pub fn query_ray(&self, origin: Vec3, dir: Vec3, visit: impl FnMut(u32)) {
+        let inv = dir.recip();
+        self.traverse(
+            |b| {
+                let (t0, t1) = ((b.min - origin) * inv, (b.max - origin) * inv);
+                t0.max(t1).min_element() >= t0.min(t1).max_element().max(0.0)
+            },
+            visit,
+        );
+    }
+
+    /// Depth-first walk of the nodes whose bounds pass `overlaps`.
+    fn traverse(&self, overlaps: impl Fn(&Aabb) -> bool, mut visit: impl FnMut(u32)) {
         if self.order.is_empty() {
             return;
         }
-        let inv = dir.recip();
         let mut stack = [0u32; 64];
         let mut top = 1;
         while top > 0 {
             top -= 1;
             let node = self.nodes[stack[top] as usize];
-            let (t0, t1) = (
-                (node.bounds.min - origin) * inv,
-                (node.bounds.max - origin) * inv,
-            );
-            let (enter, exit) = (t0.min(t1).max_element(), t0.max(t1).min_element());
-            if exit < enter.max(0.0) {
+            if !overlaps(&node.bounds) {
                 continue;
             }
             if node.count > 0 {

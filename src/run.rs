@@ -10,8 +10,7 @@ use crate::cpu::{CpuSim, STAGES};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {
     Gpu,
     Cpu,

@@ -5,7 +5,7 @@ mod common;
 use common::Rng;
 use glam::{Quat, Vec3};
 use wgcloth::bvh::{Bvh, triangle_boxes};
-use wgcloth::cpu::collide::{self, Best, Tolerances, cloth_normal, point_triangle};
+use wgcloth::cpu::collide::{self, Best, Tolerances, cloth_normal};
 use wgcloth::cpu::rigid::{RigidFrame, transform};
 use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
 
@@ -13,19 +13,8 @@ fn brute_rigid(body: &RigidBody, frame: &RigidFrame, x: Vec3, tol: Tolerances) -
     let p = frame.to_body(x);
     let mut best = None;
     for (t, tri) in body.mesh.triangles.iter().enumerate() {
-        let n = body.face_normals[t];
-        if let Some((d, w)) = point_triangle(p, tri.map(|i| body.mesh.vertices[i as usize]), n, tol)
-        {
-            Best::keep(
-                &mut best,
-                Best {
-                    triangle: t as u32,
-                    distance: d,
-                    weights: w,
-                    normal: n,
-                },
-            );
-        }
+        let tri = tri.map(|i| body.mesh.vertices[i as usize]);
+        Best::consider(&mut best, t as u32, p, tri, body.face_normals[t], tol);
     }
     best
 }
@@ -34,17 +23,7 @@ fn brute_cloth(cloth: &Cloth, x: &[Vec3], p: Vec3, np: Vec3, tol: Tolerances) ->
     let mut best = None;
     for (t, tri) in cloth.triangles.iter().enumerate() {
         let n = cloth_normal(cloth, x, t as u32, np);
-        if let Some((d, w)) = point_triangle(p, tri.map(|i| x[i as usize]), n, tol) {
-            Best::keep(
-                &mut best,
-                Best {
-                    triangle: t as u32,
-                    distance: d,
-                    weights: w,
-                    normal: n,
-                },
-            );
-        }
+        Best::consider(&mut best, t as u32, p, tri.map(|i| x[i as usize]), n, tol);
     }
     best
 }

@@ -99,6 +99,29 @@ pub struct Best {
 }
 
 impl Best {
+    /// Runs the narrow phase of `p` against triangle `t` (unit normal `n`)
+    /// and keeps it in `best` if it wins.
+    pub fn consider(
+        best: &mut Option<Best>,
+        t: u32,
+        p: Vec3,
+        tri: [Vec3; 3],
+        n: Vec3,
+        tol: Tolerances,
+    ) {
+        if let Some((distance, weights)) = point_triangle(p, tri, n, tol) {
+            Best::keep(
+                best,
+                Best {
+                    triangle: t,
+                    distance,
+                    weights,
+                    normal: n,
+                },
+            );
+        }
+    }
+
     pub fn keep(best: &mut Option<Best>, cand: Best) {
         let better = match best {
             None => true,
@@ -124,18 +147,7 @@ pub fn best_rigid_triangle(
     let mut best = None;
     body.bvh.query(p, tol.reach(), |t| {
         let tri = body.mesh.triangles[t as usize].map(|i| body.mesh.vertices[i as usize]);
-        let n = body.face_normals[t as usize];
-        if let Some((d, w)) = point_triangle(p, tri, n, tol) {
-            Best::keep(
-                &mut best,
-                Best {
-                    triangle: t,
-                    distance: d,
-                    weights: w,
-                    normal: n,
-                },
-            );
-        }
+        Best::consider(&mut best, t, p, tri, body.face_normals[t as usize], tol);
     });
     best
 }
@@ -162,19 +174,8 @@ pub fn best_cloth_triangle(
     cloth_bvh.query(p, tol.reach(), |t| {
         let tri = cloth.triangles[t as usize].map(|i| x[i as usize]);
         let n = cloth_normal(cloth, x, t, rigid_normal);
-        if n == Vec3::ZERO {
-            return;
-        }
-        if let Some((d, w)) = point_triangle(p, tri, n, tol) {
-            Best::keep(
-                &mut best,
-                Best {
-                    triangle: t,
-                    distance: d,
-                    weights: w,
-                    normal: n,
-                },
-            );
+        if n != Vec3::ZERO {
+            Best::consider(&mut best, t, p, tri, n, tol);
         }
     });
     best

@@ -245,17 +245,20 @@ impl TriMesh {
 mod tests {
     use super::*;
 
-    /// A closed mesh with outward winding has positive signed volume and
-    /// every edge shared by exactly two faces.
-    fn check_closed_outward(m: &TriMesh) {
-        let vol: f32 = m
-            .triangles
+    fn signed_volume(m: &TriMesh) -> f32 {
+        m.triangles
             .iter()
             .map(|t| {
                 let [a, b, c] = t.map(|i| m.vertices[i as usize]);
                 a.dot(b.cross(c)) / 6.0
             })
-            .sum();
+            .sum()
+    }
+
+    /// A closed mesh with outward winding has positive signed volume and
+    /// every edge shared by exactly two faces.
+    fn check_closed_outward(m: &TriMesh) {
+        let vol = signed_volume(m);
         assert!(vol > 0.0, "volume {vol}");
         let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
         for t in &m.triangles {
@@ -276,14 +279,7 @@ mod tests {
         assert_eq!(m.triangles.len(), 20 * 16);
         check_closed_outward(&m);
         assert!(m.vertices.iter().all(|v| (v.length() - 0.3).abs() < 1e-6));
-        let vol: f32 = m
-            .triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| m.vertices[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum();
+        let vol = signed_volume(&m);
         let exact = 4.0 / 3.0 * std::f32::consts::PI * 0.027;
         assert!((vol - exact).abs() < 0.05 * exact);
     }
