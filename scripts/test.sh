@@ -1,9 +1,19 @@
 #!/usr/bin/env bash
 # The whole test suite, exactly as CI runs it (.ci/run calls this script).
-# Needs only the Rust toolchain; installs rustfmt/clippy if they are missing.
+# Needs the Rust toolchain; installs rustfmt/clippy and, when no Vulkan
+# driver is present, Mesa's lavapipe (software Vulkan) for the GPU tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
+
+if ! { ls /usr/share/vulkan/icd.d/*.json && ldconfig -p | grep -q libvulkan.so.1; } >/dev/null 2>&1; then
+  echo "no Vulkan driver: installing mesa-vulkan-drivers (lavapipe)"
+  sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+fi
+# Fill fresh GPU allocations with garbage so reads of unwritten memory show.
+export LVP_POISON_MEMORY=true
 
 for component in rustfmt clippy; do
   rustup component list --installed 2>/dev/null | grep -q "^$component" || rustup component add "$component"

@@ -26,6 +26,11 @@ pub enum Error {
     #[error("{0}")]
     Unsupported(String),
 
+    /// No usable GPU adapter, a device that could not be created or was
+    /// lost, or a scene beyond the adapter's limits.
+    #[error("GPU: {0}")]
+    Gpu(String),
+
     /// The simulation state stopped being finite or the solver broke down.
     #[error("simulation diverged at step {step}: {reason}")]
     Diverged { step: u64, reason: String },

@@ -11,6 +11,7 @@ pub mod bvh;
 pub mod config;
 pub mod cpu;
 pub mod error;
+pub mod gpu;
 pub mod math;
 pub mod run;
 pub mod scene;

@@ -1,0 +1,77 @@
+//! Choosing an adapter and opening a device for headless use. Embedding
+//! apps skip this and hand their own device and queue to [`super::GpuSim`].
+
+use crate::error::{Error, Result};
+
+/// A device and queue with what the simulator needs to know of them.
+#[derive(Clone, Debug)]
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: wgpu::AdapterInfo,
+}
+
+/// "name (backend, device type)" for logs and reports.
+pub fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+}
+
+impl GpuContext {
+    /// Picks an adapter: `WGPU_BACKEND` limits the backends,
+    /// `WGPU_ADAPTER_NAME` (a case-insensitive substring) picks by name,
+    /// otherwise the high-performance default. Errors say which adapters
+    /// exist when none fits.
+    pub fn headless() -> Result<GpuContext> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(wanted) => {
+                let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+                let names: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
+                adapters
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()))
+                    .ok_or_else(|| {
+                        Error::Gpu(format!(
+                            "WGPU_ADAPTER_NAME={wanted:?} matches no adapter (found: {})",
+                            if names.is_empty() { "none".into() } else { names.join("; ") }
+                        ))
+                    })?
+            }
+            Err(_) => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            }))
+            .map_err(|e| {
+                Error::Gpu(format!(
+                    "no GPU adapter ({e}); on Debian `apt-get install mesa-vulkan-drivers` provides lavapipe"
+                ))
+            })?,
+        };
+        Self::from_adapter(&adapter)
+    }
+
+    /// Opens a device on `adapter` with its full limits and, where present,
+    /// timestamp queries.
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<GpuContext> {
+        let wanted =
+            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("wgcloth"),
+            required_features: adapter.features() & wanted,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| {
+            Error::Gpu(format!(
+                "cannot open a device on {}: {e}",
+                describe(&adapter.get_info())
+            ))
+        })?;
+        Ok(GpuContext {
+            device,
+            queue,
+            adapter: adapter.get_info(),
+        })
+    }
+}

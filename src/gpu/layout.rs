@@ -1,0 +1,132 @@
+//! Host mirrors of the WGSL structs in `wgsl/common.wgsl` (same field
+//! order, sizes and alignment; a test checks the sizes).
+
+use bytemuck::{Pod, Zeroable};
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct Params {
+    pub n_vertices: u32,
+    pub n_springs: u32,
+    pub n_triangles: u32,
+    pub n_rigid_vertices: u32,
+    pub n_rigid_triangles: u32,
+    pub model: u32,
+    pub has_rigid: u32,
+    pub cg_max_iters: u32,
+    pub dt: f32,
+    pub vertex_mass: f32,
+    pub stiffness: f32,
+    pub cg_tol: f32,
+    pub damping_mass: f32,
+    pub damping_stiffness: f32,
+    pub thickness: f32,
+    pub max_depth: f32,
+    pub gravity: [f32; 3],
+    pub naive_stiffness: f32,
+    pub force_scale: f32,
+    pub kn: f32,
+    pub kd: f32,
+    pub kt: f32,
+    pub mu: f32,
+    pub motion_kind: u32,
+    pub motion_period: f32,
+    pub motion_phase: f32,
+    pub rigid_position: [f32; 3],
+    pub motion_amplitude: f32,
+    pub rigid_rotation: [f32; 4],
+    pub motion_vector: [f32; 3],
+    pub cells_x: u32,
+    pub cells_y: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub supertiles_x: u32,
+    pub supertiles_y: u32,
+    pub pad: [u32; 3],
+}
+
+/// Clock and run statistics kept on the GPU.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct StepState {
+    pub time: f32,
+    pub steps: u32,
+    pub cg_iterations_total: u32,
+    pub cg_breakdowns: u32,
+    pub cg_residual_max: f32,
+    pub contacts_total: u32,
+    pub contacts_last: u32,
+    pub max_penetration_bits: u32,
+    pub last_iterations: u32,
+    pub last_residual: f32,
+    pub pad: [u32; 2],
+}
+
+/// Symmetric 3×3 block: (xx, yy, zz, xy), (xz, yz, 0, 0).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Sym3 {
+    pub a: [f32; 4],
+    pub b: [f32; 4],
+}
+
+impl Sym3 {
+    pub fn to_mat3(self) -> glam::Mat3 {
+        let [xx, yy, zz, xy] = self.a;
+        let [xz, yz, _, _] = self.b;
+        glam::Mat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz])
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Contact {
+    pub normal: [f32; 3],
+    pub depth: f32,
+    pub beta: [f32; 3],
+    pub distance: f32,
+    pub offset: [f32; 3],
+    pub valid: u32,
+    pub vertices: [u32; 3],
+    pub triangle: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Response {
+    pub force: [f32; 3],
+    pub normal_stiffness: f32,
+    pub damping: Sym3,
+}
+
+/// PCG scalars (mirrors `Scalars` in wgsl/pcg.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct Scalars {
+    pub delta: f32,
+    pub delta0: f32,
+    pub threshold: f32,
+    pub iterations: u32,
+    pub done: u32,
+    pub breakdown: u32,
+    pub pad: [u32; 2],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_match_the_wgsl_layout() {
+        assert_eq!(size_of::<Params>(), 192);
+        assert_eq!(size_of::<StepState>(), 48);
+        assert_eq!(size_of::<Sym3>(), 32);
+        assert_eq!(size_of::<Contact>(), 64);
+        assert_eq!(size_of::<Response>(), 48);
+        assert_eq!(size_of::<Scalars>(), 32);
+        assert_eq!(std::mem::offset_of!(Params, gravity), 64);
+        assert_eq!(std::mem::offset_of!(Params, rigid_position), 112);
+        assert_eq!(std::mem::offset_of!(Params, rigid_rotation), 128);
+        assert_eq!(std::mem::offset_of!(Params, motion_vector), 144);
+    }
+}

@@ -1,0 +1,130 @@
+// Shared by every stage: the run parameters, symmetric 3×3 blocks, and the
+// workgroup reduction. Prepended to each stage file when it is compiled.
+
+const WORKGROUP: u32 = 256u;
+
+// Constant over a run. Mirrors `gpu::layout::Params`.
+struct Params {
+    n_vertices: u32, n_springs: u32, n_triangles: u32, n_rigid_vertices: u32,
+    n_rigid_triangles: u32, model: u32, has_rigid: u32, cg_max_iters: u32,
+    dt: f32, vertex_mass: f32, stiffness: f32, cg_tol: f32,
+    damping_mass: f32, damping_stiffness: f32, thickness: f32, max_depth: f32,
+    gravity: vec3<f32>, naive_stiffness: f32,
+    force_scale: f32, kn: f32, kd: f32, kt: f32,
+    mu: f32, motion_kind: u32, motion_period: f32, motion_phase: f32,
+    rigid_position: vec3<f32>, motion_amplitude: f32,
+    rigid_rotation: vec4<f32>,
+    motion_vector: vec3<f32>, cells_x: u32,
+    cells_y: u32, tiles_x: u32, tiles_y: u32, supertiles_x: u32,
+    supertiles_y: u32, pad0: u32, pad1: u32, pad2: u32,
+}
+
+// Time and run statistics, on the GPU so a step needs no host writes.
+// Mirrors `gpu::layout::StepState`.
+struct StepState {
+    time: f32,
+    steps: u32,
+    cg_iterations_total: u32,
+    cg_breakdowns: u32,
+    cg_residual_max: f32,
+    contacts_total: u32,
+    contacts_last: atomic<u32>,
+    // Bit pattern of a non-negative f32: integer order is float order.
+    max_penetration_bits: atomic<u32>,
+    last_iterations: u32,
+    last_residual: f32,
+    pad0: u32,
+    pad1: u32,
+}
+
+// A symmetric 3×3 block: a = (xx, yy, zz, xy), b = (xz, yz, 0, 0).
+// Every block of the system matrix is symmetric, so 8 floats instead of 9
+// padded to 12 keep the SpMV's memory traffic down.
+struct Sym3 {
+    a: vec4<f32>,
+    b: vec4<f32>,
+}
+
+fn sym_zero() -> Sym3 {
+    return Sym3(vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+fn sym_diagonal(s: f32) -> Sym3 {
+    return Sym3(vec4<f32>(s, s, s, 0.0), vec4<f32>(0.0));
+}
+
+fn sym_outer(d: vec3<f32>) -> Sym3 {
+    return Sym3(vec4<f32>(d.x * d.x, d.y * d.y, d.z * d.z, d.x * d.y),
+                vec4<f32>(d.x * d.z, d.y * d.z, 0.0, 0.0));
+}
+
+fn sym_add(m: Sym3, n: Sym3) -> Sym3 {
+    return Sym3(m.a + n.a, m.b + n.b);
+}
+
+fn sym_scale(m: Sym3, s: f32) -> Sym3 {
+    return Sym3(m.a * s, m.b * s);
+}
+
+fn sym_mul(m: Sym3, v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(
+        m.a.x * v.x + m.a.w * v.y + m.b.x * v.z,
+        m.a.w * v.x + m.a.y * v.y + m.b.y * v.z,
+        m.b.x * v.x + m.b.y * v.y + m.a.z * v.z,
+    );
+}
+
+fn sym_diag(m: Sym3) -> vec3<f32> {
+    return m.a.xyz;
+}
+
+var<workgroup> scratch: array<f32, WORKGROUP>;
+
+// Sum of `value` over the workgroup, in a fixed order (deterministic), as
+// a uniform value the workgroup may branch on. Every invocation must call it.
+fn workgroup_sum(lid: u32, value: f32) -> f32 {
+    scratch[lid] = value;
+    workgroupBarrier();
+    for (var s = WORKGROUP / 2u; s > 0u; s = s >> 1u) {
+        if lid < s {
+            scratch[lid] += scratch[lid + s];
+        }
+        workgroupBarrier();
+    }
+    let total = workgroupUniformLoad(&scratch[0]);
+    workgroupBarrier();
+    return total;
+}
+
+// Contacts live in fixed slots: one per cloth vertex (vertex–face) and one
+// per rigid vertex (face–vertex). Mirrors `cpu::collide::Contact`: the
+// force on cloth vertex k is β_k f and v_rel = Σ β_k v_k + offset.
+struct Contact {
+    normal: vec3<f32>,
+    depth: f32,
+    beta: vec3<f32>,
+    distance: f32,
+    offset: vec3<f32>,
+    valid: u32,
+    vertices: vec3<u32>,
+    triangle: u32,
+}
+
+// What a contact adds to the system (mirrors `cpu::contact::Response`):
+// force on the penetrating point, K_c = normal_stiffness n nᵀ, and D_c.
+struct Response {
+    force: vec3<f32>,
+    normal_stiffness: f32,
+    damping: Sym3,
+}
+
+const NO_TRIANGLE: u32 = 0xffffffffu;
+// Face–vertex contacts a cloth triangle can hold; a rigid mesh denser than
+// this per cloth triangle loses the excess (counted in `tri_overflow`).
+const MAX_TRIANGLE_CONTACTS: u32 = 8u;
+
+// −(h D_c + h² K_c): the contact's block of A before the β weights.
+fn contact_block(r: Response, n: vec3<f32>) -> Sym3 {
+    let h = params.dt;
+    return sym_scale(sym_add(sym_scale(r.damping, h), sym_scale(sym_outer(n), h * h * r.normal_stiffness)), -1.0);
+}

@@ -1,0 +1,29 @@
+// Stage "integrate": x' = x + h v'; pinned vertices return to their
+// prescribed positions with zero velocity; the clock advances.
+// CPU twin: src/cpu/integrate.rs.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read_write> x: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> v: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> rest_positions: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> pinned: array<u32>;
+@group(0) @binding(5) var<storage, read_write> state: StepState;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i == 0u {
+        // Nothing else in this pass reads the clock.
+        state.time += params.dt;
+        state.steps += 1u;
+    }
+    if i >= params.n_vertices {
+        return;
+    }
+    if pinned[i] != 0u {
+        x[i] = vec4<f32>(rest_positions[i].xyz, 1.0);
+        v[i] = vec4<f32>(0.0);
+    } else {
+        x[i] = vec4<f32>(x[i].xyz + params.dt * v[i].xyz, 1.0);
+    }
+}
