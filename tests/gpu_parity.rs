@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use glam::{Mat3, Vec3};
-use wgcloth::config::SceneKind;
+use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::{CpuSim, springs};
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::{Config, Scene};
@@ -126,4 +126,183 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
             assert_eq!(x[i], scene.cloth.rest_positions[i]);
         }
     }
+}
+
+fn sphere(grid: u32, model: ModelKind) -> Scene {
+    let mut c = Config {
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    Scene::new(&c).unwrap()
+}
+
+/// Steps at which the default sphere is pushing into the cloth.
+const IN_CONTACT: usize = 70;
+
+#[test]
+fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    for model in [ModelKind::Friction, ModelKind::Naive] {
+        let scene = sphere(20, model);
+        let mut cpu = cpu_after(&scene, IN_CONTACT);
+        let gpu = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+        gpu.step();
+        cpu.step();
+
+        let (vf, fv) = gpu.read_contacts().unwrap();
+        let gpu_vf: Vec<_> = vf.iter().filter(|(c, _)| c.valid != 0).collect();
+        let gpu_fv: Vec<_> = fv.iter().filter(|(c, _)| c.valid != 0).collect();
+        let cpu_vf: Vec<_> = cpu
+            .contacts()
+            .iter()
+            .filter(|c| c.cloth_triangle.is_none())
+            .collect();
+        let cpu_fv: Vec<_> = cpu
+            .contacts()
+            .iter()
+            .filter(|c| c.cloth_triangle.is_some())
+            .collect();
+        assert!(
+            cpu_vf.len() > 10 && cpu_fv.len() > 10,
+            "{model:?}: the state must be in contact"
+        );
+        assert_eq!(
+            gpu_vf.len(),
+            cpu_vf.len(),
+            "{model:?}: vertex–face contact count"
+        );
+        assert_eq!(
+            gpu_fv.len(),
+            cpu_fv.len(),
+            "{model:?}: face–vertex contact count"
+        );
+        let responses = cpu.responses();
+        let mut force_dev = 0.0f32;
+        let mut force_max = 0.0f32;
+        for (k, c) in cpu.contacts().iter().enumerate() {
+            let (g, r) = match c.cloth_triangle {
+                None => vf[c.vertices[0] as usize],
+                Some(t) => {
+                    let g = fv[c.rigid_feature as usize];
+                    assert_eq!(
+                        g.0.triangle, t,
+                        "{model:?}: rigid vertex {} hit another triangle",
+                        c.rigid_feature
+                    );
+                    g
+                }
+            };
+            assert!(
+                (g.distance - c.distance).abs() < 1e-5,
+                "{model:?}: distance {} vs {}",
+                g.distance,
+                c.distance
+            );
+            force_dev = force_dev.max((Vec3::from(r.force) - responses[k].force).length());
+            force_max = force_max.max(responses[k].force.length());
+            let (dev, norm) = mat_dev(&[r.damping.to_mat3()], &[responses[k].damping]);
+            assert!(
+                dev <= 1e-3 * norm + 1e-4,
+                "{model:?}: contact damping {dev} vs {norm}"
+            );
+        }
+        assert!(
+            force_dev <= 1e-4 * force_max,
+            "{model:?}: contact forces {force_dev} vs {force_max}"
+        );
+
+        let (gd, go, gb) = gpu.read_system().unwrap();
+        let (a, b) = cpu.system();
+        let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
+        assert!(dev <= 1e-4 * norm, "{model:?}: A diagonal {dev} vs {norm}");
+        let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
+        assert!(
+            dev <= 1e-4 * norm,
+            "{model:?}: A off-diagonal {dev} vs {norm}"
+        );
+        assert!(
+            max_dev(&gb, b) <= 1e-4 * max_norm(b),
+            "{model:?}: b {} vs {}",
+            max_dev(&gb, b),
+            max_norm(b)
+        );
+    }
+}
+
+#[test]
+fn thesis_scene_runs_like_the_cpu_with_both_models() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    for model in [ModelKind::Friction, ModelKind::Naive] {
+        let scene = sphere(16, model);
+        let steps = 100;
+        let mut cpu = CpuSim::new(scene.clone());
+        let mut cpu_contacts = 0;
+        let mut cpu_deepest = 0.0f32;
+        for _ in 0..steps {
+            let s = cpu.step();
+            cpu_contacts += s.contacts;
+            cpu_deepest = cpu_deepest.max(s.max_penetration);
+        }
+        let gpu = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        for _ in 0..steps {
+            gpu.step();
+        }
+        let x = gpu.read_positions().unwrap();
+        let state = gpu.read_state().unwrap();
+        let dev = max_dev(&x, &cpu.state.x);
+        let deepest = f32::from_bits(state.max_penetration_bits);
+        eprintln!(
+            "{model:?}, {steps} steps: position deviation {dev:.3e} m; contacts {} vs {cpu_contacts}; deepest {deepest:.4} vs {cpu_deepest:.4}",
+            state.contacts_total
+        );
+        assert!(cpu_contacts > 500, "the sphere must hit the cloth");
+        assert!(dev < 1e-3, "{model:?}: GPU and CPU drifted {dev} m apart");
+        let ratio = state.contacts_total as f64 / cpu_contacts as f64;
+        assert!(
+            (ratio - 1.0).abs() < 0.02,
+            "{model:?}: contact totals {} vs {cpu_contacts}",
+            state.contacts_total
+        );
+        assert!((deepest - cpu_deepest).abs() < 1e-3);
+    }
+}
+
+#[test]
+fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = sphere(16, ModelKind::Friction);
+    let mut cpu = cpu_after(&scene, IN_CONTACT);
+    let center = {
+        let body = scene.rigid.as_ref().unwrap();
+        body.translation((cpu.state.time + scene.config.solver.dt as f64) as f32)
+    };
+    // Ten vertices 5 cm inside the sphere (radius 0.2): deeper than the
+    // contact band, so no force pushes them out during the step.
+    for (k, i) in (0..scene.cloth.vertex_count())
+        .step_by(23)
+        .take(10)
+        .enumerate()
+    {
+        let dir = (cpu.state.x[i] - center).normalize_or(Vec3::Z);
+        cpu.state.x[i] = center + dir * (0.15 - 0.002 * k as f32);
+        cpu.state.v[i] = Vec3::ZERO;
+    }
+    let gpu = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+    gpu.step();
+    let stats = cpu.step();
+    let deepest = f32::from_bits(gpu.read_state().unwrap().max_penetration_bits);
+    eprintln!(
+        "deepest: GPU {deepest:.5} m, CPU {:.5} m",
+        stats.max_penetration
+    );
+    // Springs pull them partly out within the step; still beyond the band.
+    let band = scene.config.contact.max_depth;
+    assert!(
+        stats.max_penetration > band,
+        "the test must put vertices deeper than the contact band"
+    );
+    assert!((deepest - stats.max_penetration).abs() < 1e-4);
 }

@@ -128,3 +128,81 @@ fn contact_block(r: Response, n: vec3<f32>) -> Sym3 {
     let h = params.dt;
     return sym_scale(sym_add(sym_scale(r.damping, h), sym_scale(sym_outer(n), h * h * r.normal_stiffness)), -1.0);
 }
+
+// The rigid body at the end of the step (written by stage "rigid").
+struct RigidFrame {
+    rotation: vec4<f32>,
+    translation: vec3<f32>,
+    pad0: f32,
+    velocity: vec3<f32>,
+    pad1: f32,
+}
+
+// A node of the rigid body's BVH (see src/bvh.rs): a leaf holds `count`
+// primitives from `first` in the order array; an internal node has
+// count = 0 and children `first`, `first + 1`.
+struct BvhNode {
+    lo: vec3<f32>,
+    first: u32,
+    hi: vec3<f32>,
+    count: u32,
+}
+
+struct Bounds {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+}
+
+// q v q⁻¹ for a unit quaternion (x, y, z, w).
+fn rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    let t = 2.0 * cross(q.xyz, v);
+    return v + q.w * t + cross(q.xyz, t);
+}
+
+fn inverse_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    return rotate(vec4<f32>(-q.xyz, q.w), v);
+}
+
+fn box_near(lo: vec3<f32>, hi: vec3<f32>, p: vec3<f32>, r: f32) -> bool {
+    return all(p + r >= lo) && all(p - r <= hi);
+}
+
+// The proximity test of thesis 2.3 (mirrors cpu::collide::point_triangle):
+// returns (d, w0, w1, w2) when p projects inside triangle (a, b, c) and
+// −max_depth < d < thickness; w0 = 2 (impossible weight) otherwise.
+fn point_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, n: vec3<f32>,
+                  thickness: f32, max_depth: f32) -> vec4<f32> {
+    let none = vec4<f32>(0.0, 2.0, 0.0, 0.0);
+    let d = dot(p - a, n);
+    if !(d > -max_depth && d < thickness) {
+        return none;
+    }
+    let e0 = b - a;
+    let e1 = c - a;
+    let ep = p - a;
+    let d00 = dot(e0, e0);
+    let d01 = dot(e0, e1);
+    let d11 = dot(e1, e1);
+    let d20 = dot(ep, e0);
+    let d21 = dot(ep, e1);
+    let denom = d00 * d11 - d01 * d01;
+    if denom <= 1.1920929e-7 * d00 * d11 {
+        return none;
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    let u = 1.0 - v - w;
+    if min(u, min(v, w)) < 0.0 || max(u, max(v, w)) > 1.0 {
+        return none;
+    }
+    return vec4<f32>(d, u, v, w);
+}
+
+fn found(hit: vec4<f32>) -> bool {
+    return hit.y <= 1.0;
+}
+
+// Larger d wins, then the lower triangle index (as on the CPU).
+fn better(d: f32, t: u32, best_d: f32, best_t: u32) -> bool {
+    return best_t == NO_TRIANGLE || d > best_d || (d == best_d && t < best_t);
+}

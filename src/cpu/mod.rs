@@ -118,6 +118,11 @@ impl CpuSim {
         &self.contacts
     }
 
+    /// The responses of the last step's contacts, in the same order.
+    pub fn responses(&self) -> &[Response] {
+        &self.responses
+    }
+
     /// The system the last step solved.
     pub fn system(&self) -> (&BlockMatrix, &[Vec3]) {
         (&self.matrix, &self.rhs)

@@ -99,6 +99,27 @@ pub struct Response {
     pub damping: Sym3,
 }
 
+/// Mirrors `RigidFrame` in wgsl/common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RigidFrame {
+    pub rotation: [f32; 4],
+    pub translation: [f32; 3],
+    pub pad0: f32,
+    pub velocity: [f32; 3],
+    pub pad1: f32,
+}
+
+/// Mirrors `BvhNode` in wgsl/common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct BvhNode {
+    pub lo: [f32; 3],
+    pub first: u32,
+    pub hi: [f32; 3],
+    pub count: u32,
+}
+
 /// PCG scalars (mirrors `Scalars` in wgsl/pcg.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -124,6 +145,8 @@ mod tests {
         assert_eq!(size_of::<Contact>(), 64);
         assert_eq!(size_of::<Response>(), 48);
         assert_eq!(size_of::<Scalars>(), 32);
+        assert_eq!(size_of::<RigidFrame>(), 48);
+        assert_eq!(size_of::<BvhNode>(), 32);
         assert_eq!(std::mem::offset_of!(Params, gravity), 64);
         assert_eq!(std::mem::offset_of!(Params, rigid_position), 112);
         assert_eq!(std::mem::offset_of!(Params, rigid_rotation), 128);

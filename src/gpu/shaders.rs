@@ -8,11 +8,15 @@ use std::collections::BTreeMap;
 use wgpu::naga;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 4] = [
+pub const STAGES: [(&str, &str); 8] = [
+    ("rigid", include_str!("../../wgsl/rigid.wgsl")),
+    ("collide", include_str!("../../wgsl/collide.wgsl")),
+    ("contact", include_str!("../../wgsl/contact.wgsl")),
     ("springs", include_str!("../../wgsl/springs.wgsl")),
     ("assemble", include_str!("../../wgsl/assemble.wgsl")),
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
+    ("measure", include_str!("../../wgsl/measure.wgsl")),
 ];
 
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");

@@ -12,13 +12,25 @@ use wgpu::util::DeviceExt;
 use crate::config::ModelKind;
 use crate::error::{Error, Result};
 use crate::gpu::kernels::Kernels;
-use crate::gpu::layout::{Contact, Params, Response, Scalars, StepState, Sym3};
-use crate::scene::Scene;
+use crate::gpu::layout::{
+    BvhNode, Contact, Params, Response, RigidFrame, Scalars, StepState, Sym3,
+};
+use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
 
-/// Timed passes, in recording order (`stage_ms` uses these names).
-pub const PASSES: [&str; 4] = ["springs", "assemble", "pcg", "integrate"];
+/// `MAX_TRIANGLE_CONTACTS` in wgsl/common.wgsl.
+const MAX_TRIANGLE_CONTACTS: usize = 8;
+
+/// Passes, in recording order: the CPU's stages (`stage_ms` uses these names).
+pub use crate::cpu::STAGES as PASSES;
+
+/// Cloth grid cells per tile edge, and tiles per super-tile edge
+/// (`TILE` in wgsl/collide.wgsl).
+const TILE: u32 = 8;
+
+/// A contact slot and its response, as read back.
+pub type ContactSlot = (Contact, Response);
 
 struct Buffers {
     params: wgpu::Buffer,
@@ -54,9 +66,24 @@ struct Buffers {
     partials: wgpu::Buffer,
     scalars: [wgpu::Buffer; 2],
     state: wgpu::Buffer,
+    body_vertices: wgpu::Buffer,
+    body_normals: wgpu::Buffer,
+    body_triangles: wgpu::Buffer,
+    body_face_normals: wgpu::Buffer,
+    bvh_nodes: wgpu::Buffer,
+    bvh_order: wgpu::Buffer,
+    rigid_vertices: wgpu::Buffer,
+    rigid_normals: wgpu::Buffer,
+    frame: wgpu::Buffer,
+    tile_bounds: wgpu::Buffer,
+    supertile_bounds: wgpu::Buffer,
 }
 
 struct BindGroups {
+    rigid: wgpu::BindGroup,
+    collide: wgpu::BindGroup,
+    contact: wgpu::BindGroup,
+    measure: wgpu::BindGroup,
     springs: wgpu::BindGroup,
     assemble: wgpu::BindGroup,
     /// [0]: scalars in = 0, out = 1; [1]: the reverse.
@@ -89,50 +116,75 @@ fn vec4s(points: &[Vec3], w: f32) -> Vec<[f32; 4]> {
     points.iter().map(|p| p.extend(w).to_array()).collect()
 }
 
-impl GpuSim {
-    /// Uploads `scene` onto the app's device. Fails with a clear error when
-    /// the scene exceeds the device's limits.
-    pub fn new(
-        kernels: Arc<Kernels>,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        scene: &Scene,
-    ) -> Result<GpuSim> {
-        let cloth = &scene.cloth;
-        let cfg = &scene.config;
-        let n = cloth.vertex_count();
-        let s = cloth.springs.len();
-        let t = cloth.triangles.len();
-        check_limits(device, n, s, t)?;
-
-        let params = Params {
-            n_vertices: n as u32,
-            n_springs: s as u32,
-            n_triangles: t as u32,
-            model: match cfg.model {
-                ModelKind::Naive => 0,
-                ModelKind::Friction => 1,
-            },
-            has_rigid: 0,
-            cg_max_iters: cfg.solver.cg_iters,
-            dt: cfg.solver.dt,
-            vertex_mass: cloth.vertex_mass,
-            stiffness: cloth.stiffness,
-            cg_tol: cfg.solver.cg_tol,
-            damping_mass: cfg.cloth.damping_mass,
-            damping_stiffness: cfg.cloth.damping_stiffness,
-            thickness: cfg.contact.thickness,
-            max_depth: cfg.contact.max_depth,
-            gravity: cfg.solver.gravity,
-            naive_stiffness: cfg.contact.naive_stiffness,
-            force_scale: cfg.contact.force_scale,
-            kn: cfg.contact.kn,
-            kd: cfg.contact.kd,
-            kt: cfg.contact.kt,
-            mu: cfg.contact.mu,
-            ..Default::default()
+/// The run's constants, as the kernels read them.
+fn params_for(scene: &Scene) -> Params {
+    let cloth = &scene.cloth;
+    let cfg = &scene.config;
+    let (cells_x, cells_y) = (cloth.nx - 1, cloth.ny - 1);
+    let (tiles_x, tiles_y) = (cells_x.div_ceil(TILE), cells_y.div_ceil(TILE));
+    let mut p = Params {
+        n_vertices: cloth.vertex_count() as u32,
+        n_springs: cloth.springs.len() as u32,
+        n_triangles: cloth.triangles.len() as u32,
+        model: match cfg.model {
+            ModelKind::Naive => 0,
+            ModelKind::Friction => 1,
+        },
+        cg_max_iters: cfg.solver.cg_iters,
+        dt: cfg.solver.dt,
+        vertex_mass: cloth.vertex_mass,
+        stiffness: cloth.stiffness,
+        cg_tol: cfg.solver.cg_tol,
+        damping_mass: cfg.cloth.damping_mass,
+        damping_stiffness: cfg.cloth.damping_stiffness,
+        thickness: cfg.contact.thickness,
+        max_depth: cfg.contact.max_depth,
+        gravity: cfg.solver.gravity,
+        naive_stiffness: cfg.contact.naive_stiffness,
+        force_scale: cfg.contact.force_scale,
+        kn: cfg.contact.kn,
+        kd: cfg.contact.kd,
+        kt: cfg.contact.kt,
+        mu: cfg.contact.mu,
+        cells_x,
+        cells_y,
+        tiles_x,
+        tiles_y,
+        supertiles_x: tiles_x.div_ceil(TILE),
+        supertiles_y: tiles_y.div_ceil(TILE),
+        ..Default::default()
+    };
+    if let Some(body) = &scene.rigid {
+        p.has_rigid = 1;
+        p.n_rigid_vertices = body.mesh.vertices.len() as u32;
+        p.n_rigid_triangles = body.mesh.triangles.len() as u32;
+        p.rigid_position = body.position.to_array();
+        p.rigid_rotation = body.rotation.to_array();
+        (p.motion_kind, p.motion_vector) = match body.motion {
+            Motion::Static => (0, [0.0; 3]),
+            Motion::Linear { velocity } => (1, velocity.to_array()),
+            Motion::Sinusoid {
+                axis,
+                amplitude,
+                period,
+                phase,
+            } => {
+                (p.motion_amplitude, p.motion_period, p.motion_phase) = (amplitude, period, phase);
+                (2, axis.to_array())
+            }
         };
+    }
+    p
+}
 
+impl Buffers {
+    fn new(device: &wgpu::Device, scene: &Scene, params: &Params) -> Buffers {
+        let cloth = &scene.cloth;
+        let (n, s, t) = (
+            cloth.vertex_count(),
+            cloth.springs.len(),
+            cloth.triangles.len(),
+        );
         // Vertex → (triangle, corner) and spring → (triangle, edge): where
         // the gathers find the face–vertex contacts.
         let mut per_vertex: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -158,22 +210,32 @@ impl GpuSim {
             vertex_triangle_offsets.push(vertex_triangles.len() as u32);
         }
 
-        let storage = |label: &str, contents: &[u8]| {
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let init = |label: &str, contents: &[u8], extra: wgpu::BufferUsages| {
+            // Empty arrays (no rigid body) still need a bindable buffer of
+            // at least one element of the largest struct (Contact, 64 B).
+            let padded;
+            let contents = if contents.is_empty() {
+                padded = [0u8; 64];
+                &padded[..]
+            } else {
+                contents
+            };
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
                 contents,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
+                usage: usage | extra,
             })
         };
+        let storage =
+            |label: &str, contents: &[u8]| init(label, contents, wgpu::BufferUsages::empty());
         let zeroed = |label: &str, bytes: usize| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: bytes.max(16) as u64,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
+                size: bytes.max(64) as u64,
+                usage,
                 mapped_at_creation: false,
             })
         };
@@ -181,20 +243,41 @@ impl GpuSim {
         let pinned: Vec<u32> = cloth.pinned.iter().map(|&p| p as u32).collect();
         let flat_triangles: Vec<u32> = cloth.triangles.iter().flatten().copied().collect();
         let partial_count = groups(n as u32) as usize;
-        let buffers = Buffers {
+        let tiles = (params.tiles_x * params.tiles_y) as usize;
+        let supertiles = (params.supertiles_x * params.supertiles_y) as usize;
+
+        let body = scene.rigid.as_ref();
+        let r = body.map_or(0, |b| b.mesh.vertices.len());
+        let body_vertices = body.map_or(vec![], |b| vec4s(&b.mesh.vertices, 1.0));
+        let body_normals = body.map_or(vec![], |b| vec4s(&b.vertex_normals, 0.0));
+        let body_triangles: Vec<u32> = body.map_or(vec![], |b| {
+            b.mesh.triangles.iter().flatten().copied().collect()
+        });
+        let body_face_normals = body.map_or(vec![], |b| vec4s(&b.face_normals, 0.0));
+        let bvh_nodes: Vec<BvhNode> = body.map_or(vec![], |b| {
+            b.bvh
+                .nodes
+                .iter()
+                .map(|n| BvhNode {
+                    lo: n.bounds.min.to_array(),
+                    first: n.first,
+                    hi: n.bounds.max.to_array(),
+                    count: n.count,
+                })
+                .collect()
+        });
+        let bvh_order = body.map_or(vec![], |b| b.bvh.order.clone());
+        Buffers {
             params: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("params"),
-                contents: bytemuck::bytes_of(&params),
+                contents: bytemuck::bytes_of(params),
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             }),
-            x: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("positions"),
-                contents: bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
-                usage: wgpu::BufferUsages::VERTEX
-                    | wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
-            }),
+            x: init(
+                "positions",
+                bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
+                wgpu::BufferUsages::VERTEX,
+            ),
             v: zeroed("velocities", n * vec4),
             rest: storage(
                 "rest positions",
@@ -215,13 +298,11 @@ impl GpuSim {
                 "adjacency vertices",
                 bytemuck::cast_slice(&cloth.adjacency.other),
             ),
-            triangles: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("triangles"),
-                contents: bytemuck::cast_slice(&flat_triangles),
-                usage: wgpu::BufferUsages::INDEX
-                    | wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC,
-            }),
+            triangles: init(
+                "triangles",
+                bytemuck::cast_slice(&flat_triangles),
+                wgpu::BufferUsages::INDEX,
+            ),
             vertex_triangle_offsets: storage(
                 "vertex triangle offsets",
                 bytemuck::cast_slice(&vertex_triangle_offsets),
@@ -230,12 +311,12 @@ impl GpuSim {
             spring_triangles: storage("spring triangles", bytemuck::cast_slice(&spring_triangles)),
             spring_force: zeroed("spring forces", s * vec4),
             spring_block: zeroed("spring blocks", s * size_of::<Sym3>()),
-            vf_contacts: zeroed("vertex-face contacts", size_of::<Contact>()),
-            vf_responses: zeroed("vertex-face responses", size_of::<Response>()),
-            fv_contacts: zeroed("face-vertex contacts", size_of::<Contact>()),
-            fv_responses: zeroed("face-vertex responses", size_of::<Response>()),
-            triangle_contact_count: zeroed("triangle contact counts", 4),
-            triangle_contacts: zeroed("triangle contacts", 4),
+            vf_contacts: zeroed("vertex-face contacts", n * size_of::<Contact>()),
+            vf_responses: zeroed("vertex-face responses", n * size_of::<Response>()),
+            fv_contacts: zeroed("face-vertex contacts", r * size_of::<Contact>()),
+            fv_responses: zeroed("face-vertex responses", r * size_of::<Response>()),
+            triangle_contact_count: zeroed("triangle contact counts", t * 4),
+            triangle_contacts: zeroed("triangle contacts", t * MAX_TRIANGLE_CONTACTS * 4),
             a_diag: zeroed("A diagonal", n * size_of::<Sym3>()),
             a_off: zeroed("A off-diagonal", s * size_of::<Sym3>()),
             b: zeroed("b", n * vec4),
@@ -250,10 +331,26 @@ impl GpuSim {
                 zeroed("pcg scalars 1", size_of::<Scalars>()),
             ],
             state: zeroed("step state", size_of::<StepState>()),
-        };
-        // Contact buffers stay 1-element dummies until the rigid-body stages
-        // run; `has_rigid = 0` keeps the gathers off them.
-        let bf = &buffers;
+            body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
+            body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),
+            body_triangles: storage("body triangles", bytemuck::cast_slice(&body_triangles)),
+            body_face_normals: storage(
+                "body face normals",
+                bytemuck::cast_slice(&body_face_normals),
+            ),
+            bvh_nodes: storage("body BVH nodes", bytemuck::cast_slice(&bvh_nodes)),
+            bvh_order: storage("body BVH order", bytemuck::cast_slice(&bvh_order)),
+            rigid_vertices: zeroed("rigid vertices", r * vec4),
+            rigid_normals: zeroed("rigid normals", r * vec4),
+            frame: zeroed("rigid frame", size_of::<RigidFrame>()),
+            tile_bounds: zeroed("tile bounds", tiles * 2 * vec4),
+            supertile_bounds: zeroed("super-tile bounds", supertiles * 2 * vec4),
+        }
+    }
+}
+
+impl BindGroups {
+    fn new(kernels: &Kernels, device: &wgpu::Device, bf: &Buffers) -> BindGroups {
         let pcg_group = |[sin, sout]: [&wgpu::Buffer; 2]| {
             kernels.bind(
                 device,
@@ -280,7 +377,71 @@ impl GpuSim {
                 ],
             )
         };
-        let groups = BindGroups {
+        BindGroups {
+            rigid: kernels.bind(
+                device,
+                "rigid",
+                &[
+                    ("params", &bf.params),
+                    ("body_vertices", &bf.body_vertices),
+                    ("body_normals", &bf.body_normals),
+                    ("rigid_vertices", &bf.rigid_vertices),
+                    ("rigid_normals", &bf.rigid_normals),
+                    ("frame", &bf.frame),
+                    ("state", &bf.state),
+                ],
+            ),
+            collide: kernels.bind(
+                device,
+                "collide",
+                &[
+                    ("params", &bf.params),
+                    ("x", &bf.x),
+                    ("triangles", &bf.triangles),
+                    ("body_vertices", &bf.body_vertices),
+                    ("body_triangles", &bf.body_triangles),
+                    ("body_face_normals", &bf.body_face_normals),
+                    ("bvh_nodes", &bf.bvh_nodes),
+                    ("bvh_order", &bf.bvh_order),
+                    ("rigid_vertices", &bf.rigid_vertices),
+                    ("rigid_normals", &bf.rigid_normals),
+                    ("frame", &bf.frame),
+                    ("tile_bounds", &bf.tile_bounds),
+                    ("supertile_bounds", &bf.supertile_bounds),
+                    ("vf_contacts", &bf.vf_contacts),
+                    ("fv_contacts", &bf.fv_contacts),
+                    ("triangle_contact_count", &bf.triangle_contact_count),
+                    ("triangle_contacts", &bf.triangle_contacts),
+                    ("state", &bf.state),
+                ],
+            ),
+            contact: kernels.bind(
+                device,
+                "contact",
+                &[
+                    ("params", &bf.params),
+                    ("v", &bf.v),
+                    ("vf_contacts", &bf.vf_contacts),
+                    ("fv_contacts", &bf.fv_contacts),
+                    ("vf_responses", &bf.vf_responses),
+                    ("fv_responses", &bf.fv_responses),
+                ],
+            ),
+            measure: kernels.bind(
+                device,
+                "measure",
+                &[
+                    ("params", &bf.params),
+                    ("x", &bf.x),
+                    ("body_vertices", &bf.body_vertices),
+                    ("body_triangles", &bf.body_triangles),
+                    ("body_face_normals", &bf.body_face_normals),
+                    ("bvh_nodes", &bf.bvh_nodes),
+                    ("bvh_order", &bf.bvh_order),
+                    ("frame", &bf.frame),
+                    ("state", &bf.state),
+                ],
+            ),
             springs: kernels.bind(
                 device,
                 "springs",
@@ -334,7 +495,29 @@ impl GpuSim {
                     ("state", &bf.state),
                 ],
             ),
-        };
+        }
+    }
+}
+
+impl GpuSim {
+    /// Uploads `scene` onto the app's device. Fails with a clear error when
+    /// the scene exceeds the device's limits.
+    pub fn new(
+        kernels: Arc<Kernels>,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+    ) -> Result<GpuSim> {
+        let cloth = &scene.cloth;
+        check_limits(
+            device,
+            cloth.vertex_count(),
+            cloth.springs.len(),
+            cloth.triangles.len(),
+        )?;
+        let params = params_for(scene);
+        let buffers = Buffers::new(device, scene, &params);
+        let groups = BindGroups::new(&kernels, device, &buffers);
         let timer = device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
@@ -404,39 +587,71 @@ impl GpuSim {
         pass.dispatch_workgroups(groups(threads), 1, 1);
     }
 
+    /// The passes a step records: the rigid-body ones only with a body.
+    fn active_passes(&self) -> impl Iterator<Item = usize> + '_ {
+        let rigid_only = ["rigid", "collide", "contact", "measure"];
+        (0..PASSES.len())
+            .filter(move |&k| self.params.has_rigid != 0 || !rigid_only.contains(&PASSES[k]))
+    }
+
     /// Records one backward Euler step into `encoder`; nothing is read back.
     pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder) {
-        let (n, s) = (self.params.n_vertices, self.params.n_springs);
+        let p = &self.params;
+        let (n, s, r) = (p.n_vertices, p.n_springs, p.n_rigid_vertices);
         let g = &self.groups;
-        {
-            let mut pass = self.pass(encoder, 0);
-            self.dispatch(&mut pass, "springs", "main", &g.springs, s);
-        }
-        {
-            let mut pass = self.pass(encoder, 1);
-            self.dispatch(&mut pass, "assemble", "vertex", &g.assemble, n);
-            self.dispatch(&mut pass, "assemble", "spring", &g.assemble, s);
-        }
-        {
-            let mut pass = self.pass(encoder, 2);
-            self.dispatch(&mut pass, "pcg", "init", &g.pcg[0], n);
-            // Writes scalars[0], which iteration 0 reads.
-            self.dispatch(&mut pass, "pcg", "init_scalars", &g.pcg[1], 1);
-            let iters = self.params.cg_max_iters as usize;
-            for it in 0..iters {
-                let group = &g.pcg[it % 2];
-                self.dispatch(&mut pass, "pcg", "spmv", group, n);
-                self.dispatch(&mut pass, "pcg", "update", group, n);
-                self.dispatch(&mut pass, "pcg", "direction", group, n);
+        for k in self.active_passes() {
+            if PASSES[k] == "collide" {
+                // Face–vertex contacts append to their triangle's list.
+                encoder.clear_buffer(&self.buffers.triangle_contact_count, 0, None);
             }
-            // The last iteration wrote scalars[iters % 2].
-            pass.set_pipeline(self.kernels.pipeline("pcg", "finish"));
-            pass.set_bind_group(0, &g.pcg[iters % 2], &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-        }
-        {
-            let mut pass = self.pass(encoder, 3);
-            self.dispatch(&mut pass, "integrate", "main", &g.integrate, n);
+            let mut pass = self.pass(encoder, k);
+            match PASSES[k] {
+                "rigid" => self.dispatch(&mut pass, "rigid", "main", &g.rigid, r.max(1)),
+                "collide" => {
+                    self.dispatch(
+                        &mut pass,
+                        "collide",
+                        "tiles",
+                        &g.collide,
+                        p.tiles_x * p.tiles_y,
+                    );
+                    self.dispatch(
+                        &mut pass,
+                        "collide",
+                        "supertiles",
+                        &g.collide,
+                        p.supertiles_x * p.supertiles_y,
+                    );
+                    self.dispatch(&mut pass, "collide", "vertex_face", &g.collide, n);
+                    self.dispatch(&mut pass, "collide", "face_vertex", &g.collide, r);
+                }
+                "contact" => {
+                    self.dispatch(&mut pass, "contact", "vertex_face", &g.contact, n);
+                    self.dispatch(&mut pass, "contact", "face_vertex", &g.contact, r);
+                }
+                "springs" => self.dispatch(&mut pass, "springs", "main", &g.springs, s),
+                "assemble" => {
+                    self.dispatch(&mut pass, "assemble", "vertex", &g.assemble, n);
+                    self.dispatch(&mut pass, "assemble", "spring", &g.assemble, s);
+                }
+                "pcg" => {
+                    self.dispatch(&mut pass, "pcg", "init", &g.pcg[0], n);
+                    // Writes scalars[0], which iteration 0 reads.
+                    self.dispatch(&mut pass, "pcg", "init_scalars", &g.pcg[1], 1);
+                    let iters = p.cg_max_iters as usize;
+                    for it in 0..iters {
+                        let group = &g.pcg[it % 2];
+                        self.dispatch(&mut pass, "pcg", "spmv", group, n);
+                        self.dispatch(&mut pass, "pcg", "update", group, n);
+                        self.dispatch(&mut pass, "pcg", "direction", group, n);
+                    }
+                    // The last iteration wrote scalars[iters % 2].
+                    self.dispatch(&mut pass, "pcg", "finish", &g.pcg[iters % 2], 1);
+                }
+                "integrate" => self.dispatch(&mut pass, "integrate", "main", &g.integrate, n),
+                "measure" => self.dispatch(&mut pass, "measure", "main", &g.measure, n),
+                other => unreachable!("no pass {other}"),
+            }
         }
         if let Some(t) = &self.timer {
             encoder.resolve_query_set(&t.queries, 0..2 * PASSES.len() as u32, &t.resolve, 0);
@@ -485,7 +700,9 @@ impl GpuSim {
         let view = staging
             .get_mapped_range(..)
             .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
-        Ok(bytemuck::cast_slice(&view).to_vec())
+        // Whole elements only: small buffers are padded to 64 bytes.
+        let whole = view.len() / size_of::<T>() * size_of::<T>();
+        Ok(bytemuck::pod_collect_to_vec(&view[..whole]))
     }
 
     fn read_vec3(&self, buffer: &wgpu::Buffer) -> Result<Vec<Vec3>> {
@@ -519,6 +736,28 @@ impl GpuSim {
         ))
     }
 
+    /// The last step's contact slots and responses: vertex–face (one per
+    /// cloth vertex), then face–vertex (one per rigid vertex); `valid`
+    /// marks the slots in use.
+    pub fn read_contacts(&self) -> Result<(Vec<ContactSlot>, Vec<ContactSlot>)> {
+        let b = &self.buffers;
+        let zip = |c: Vec<Contact>, r: Vec<Response>, len: u32| -> Vec<ContactSlot> {
+            c.into_iter().zip(r).take(len as usize).collect()
+        };
+        Ok((
+            zip(
+                self.read(&b.vf_contacts)?,
+                self.read(&b.vf_responses)?,
+                self.params.n_vertices,
+            ),
+            zip(
+                self.read(&b.fv_contacts)?,
+                self.read(&b.fv_responses)?,
+                self.params.n_rigid_vertices,
+            ),
+        ))
+    }
+
     /// Spring forces and blocks of the last step.
     pub fn read_springs(&self) -> Result<(Vec<Vec3>, Vec<Sym3>)> {
         let f: Vec<[f32; 4]> = self.read(&self.buffers.spring_force)?;
@@ -534,12 +773,10 @@ impl GpuSim {
         };
         let ticks: Vec<u64> = self.read(&t.resolve)?;
         Ok(Some(
-            PASSES
-                .iter()
-                .enumerate()
-                .map(|(k, name)| {
+            self.active_passes()
+                .map(|k| {
                     let dt = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
-                    (*name, dt as f64 * t.period_ns as f64 * 1e-6)
+                    (PASSES[k], dt as f64 * t.period_ns as f64 * 1e-6)
                 })
                 .collect(),
         ))
