@@ -7,7 +7,8 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use wgcloth::config::{ModelKind, SceneKind, Shape};
-use wgcloth::run::{Backend, resolve_backend, run_cpu};
+use wgcloth::gpu::GpuContext;
+use wgcloth::run::{self, Backend, check_finite, choose_backend};
 use wgcloth::{Config, Error, Result, Scene};
 
 #[derive(Parser)]
@@ -25,18 +26,45 @@ struct Cli {
 enum Command {
     /// Simulate a scene and print a summary.
     Run(RunArgs),
+    /// Run the same scene on the GPU and the CPU and compare the results.
+    Validate(ValidateArgs),
 }
 
 #[derive(Args)]
 struct RunArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    #[arg(long, default_value = "auto")]
+    backend: Backend,
+    /// Write the run report as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct ValidateArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Allowed GPU–CPU position difference beyond the scene's own
+    /// sensitivity to rounding (see the printed `sensitivity`), m.
+    #[arg(
+        long,
+        value_name = "M",
+        default_value_t = 1e-4,
+        allow_negative_numbers = true
+    )]
+    tolerance: f32,
+}
+
+/// The flags that define a scene and its run.
+#[derive(Args)]
+struct SceneArgs {
     /// sphere: a rigid body moving through the hanging cloth; hang: cloth alone.
     #[arg(long)]
     scene: Option<SceneKind>,
     /// Collision model.
     #[arg(long)]
     model: Option<ModelKind>,
-    #[arg(long, default_value = "auto")]
-    backend: Backend,
     /// N×N particles.
     #[arg(long, value_name = "N", allow_negative_numbers = true)]
     grid: Option<u32>,
@@ -57,12 +85,9 @@ struct RunArgs {
     /// OBJ mesh for the rigid body.
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
-    /// Write the run report as JSON.
-    #[arg(long, value_name = "FILE.json")]
-    report: Option<PathBuf>,
 }
 
-impl RunArgs {
+impl SceneArgs {
     fn config(&self) -> Result<Config> {
         let mut c = match &self.config {
             Some(path) => Config::load(path)?,
@@ -103,19 +128,23 @@ impl RunArgs {
     }
 }
 
+fn progress_bar(steps: u64) -> ProgressBar {
+    ProgressBar::new(steps).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, {eta} left")
+            .expect("static template"),
+    )
+}
+
 fn run(args: &RunArgs) -> Result<()> {
-    let config = args.config()?;
+    let config = args.scene.config()?;
     let scene = Scene::new(&config)?;
-    let (_backend, notice) = resolve_backend(args.backend)?;
+    let (chosen, notice) = choose_backend(args.backend)?;
     if let Some(n) = notice {
         eprintln!("{n}");
     }
     let steps = config.solver.steps;
-    let bar = ProgressBar::new(steps).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, {eta} left")
-            .expect("static template"),
-    );
-    let (report, outcome) = run_cpu(scene, steps, |k| bar.set_position(k));
+    let bar = progress_bar(steps);
+    let report = run::run(&chosen, scene, steps, |k| bar.set_position(k))?;
     bar.finish_and_clear();
     println!("{}", report.summary());
     if let Some(path) = &args.report {
@@ -123,17 +152,72 @@ fn run(args: &RunArgs) -> Result<()> {
         std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))?;
         println!("report       {}", path.display());
     }
-    outcome
+    check_finite(&report)
+}
+
+/// Exit code 1: the GPU and CPU disagree (the check ran, and failed).
+struct Mismatch(String);
+
+fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
+    let config = args.scene.config()?;
+    if !args.tolerance.is_finite() || args.tolerance <= 0.0 {
+        return Err(Error::config(
+            "--tolerance",
+            format!("must be > 0, got {}", args.tolerance),
+        ));
+    }
+    let scene = Scene::new(&config)?;
+    let ctx = GpuContext::headless()?;
+    let steps = config.solver.steps;
+    let bar = progress_bar(steps);
+    let v = run::validate(&ctx, scene, steps, |k| bar.set_position(k))?;
+    bar.finish_and_clear();
+    // Contact amplifies rounding differences; the GPU may differ from the
+    // CPU as much as the CPU differs from itself under a nudge of a few ulps.
+    let allowed = args.tolerance + 4.0 * v.sensitivity;
+    println!(
+        "validate: scene {:?}, model {:?}, grid {}x{}, {steps} steps\n\
+         gpu          {}\n\
+         deviation    {:.3e} m largest |x_gpu − x_cpu|\n\
+         sensitivity  {:.3e} m largest |x_cpu − x_cpu'| with x_cpu' nudged {:.0e} m at the start\n\
+         allowed      {:.3e} m = --tolerance {:.1e} + 4 × sensitivity\n\
+         contacts     {} on the GPU, {} on the CPU",
+        config.scene,
+        config.model,
+        config.cloth.grid[0],
+        config.cloth.grid[1],
+        v.adapter,
+        v.max_deviation,
+        v.sensitivity,
+        run::PERTURBATION,
+        allowed,
+        args.tolerance,
+        v.gpu_contacts,
+        v.cpu_contacts
+    );
+    if v.max_deviation <= allowed {
+        Ok(Ok(()))
+    } else {
+        Ok(Err(Mismatch(format!(
+            "GPU and CPU differ by {:.3e} m, more than the {allowed:.3e} m allowed",
+            v.max_deviation
+        ))))
+    }
 }
 
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
     let result = match &cli.command {
-        Command::Run(args) => run(args),
+        Command::Run(args) => run(args).map(Ok),
+        Command::Validate(args) => validate(args),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(Mismatch(why))) => {
+            eprintln!("validation failed: {why}");
+            ExitCode::from(1)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(2)

@@ -1,13 +1,16 @@
-//! Running a scene for a number of steps and summarising it: the `--report`
-//! JSON of DESIGN.md and the one-screen summary.
+//! Running a scene for a number of steps on a backend and summarising it:
+//! the `--report` JSON of DESIGN.md and the one-screen summary.
 
-use serde::Serialize;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Instant;
 
+use serde::Serialize;
+
 use crate::config::{ModelKind, SceneKind};
-use crate::cpu::{CpuSim, STAGES};
+use crate::cpu::{self, CpuSim, STAGES};
 use crate::error::{Error, Result};
+use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use crate::scene::Scene;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -16,6 +19,29 @@ pub enum Backend {
     Cpu,
     /// The GPU when an adapter exists, else the CPU (with a notice).
     Auto,
+}
+
+/// The backend a run uses.
+pub enum Chosen {
+    Cpu,
+    Gpu(Box<GpuContext>),
+}
+
+/// Resolves `auto`, and says why when it falls back to the CPU.
+pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
+    match requested {
+        Backend::Cpu => Ok((Chosen::Cpu, None)),
+        Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),
+        Backend::Auto => Ok(match GpuContext::headless() {
+            Ok(ctx) => (Chosen::Gpu(Box::new(ctx)), None),
+            Err(e) => (
+                Chosen::Cpu,
+                Some(format!(
+                    "notice: {e}\nnotice: running on the CPU reference path"
+                )),
+            ),
+        }),
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -29,11 +55,16 @@ pub struct Report {
     pub dt: f32,
     /// Median wall time of a step, ms.
     pub ms_per_step: f64,
-    /// Median time of each stage per step, ms.
+    /// Median time of each stage per step, ms (GPU: timestamp queries,
+    /// absent where the adapter has none).
     pub stage_ms: BTreeMap<String, f64>,
+    /// Compute dispatches one step records (GPU only).
+    pub dispatches_per_step: Option<u32>,
     /// Deepest any cloth vertex got inside the rigid surface, m (≥ 0).
     pub max_penetration: f32,
     pub finite: bool,
+    /// The step after which the state was first found non-finite.
+    pub diverged_at: Option<u64>,
     pub cg_iterations_mean: f64,
     pub cg_residual_max: f32,
     pub cg_breakdowns: u64,
@@ -55,39 +86,57 @@ pub fn median(values: &mut [f64]) -> f64 {
     }
 }
 
-/// Which backend actually runs, and the notice to print when `auto` had
-/// to fall back.
-pub fn resolve_backend(requested: Backend) -> Result<(Backend, Option<String>)> {
-    match requested {
-        Backend::Cpu => Ok((Backend::Cpu, None)),
-        Backend::Auto => Ok((
-            Backend::Cpu,
-            Some("notice: no GPU backend in this build; running the CPU reference path".into()),
-        )),
-        Backend::Gpu => Err(Error::Unsupported(
-            "--backend gpu: the GPU backend is not part of this build yet; use --backend cpu"
-                .into(),
-        )),
+/// Per-step wall and stage times, summarised as medians.
+#[derive(Default)]
+struct Timings {
+    wall_ms: Vec<f64>,
+    stage_ms: BTreeMap<String, Vec<f64>>,
+}
+
+impl Timings {
+    fn push(&mut self, wall_ms: f64, stages: impl IntoIterator<Item = (&'static str, f64)>) {
+        self.wall_ms.push(wall_ms);
+        for (name, ms) in stages {
+            self.stage_ms.entry(name.to_string()).or_default().push(ms);
+        }
+    }
+
+    fn medians(mut self) -> (f64, BTreeMap<String, f64>) {
+        let stages = self
+            .stage_ms
+            .iter_mut()
+            .map(|(k, v)| (k.clone(), median(v)))
+            .collect();
+        (median(&mut self.wall_ms), stages)
     }
 }
 
-/// Runs the scene on the CPU for `steps` steps, calling `progress` after
-/// each. Stops at the first non-finite state with [`Error::Diverged`].
-pub fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> (Report, Result<()>) {
+/// Runs `steps` steps, calling `progress` after each.
+pub fn run(chosen: &Chosen, scene: Scene, steps: u64, progress: impl FnMut(u64)) -> Result<Report> {
+    match chosen {
+        Chosen::Cpu => Ok(run_cpu(scene, steps, progress)),
+        Chosen::Gpu(ctx) => run_gpu(ctx, scene, steps, progress),
+    }
+}
+
+fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> Report {
     let config = scene.config.clone();
     let mut sim = CpuSim::new(scene);
-    let mut wall = Vec::with_capacity(steps as usize);
-    let mut stage: Vec<Vec<f64>> = vec![Vec::with_capacity(steps as usize); STAGES.len()];
+    let mut timings = Timings::default();
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
     let (mut cg_residual_max, mut max_penetration) = (0.0f32, 0.0f32);
-    let mut outcome = Ok(());
+    let mut diverged_at = None;
     for k in 0..steps {
         let start = Instant::now();
         let s = sim.step();
-        wall.push(start.elapsed().as_secs_f64() * 1e3);
-        for (times, secs) in stage.iter_mut().zip(s.stage_seconds) {
-            times.push(secs * 1e3);
-        }
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        timings.push(
+            wall,
+            STAGES
+                .iter()
+                .zip(s.stage_seconds)
+                .map(|(n, secs)| (*n, secs * 1e3)),
+        );
         cg_iters += s.pcg.iterations as u64;
         contacts += s.contacts as u64;
         breakdowns += s.pcg.breakdown as u64;
@@ -95,15 +144,13 @@ pub fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> (Repo
         max_penetration = max_penetration.max(s.max_penetration);
         progress(k + 1);
         if !sim.is_finite() {
-            outcome = Err(Error::Diverged {
-                step: k + 1,
-                reason: "positions or velocities are no longer finite".into(),
-            });
+            diverged_at = Some(k + 1);
             break;
         }
     }
     let done = sim.state.step.max(1) as f64;
-    let report = Report {
+    let (ms_per_step, stage_ms) = timings.medians();
+    Report {
         backend: "cpu".into(),
         adapter: format!(
             "CPU reference path ({} threads)",
@@ -114,21 +161,129 @@ pub fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> (Repo
         grid: config.cloth.grid,
         steps: sim.state.step,
         dt: config.solver.dt,
-        ms_per_step: median(&mut wall),
-        stage_ms: STAGES
-            .iter()
-            .zip(&mut stage)
-            .map(|(name, t)| (name.to_string(), median(t)))
-            .collect(),
+        ms_per_step,
+        stage_ms,
+        dispatches_per_step: None,
         max_penetration,
         finite: sim.is_finite(),
+        diverged_at,
         cg_iterations_mean: cg_iters as f64 / done,
         cg_residual_max,
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
-    };
-    (report, outcome)
+    }
+}
+
+fn run_gpu(
+    ctx: &GpuContext,
+    scene: Scene,
+    steps: u64,
+    mut progress: impl FnMut(u64),
+) -> Result<Report> {
+    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene)?;
+    let mut timings = Timings::default();
+    let mut dispatches = 0;
+    for k in 0..steps {
+        let start = Instant::now();
+        dispatches = sim.step();
+        ctx.finish()?;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        timings.push(wall, sim.read_stage_ms()?.unwrap_or_default());
+        progress(k + 1);
+    }
+    let state = sim.read_state()?;
+    let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+    let finite = x.iter().chain(&v).all(|p| p.is_finite());
+    let done = state.steps.max(1) as f64;
+    let (ms_per_step, stage_ms) = timings.medians();
+    let config = &scene.config;
+    Ok(Report {
+        backend: "gpu".into(),
+        adapter: describe(&ctx.adapter),
+        model: config.model,
+        scene: config.scene,
+        grid: config.cloth.grid,
+        steps: state.steps as u64,
+        dt: config.solver.dt,
+        ms_per_step,
+        stage_ms,
+        dispatches_per_step: Some(dispatches),
+        max_penetration: f32::from_bits(state.max_penetration_bits),
+        finite,
+        // The GPU state is only read back at the end.
+        diverged_at: (!finite).then_some(state.steps as u64),
+        cg_iterations_mean: state.cg_iterations_total as f64 / done,
+        cg_residual_max: state.cg_residual_max,
+        cg_breakdowns: state.cg_breakdowns as u64,
+        contacts_mean: state.contacts_total as f64 / done,
+        energy_final: cpu::energy(&scene, &x, &v).total(),
+    })
+}
+
+/// GPU against CPU on the same scene: the largest position deviation (m)
+/// after `steps` steps, and the contact totals of each.
+///
+/// Contact makes the dynamics discontinuous (a vertex entering the band
+/// gets k_d ḋ at once; friction switches between stick and slip), so
+/// rounding-level differences grow. `sensitivity` measures how much: the
+/// deviation between the CPU run and a CPU run whose free vertices start
+/// `PERTURBATION` m away. A GPU as faithful as f32 allows deviates by
+/// about that much.
+pub struct Validation {
+    pub max_deviation: f32,
+    pub sensitivity: f32,
+    pub cpu_contacts: u64,
+    pub gpu_contacts: u64,
+    pub adapter: String,
+}
+
+/// Initial offset of the sensitivity run, m: a few f32 ulps at 1 m.
+pub const PERTURBATION: f32 = 1e-7;
+
+fn max_deviation(a: &[glam::Vec3], b: &[glam::Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(
+            0.0f32,
+            |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
+        )
+}
+
+pub fn validate(
+    ctx: &GpuContext,
+    scene: Scene,
+    steps: u64,
+    mut progress: impl FnMut(u64),
+) -> Result<Validation> {
+    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let gpu = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene)?;
+    let mut cpu = CpuSim::new(scene.clone());
+    let mut nudged = CpuSim::new(scene);
+    for (i, x) in nudged.state.x.iter_mut().enumerate() {
+        // A fixed, irregular direction per vertex.
+        let phase = i as f32 * 2.399_963;
+        *x += PERTURBATION
+            * glam::Vec3::new(phase.cos(), phase.sin(), (0.5 * phase).cos()).normalize();
+    }
+    let mut cpu_contacts = 0;
+    for k in 0..steps {
+        gpu.step();
+        cpu_contacts += cpu.step().contacts as u64;
+        nudged.step();
+        progress(k + 1);
+    }
+    ctx.finish()?;
+    let x = gpu.read_positions()?;
+    Ok(Validation {
+        max_deviation: max_deviation(&x, &cpu.state.x),
+        sensitivity: max_deviation(&nudged.state.x, &cpu.state.x),
+        cpu_contacts,
+        gpu_contacts: gpu.read_state()?.contacts_total as u64,
+        adapter: describe(&ctx.adapter),
+    })
 }
 
 impl Report {
@@ -139,10 +294,14 @@ impl Report {
             .iter()
             .map(|(k, v)| format!("{k} {v:.3}"))
             .collect();
+        let dispatches = self
+            .dispatches_per_step
+            .map(|d| format!(", {d} dispatches/step"))
+            .unwrap_or_default();
         format!(
             "wgcloth run: scene {:?}, model {:?}, grid {}x{}, {} steps of {} s\n\
              backend      {} — {}\n\
-             ms/step      {:.3} (median)\n\
+             ms/step      {:.3} (median{dispatches})\n\
              stages (ms)  {}\n\
              pcg          {:.1} iterations/step, worst relative residual {:.2e}, {} breakdowns\n\
              contacts     {:.1} per step\n\
@@ -157,7 +316,11 @@ impl Report {
             self.backend,
             self.adapter,
             self.ms_per_step,
-            stages.join(", "),
+            if stages.is_empty() {
+                "(no timestamp queries on this adapter)".into()
+            } else {
+                stages.join(", ")
+            },
             self.cg_iterations_mean,
             self.cg_residual_max,
             self.cg_breakdowns,
@@ -166,5 +329,16 @@ impl Report {
             if self.finite { "finite" } else { "NOT FINITE" },
             self.energy_final,
         )
+    }
+}
+
+/// Fails a run whose state stopped being finite.
+pub fn check_finite(report: &Report) -> Result<()> {
+    match report.diverged_at {
+        Some(step) => Err(Error::Diverged {
+            step,
+            reason: "positions or velocities are no longer finite".into(),
+        }),
+        None => Ok(()),
     }
 }

@@ -41,7 +41,7 @@ fn stderr_lines(out: &Output) -> Vec<String> {
         .trim()
         .lines()
         .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with("XDG_RUNTIME_DIR"))
+        .filter(|l| !l.is_empty() && !l.contains("XDG_RUNTIME_DIR is invalid"))
         .map(String::from)
         .collect()
 }
@@ -255,10 +255,48 @@ fn unknown_subcommand_is_a_usage_error() {
     expect_clap_error("simulate", &out, "simulate");
 }
 
+fn wgcloth_env(args: &[&str], key: &str, value: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_wgcloth"))
+        .args(args)
+        .env(key, value)
+        .output()
+        .expect("failed to run the wgcloth binary")
+}
+
 #[test]
-fn backend_gpu_is_unsupported() {
-    let out = wgcloth(&["run", "--grid", "4", "--steps", "2", "--backend", "gpu"]);
-    expect_error("--backend gpu", &out, &["--backend", "gpu"], &[]);
+fn backend_gpu_without_a_matching_adapter_is_one_clear_error() {
+    let args = ["run", "--grid", "4", "--steps", "2", "--backend", "gpu"];
+    let out = wgcloth_env(&args, "WGPU_ADAPTER_NAME", "no-such-adapter");
+    expect_error(
+        "--backend gpu, no adapter",
+        &out,
+        &["WGPU_ADAPTER_NAME", "no-such-adapter"],
+        &[],
+    );
+}
+
+#[test]
+fn backend_auto_without_an_adapter_falls_back_to_the_cpu_with_a_notice() {
+    let args = ["run", "--grid", "4", "--steps", "2", "--backend", "auto"];
+    let out = wgcloth_env(&args, "WGPU_ADAPTER_NAME", "no-such-adapter");
+    assert!(out.status.success(), "{}", describe("auto fallback", &out));
+    let err = stderr(&out);
+    assert!(err.contains("notice") && err.contains("CPU"), "{err}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("backend      cpu"));
+}
+
+#[test]
+fn validate_with_a_zero_tolerance_is_rejected() {
+    let out = wgcloth(&[
+        "validate",
+        "--grid",
+        "4",
+        "--steps",
+        "2",
+        "--tolerance",
+        "0",
+    ]);
+    expect_error("--tolerance 0", &out, &["--tolerance"], &[]);
 }
 
 // ----------------------------------------------------------------- TOML

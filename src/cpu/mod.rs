@@ -241,6 +241,21 @@ impl CpuSim {
     }
 }
 
+/// Kinetic, gravitational and elastic energy (J) of a cloth state, in f64.
+pub fn energy(scene: &Scene, x: &[Vec3], v: &[Vec3]) -> Energy {
+    let cloth = &scene.cloth;
+    let m = cloth.vertex_mass as f64;
+    let g = Vec3::from_array(scene.config.solver.gravity).as_dvec3();
+    Energy {
+        kinetic: v
+            .iter()
+            .map(|v| 0.5 * m * v.as_dvec3().length_squared())
+            .sum(),
+        gravity: x.iter().map(|x| -m * g.dot(x.as_dvec3())).sum(),
+        elastic: springs::potential_energy(cloth, x),
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Energy {
     pub kinetic: f64,

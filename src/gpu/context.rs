@@ -3,12 +3,17 @@
 
 use crate::error::{Error, Result};
 
+use std::sync::{Arc, Mutex};
+
 /// A device and queue with what the simulator needs to know of them.
 #[derive(Clone, Debug)]
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
+    /// The first validation error or device loss, recorded instead of
+    /// panicking so a run can stop with one clear error.
+    fault: Arc<Mutex<Option<String>>>,
 }
 
 /// "name (backend, device type)" for logs and reports.
@@ -22,11 +27,16 @@ impl GpuContext {
     /// otherwise the high-performance default. Errors say which adapters
     /// exist when none fits.
     pub fn headless() -> Result<GpuContext> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        // GL has no usable compute path here and its probing only adds
+        // noise; WGPU_BACKEND can still ask for it.
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends,
+            ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+        });
         let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
             Ok(wanted) => {
-                let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+                let adapters = pollster::block_on(instance.enumerate_adapters(backends));
                 let names: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
                 adapters
                     .into_iter()
@@ -68,10 +78,38 @@ impl GpuContext {
                 describe(&adapter.get_info())
             ))
         })?;
+        let fault: Arc<Mutex<Option<String>>> = Arc::default();
+        let record = |fault: &Arc<Mutex<Option<String>>>, what: String| {
+            let mut slot = fault.lock().unwrap_or_else(|e| e.into_inner());
+            slot.get_or_insert(what);
+        };
+        let f = fault.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&f, e.to_string())));
+        let f = fault.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            record(&f, format!("device lost ({reason:?}): {msg}"))
+        });
         Ok(GpuContext {
             device,
             queue,
             adapter: adapter.get_info(),
+            fault,
         })
+    }
+
+    /// Waits for submitted work and reports any fault the device recorded.
+    pub fn finish(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu(format!("waiting for the device failed: {e}")))?;
+        match self
+            .fault
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
+            Some(what) => Err(Error::Gpu(what.lines().next().unwrap_or(what).to_string())),
+            None => Ok(()),
+        }
     }
 }

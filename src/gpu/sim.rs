@@ -577,14 +577,15 @@ impl GpuSim {
     fn dispatch(
         &self,
         pass: &mut wgpu::ComputePass,
-        stage: &str,
-        entry: &str,
+        (stage, entry): (&str, &str),
         group: &wgpu::BindGroup,
         threads: u32,
+        count: &mut u32,
     ) {
         pass.set_pipeline(self.kernels.pipeline(stage, entry));
         pass.set_bind_group(0, group, &[]);
         pass.dispatch_workgroups(groups(threads), 1, 1);
+        *count += 1;
     }
 
     /// The passes a step records: the rigid-body ones only with a body.
@@ -594,68 +595,66 @@ impl GpuSim {
             .filter(move |&k| self.params.has_rigid != 0 || !rigid_only.contains(&PASSES[k]))
     }
 
-    /// Records one backward Euler step into `encoder`; nothing is read back.
-    pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder) {
+    /// Records one backward Euler step into `encoder`; nothing is read
+    /// back. Returns the number of dispatches recorded.
+    pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder) -> u32 {
         let p = &self.params;
         let (n, s, r) = (p.n_vertices, p.n_springs, p.n_rigid_vertices);
         let g = &self.groups;
+        let mut count = 0;
         for k in self.active_passes() {
             if PASSES[k] == "collide" {
                 // Face–vertex contacts append to their triangle's list.
                 encoder.clear_buffer(&self.buffers.triangle_contact_count, 0, None);
             }
             let mut pass = self.pass(encoder, k);
+            let mut run = |entry: (&str, &str), group: &wgpu::BindGroup, threads: u32| {
+                self.dispatch(&mut pass, entry, group, threads, &mut count)
+            };
             match PASSES[k] {
-                "rigid" => self.dispatch(&mut pass, "rigid", "main", &g.rigid, r.max(1)),
+                "rigid" => run(("rigid", "main"), &g.rigid, r.max(1)),
                 "collide" => {
-                    self.dispatch(
-                        &mut pass,
-                        "collide",
-                        "tiles",
-                        &g.collide,
-                        p.tiles_x * p.tiles_y,
-                    );
-                    self.dispatch(
-                        &mut pass,
-                        "collide",
-                        "supertiles",
+                    run(("collide", "tiles"), &g.collide, p.tiles_x * p.tiles_y);
+                    run(
+                        ("collide", "supertiles"),
                         &g.collide,
                         p.supertiles_x * p.supertiles_y,
                     );
-                    self.dispatch(&mut pass, "collide", "vertex_face", &g.collide, n);
-                    self.dispatch(&mut pass, "collide", "face_vertex", &g.collide, r);
+                    run(("collide", "vertex_face"), &g.collide, n);
+                    run(("collide", "face_vertex"), &g.collide, r);
                 }
                 "contact" => {
-                    self.dispatch(&mut pass, "contact", "vertex_face", &g.contact, n);
-                    self.dispatch(&mut pass, "contact", "face_vertex", &g.contact, r);
+                    run(("contact", "vertex_face"), &g.contact, n);
+                    run(("contact", "face_vertex"), &g.contact, r);
                 }
-                "springs" => self.dispatch(&mut pass, "springs", "main", &g.springs, s),
+                "springs" => run(("springs", "main"), &g.springs, s),
                 "assemble" => {
-                    self.dispatch(&mut pass, "assemble", "vertex", &g.assemble, n);
-                    self.dispatch(&mut pass, "assemble", "spring", &g.assemble, s);
+                    run(("assemble", "vertex"), &g.assemble, n);
+                    run(("assemble", "spring"), &g.assemble, s);
                 }
                 "pcg" => {
-                    self.dispatch(&mut pass, "pcg", "init", &g.pcg[0], n);
+                    run(("pcg", "init"), &g.pcg[0], n);
                     // Writes scalars[0], which iteration 0 reads.
-                    self.dispatch(&mut pass, "pcg", "init_scalars", &g.pcg[1], 1);
+                    run(("pcg", "init_scalars"), &g.pcg[1], 1);
                     let iters = p.cg_max_iters as usize;
                     for it in 0..iters {
                         let group = &g.pcg[it % 2];
-                        self.dispatch(&mut pass, "pcg", "spmv", group, n);
-                        self.dispatch(&mut pass, "pcg", "update", group, n);
-                        self.dispatch(&mut pass, "pcg", "direction", group, n);
+                        run(("pcg", "spmv"), group, n);
+                        run(("pcg", "update"), group, n);
+                        run(("pcg", "direction"), group, n);
                     }
                     // The last iteration wrote scalars[iters % 2].
-                    self.dispatch(&mut pass, "pcg", "finish", &g.pcg[iters % 2], 1);
+                    run(("pcg", "finish"), &g.pcg[iters % 2], 1);
                 }
-                "integrate" => self.dispatch(&mut pass, "integrate", "main", &g.integrate, n),
-                "measure" => self.dispatch(&mut pass, "measure", "main", &g.measure, n),
+                "integrate" => run(("integrate", "main"), &g.integrate, n),
+                "measure" => run(("measure", "main"), &g.measure, n),
                 other => unreachable!("no pass {other}"),
             }
         }
         if let Some(t) = &self.timer {
             encoder.resolve_query_set(&t.queries, 0..2 * PASSES.len() as u32, &t.resolve, 0);
         }
+        count
     }
 
     /// Replaces the cloth state (e.g. with a CPU state, to compare a stage).
@@ -668,11 +667,12 @@ impl GpuSim {
             .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&time));
     }
 
-    /// Records and submits one step.
-    pub fn step(&self) {
+    /// Records and submits one step; returns its dispatch count.
+    pub fn step(&self) -> u32 {
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        self.record_step(&mut encoder);
+        let count = self.record_step(&mut encoder);
         self.queue.submit([encoder.finish()]);
+        count
     }
 
     /// Copies `buffer` back to the host (blocks until the GPU is done).
