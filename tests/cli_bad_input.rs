@@ -501,3 +501,26 @@ fn tiny_run_with_config_and_mesh_succeeds() {
         describe("config and mesh", &out)
     );
 }
+
+#[test]
+fn scene_beyond_the_adapters_buffer_limits_is_one_clear_error() {
+    // 1100² particles need ~230 MiB of off-diagonal blocks; lavapipe binds
+    // 128 MiB. Skipped where no adapter exists (the GPU tests enforce one in CI).
+    let out = wgcloth(&[
+        "run",
+        "--backend",
+        "gpu",
+        "--scene",
+        "hang",
+        "--grid",
+        "1100",
+        "--steps",
+        "1",
+    ]);
+    let err = stderr(&out);
+    if err.contains("no GPU adapter") {
+        return;
+    }
+    let line = expect_error("--grid 1100 on the GPU", &out, &["--grid"], &[]);
+    assert!(line.contains("bytes"), "{line}");
+}

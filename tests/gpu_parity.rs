@@ -306,3 +306,42 @@ fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
     );
     assert!((deepest - stats.max_penetration).abs() < 1e-4);
 }
+
+#[test]
+fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = sphere(12, ModelKind::Friction);
+    let separate = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+    for _ in 0..50 {
+        separate.step();
+    }
+    // An embedding app: its own encoder, many steps, one submission; the
+    // clock and the rigid body's motion live on the GPU.
+    let embedded = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let dispatches: u32 = (0..50).map(|_| embedded.record_step(&mut encoder)).sum();
+    ctx.queue.submit([encoder.finish()]);
+    ctx.finish().unwrap();
+    assert_eq!(dispatches, 50 * (15 + 3 * 25), "dispatches per step");
+    assert_eq!(
+        embedded.read_positions().unwrap(),
+        separate.read_positions().unwrap()
+    );
+    assert_eq!(embedded.read_state().unwrap().steps, 50);
+    assert!(
+        embedded
+            .positions()
+            .usage()
+            .contains(wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE)
+    );
+    assert!(
+        embedded
+            .indices()
+            .usage()
+            .contains(wgpu::BufferUsages::INDEX)
+    );
+    assert_eq!(
+        embedded.index_count() as usize,
+        3 * scene.cloth.triangles.len()
+    );
+}
