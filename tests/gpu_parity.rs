@@ -345,3 +345,44 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
         3 * scene.cloth.triangles.len()
     );
 }
+
+#[test]
+fn a_lost_device_is_an_error_not_a_panic_or_a_hang() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, &hang(8)).unwrap();
+    sim.step();
+    ctx.finish().unwrap();
+    ctx.device.destroy();
+    sim.step();
+    let err = ctx
+        .finish()
+        .expect_err("a destroyed device must report an error");
+    eprintln!("{err}");
+    assert!(err.to_string().starts_with("GPU:"), "{err}");
+}
+
+#[test]
+fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let mut c = Config {
+        scene: SceneKind::Hang,
+        ..Default::default()
+    };
+    c.cloth.grid = [16, 16];
+    (c.solver.cg_iters, c.solver.cg_tol) = (300, 1e-4);
+    let scene = Scene::new(&c).unwrap();
+    let mut cpu = CpuSim::new(scene.clone());
+    let cpu_iters: u32 = (0..20).map(|_| cpu.step().pcg.iterations).sum();
+    let gpu = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    for _ in 0..20 {
+        gpu.step();
+    }
+    let gpu_iters = gpu.read_state().unwrap().cg_iterations_total;
+    eprintln!("PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} (cap 6000)");
+    assert!(
+        cpu_iters < 20 * 150,
+        "the CPU solve should converge well before the cap"
+    );
+    // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
+    assert!((gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0);
+}

@@ -87,7 +87,12 @@ impl GpuContext {
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&f, e.to_string())));
         let f = fault.clone();
         device.set_device_lost_callback(move |reason, msg| {
-            record(&f, format!("device lost ({reason:?}): {msg}"))
+            record(
+                &f,
+                format!("device lost ({reason:?}) {msg}")
+                    .trim_end()
+                    .to_string(),
+            )
         });
         Ok(GpuContext {
             device,
