@@ -18,18 +18,16 @@ const TILE: u32 = 8u;
 @group(0) @binding(3) var<storage, read> body_vertices: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> body_triangles: array<u32>;
 @group(0) @binding(5) var<storage, read> body_face_normals: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read> bvh_nodes: array<BvhNode>;
-@group(0) @binding(7) var<storage, read> bvh_order: array<u32>;
-@group(0) @binding(8) var<storage, read> rigid_vertices: array<vec4<f32>>;
-@group(0) @binding(9) var<storage, read> rigid_normals: array<vec4<f32>>;
-@group(0) @binding(10) var<storage, read> frame: RigidFrame;
-@group(0) @binding(11) var<storage, read_write> tile_bounds: array<Bounds>;
-@group(0) @binding(12) var<storage, read_write> supertile_bounds: array<Bounds>;
-@group(0) @binding(13) var<storage, read_write> vf_contacts: array<Contact>;
-@group(0) @binding(14) var<storage, read_write> fv_contacts: array<Contact>;
-@group(0) @binding(15) var<storage, read_write> triangle_contact_count: array<atomic<u32>>;
-@group(0) @binding(16) var<storage, read_write> triangle_contacts: array<u32>;
-@group(0) @binding(17) var<storage, read_write> state: StepState;
+@group(0) @binding(6) var<storage, read> rigid_vertices: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read> rigid_normals: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read> frame: RigidFrame;
+@group(0) @binding(9) var<storage, read_write> tile_bounds: array<Bounds>;
+@group(0) @binding(10) var<storage, read_write> supertile_bounds: array<Bounds>;
+@group(0) @binding(11) var<storage, read_write> vf_contacts: array<Contact>;
+@group(0) @binding(12) var<storage, read_write> fv_contacts: array<Contact>;
+@group(0) @binding(13) var<storage, read_write> triangle_contact_count: array<atomic<u32>>;
+@group(0) @binding(14) var<storage, read_write> triangle_contacts: array<u32>;
+@group(0) @binding(15) var<storage, read_write> state: StepState;
 
 fn reach() -> f32 {
     return max(params.thickness, params.max_depth);
@@ -91,21 +89,9 @@ fn vertex_face(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = inverse_rotate(frame.rotation, x[i].xyz - frame.translation);
     var best_t = NO_TRIANGLE;
     var best = vec4<f32>(0.0);
-    var stack: array<u32, 64>;
-    var top = 1u;
-    stack[0] = 0u;
-    while top > 0u {
-        top--;
-        let node = bvh_nodes[stack[top]];
-        if !box_near(node.lo, node.hi, p, reach()) {
-            continue;
-        }
-        if node.count == 0u {
-            stack[top] = node.first;
-            stack[top + 1u] = node.first + 1u;
-            top += 2u;
-            continue;
-        }
+    var walk = box_walk(p, reach());
+    for (var leaf = next_leaf(&walk); leaf != NO_TRIANGLE; leaf = next_leaf(&walk)) {
+        let node = bvh_nodes[leaf];
         for (var k = node.first; k < node.first + node.count; k++) {
             let t = bvh_order[k];
             let n = body_face_normals[t].xyz;

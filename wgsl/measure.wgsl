@@ -9,10 +9,8 @@
 @group(0) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> body_triangles: array<u32>;
 @group(0) @binding(4) var<storage, read> body_face_normals: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> bvh_nodes: array<BvhNode>;
-@group(0) @binding(6) var<storage, read> bvh_order: array<u32>;
-@group(0) @binding(7) var<storage, read> frame: RigidFrame;
-@group(0) @binding(8) var<storage, read_write> state: StepState;
+@group(0) @binding(5) var<storage, read> frame: RigidFrame;
+@group(0) @binding(6) var<storage, read_write> state: StepState;
 
 fn corner(t: u32, k: u32) -> vec3<f32> {
     return body_vertices[body_triangles[3u * t + k]].xyz;
@@ -38,27 +36,10 @@ fn ray_crosses(o: vec3<f32>, d: vec3<f32>, t: u32) -> bool {
 // Odd crossings along a direction no generated mesh is aligned with.
 fn inside(p: vec3<f32>) -> bool {
     let d = normalize(vec3<f32>(1.0, 0.7548777, 0.5698403));
-    let inv = 1.0 / d;
     var crossings = 0u;
-    var stack: array<u32, 64>;
-    var top = 1u;
-    stack[0] = 0u;
-    while top > 0u {
-        top--;
-        let node = bvh_nodes[stack[top]];
-        let t0 = (node.lo - p) * inv;
-        let t1 = (node.hi - p) * inv;
-        let enter = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z));
-        let exit = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z));
-        if exit < max(enter, 0.0) {
-            continue;
-        }
-        if node.count == 0u {
-            stack[top] = node.first;
-            stack[top + 1u] = node.first + 1u;
-            top += 2u;
-            continue;
-        }
+    var walk = ray_walk(p, d);
+    for (var leaf = next_leaf(&walk); leaf != NO_TRIANGLE; leaf = next_leaf(&walk)) {
+        let node = bvh_nodes[leaf];
         for (var k = node.first; k < node.first + node.count; k++) {
             crossings += u32(ray_crosses(p, d, bvh_order[k]));
         }
@@ -70,21 +51,9 @@ fn depth_inside(p: vec3<f32>) -> f32 {
     let root = bvh_nodes[0];
     let reach = length(root.hi - root.lo);
     var depth = 3.4e38;
-    var stack: array<u32, 64>;
-    var top = 1u;
-    stack[0] = 0u;
-    while top > 0u {
-        top--;
-        let node = bvh_nodes[stack[top]];
-        if !box_near(node.lo, node.hi, p, reach) {
-            continue;
-        }
-        if node.count == 0u {
-            stack[top] = node.first;
-            stack[top + 1u] = node.first + 1u;
-            top += 2u;
-            continue;
-        }
+    var walk = box_walk(p, reach);
+    for (var leaf = next_leaf(&walk); leaf != NO_TRIANGLE; leaf = next_leaf(&walk)) {
+        let node = bvh_nodes[leaf];
         for (var k = node.first; k < node.first + node.count; k++) {
             let t = bvh_order[k];
             let hit = point_triangle(p, corner(t, 0u), corner(t, 1u), corner(t, 2u), body_face_normals[t].xyz, 0.0, reach);

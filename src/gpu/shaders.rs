@@ -21,14 +21,27 @@ pub const STAGES: [(&str, &str); 8] = [
 
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
-/// Common code followed by the stage's own.
+/// Shared code with bindings of its own (so not in `COMMON`), and the
+/// stages it is prepended to.
+pub const INCLUDES: [(&str, &str, &[&str]); 1] = [(
+    "bvh",
+    include_str!("../../wgsl/bvh.wgsl"),
+    &["collide", "measure"],
+)];
+
+/// Common code, the stage's includes, then the stage's own code.
 pub fn source(stage: &str) -> String {
     let body = STAGES
         .iter()
         .find(|(name, _)| *name == stage)
         .unwrap_or_else(|| panic!("no WGSL stage `{stage}`"))
         .1;
-    format!("{COMMON}\n{body}")
+    let includes: String = INCLUDES
+        .iter()
+        .filter(|(_, _, users)| users.contains(&stage))
+        .map(|(_, text, _)| format!("{text}\n"))
+        .collect();
+    format!("{COMMON}\n{includes}{body}")
 }
 
 /// A binding of group 0 as the WGSL declares it.
