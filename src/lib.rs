@@ -13,6 +13,7 @@ pub mod cpu;
 pub mod error;
 pub mod gpu;
 pub mod math;
+pub mod nn;
 pub mod run;
 pub mod scene;
 

@@ -1,0 +1,136 @@
+//! The collision network as the simulator evaluates it: dense layers with
+//! LeakyReLU between them, in plain physical units (the file's min-max
+//! input and standard output scaling are folded into the first and last
+//! layers by `weights::load`), and its input Jacobian by forward mode.
+
+/// One dense layer: y = W x + b, W row-major [outputs × inputs].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    pub inputs: usize,
+    pub outputs: usize,
+    pub weight: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mlp {
+    pub layers: Vec<Layer>,
+    pub negative_slope: f32,
+}
+
+impl Mlp {
+    pub fn inputs(&self) -> usize {
+        self.layers[0].inputs
+    }
+
+    pub fn outputs(&self) -> usize {
+        self.layers[self.layers.len() - 1].outputs
+    }
+
+    /// Multiply-adds of one forward evaluation.
+    pub fn multiply_adds(&self) -> usize {
+        self.layers.iter().map(|l| l.inputs * l.outputs).sum()
+    }
+
+    fn is_hidden(&self, k: usize) -> bool {
+        k + 1 < self.layers.len()
+    }
+
+    /// The network's output at `x`.
+    pub fn forward(&self, x: &[f32]) -> Vec<f32> {
+        self.forward_jacobian(x, 0).0
+    }
+
+    /// The output and its Jacobian with respect to the first `tangents`
+    /// inputs, row-major [outputs × tangents]. Forward mode: each layer
+    /// carries the activations and their derivatives, T ← diag(σ'(z)) W T.
+    pub fn forward_jacobian(&self, x: &[f32], tangents: usize) -> (Vec<f32>, Vec<f32>) {
+        let mut a = x.to_vec();
+        // t[i * tangents + j] = ∂a_i / ∂x_j; the identity on the inputs.
+        let mut t = vec![0.0f32; x.len() * tangents];
+        for j in 0..tangents {
+            t[j * tangents + j] = 1.0;
+        }
+        for (k, layer) in self.layers.iter().enumerate() {
+            let mut z = layer.bias.clone();
+            let mut tz = vec![0.0f32; layer.outputs * tangents];
+            for o in 0..layer.outputs {
+                let row = &layer.weight[o * layer.inputs..(o + 1) * layer.inputs];
+                let out = &mut tz[o * tangents..(o + 1) * tangents];
+                for (i, &w) in row.iter().enumerate() {
+                    z[o] += w * a[i];
+                    for (dst, src) in out.iter_mut().zip(&t[i * tangents..(i + 1) * tangents]) {
+                        *dst += w * src;
+                    }
+                }
+            }
+            if self.is_hidden(k) {
+                for o in 0..layer.outputs {
+                    if z[o] < 0.0 {
+                        z[o] *= self.negative_slope;
+                        for d in &mut tz[o * tangents..(o + 1) * tangents] {
+                            *d *= self.negative_slope;
+                        }
+                    }
+                }
+            }
+            a = z;
+            t = tz;
+        }
+        (a, t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small random network (deterministic).
+    pub fn random(sizes: &[usize], seed: u64) -> Mlp {
+        let mut s = seed;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let layers = sizes
+            .windows(2)
+            .map(|w| Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| next() / (w[0] as f32).sqrt())
+                    .collect(),
+                bias: (0..w[1]).map(|_| 0.1 * next()).collect(),
+            })
+            .collect();
+        Mlp {
+            layers,
+            negative_slope: 0.01,
+        }
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let net = random(&[10, 32, 24, 16, 3], 9);
+        let x: Vec<f32> = (0..10).map(|i| 0.3 * (i as f32 * 1.7).sin()).collect();
+        let (y, jac) = net.forward_jacobian(&x, 6);
+        assert_eq!(y, net.forward(&x));
+        let h = 1e-3;
+        for j in 0..6 {
+            let (mut xp, mut xm) = (x.clone(), x.clone());
+            xp[j] += h;
+            xm[j] -= h;
+            let (yp, ym) = (net.forward(&xp), net.forward(&xm));
+            for o in 0..3 {
+                let fd = (yp[o] - ym[o]) / (2.0 * h);
+                let got = jac[o * 6 + j];
+                assert!(
+                    (fd - got).abs() <= 1e-3 * got.abs().max(1.0),
+                    "∂y{o}/∂x{j}: {got} vs {fd}"
+                );
+            }
+        }
+    }
+}
