@@ -24,6 +24,16 @@ pub enum ModelKind {
     Naive,
     /// Contact and Coulomb friction force (thesis eqs. 8–9).
     Friction,
+    /// The friction force predicted by the trained network (thesis 2.6–2.7),
+    /// its input Jacobian as the contact stiffness.
+    FrictionNet,
+}
+
+impl ModelKind {
+    /// Whether the model evaluates a network (and needs `contact.weights`).
+    pub fn is_network(self) -> bool {
+        matches!(self, ModelKind::FrictionNet)
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -198,6 +208,8 @@ pub struct ContactConfig {
     pub kt: f32,
     /// Coulomb coefficient μ.
     pub mu: f32,
+    /// The network of `friction-net` (a `wgcloth-mlp/1` file).
+    pub weights: PathBuf,
 }
 
 impl Default for ContactConfig {
@@ -211,6 +223,7 @@ impl Default for ContactConfig {
             kd: 1.0,
             kt: 100.0,
             mu: 0.5,
+            weights: PathBuf::from("weights/friction_mlp.safetensors"),
         }
     }
 }
@@ -357,7 +370,7 @@ impl Config {
         positive("contact.max_depth", &[k.max_depth])?;
         match self.model {
             ModelKind::Naive => positive("contact.naive_stiffness", &[k.naive_stiffness])?,
-            ModelKind::Friction => {
+            ModelKind::Friction | ModelKind::FrictionNet => {
                 positive("contact.force_scale", &[k.force_scale])?;
                 positive("contact.kn", &[k.kn])?;
                 non_negative("contact.kd", &[k.kd])?;

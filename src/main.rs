@@ -28,6 +28,77 @@ enum Command {
     Run(RunArgs),
     /// Run the same scene on the GPU and the CPU and compare the results.
     Validate(ValidateArgs),
+    /// Record contacts and sample the domain: training data for the friction network.
+    GenData(GenDataArgs),
+    /// Train the friction network (candle) and write its weights file.
+    Train(TrainArgs),
+    /// Accuracy of a friction network's weights file.
+    EvalNet(EvalNetArgs),
+}
+
+#[derive(Args)]
+struct GenDataArgs {
+    /// The data file to write (safetensors, `wgcloth-contacts/1`).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// Contacts recorded from randomised sphere runs.
+    #[arg(long, default_value_t = 200_000)]
+    recorded: usize,
+    /// Uniform samples of the declared input domain.
+    #[arg(long, default_value_t = 800_000)]
+    uniform: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Replace an existing file.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    /// Training data from `wgcloth gen-data`.
+    #[arg(long, value_name = "FILE")]
+    data: PathBuf,
+    /// The weights file to write.
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "weights/friction_mlp.safetensors"
+    )]
+    out: PathBuf,
+    /// Hidden layer widths (default: the thesis's 256,256,128,128,128,128,128).
+    #[arg(long, value_delimiter = ',')]
+    hidden: Option<Vec<usize>>,
+    #[arg(long, default_value_t = 60)]
+    epochs: usize,
+    #[arg(long, default_value_t = 512)]
+    batch: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f64,
+    #[arg(long, default_value_t = 10)]
+    patience: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Loss curve (PNG).
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Replace an existing weights file.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+struct EvalNetArgs {
+    /// The weights file.
+    file: PathBuf,
+    /// Held-out data (a `gen-data` file not used for training).
+    #[arg(long, value_name = "FILE")]
+    data: Option<PathBuf>,
+    /// Fresh uniform samples of the declared domain.
+    #[arg(long, default_value_t = 200_000)]
+    samples: usize,
+    #[arg(long, default_value_t = 12345)]
+    seed: u64,
 }
 
 #[derive(Args)]
@@ -85,6 +156,9 @@ struct SceneArgs {
     /// OBJ mesh for the rigid body.
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
+    /// Weights of the network model (default weights/friction_mlp.safetensors).
+    #[arg(long, value_name = "FILE.safetensors")]
+    weights: Option<PathBuf>,
 }
 
 impl SceneArgs {
@@ -114,6 +188,9 @@ impl SceneArgs {
         if let Some(t) = self.cg_tol {
             c.solver.cg_tol = t;
         }
+        if let Some(w) = &self.weights {
+            c.contact.weights = w.clone();
+        }
         if let Some(mesh) = &self.mesh {
             if c.scene == SceneKind::Hang {
                 return Err(Error::config(
@@ -138,7 +215,7 @@ fn progress_bar(steps: u64) -> ProgressBar {
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
     let scene = Scene::new(&config)?;
-    let (chosen, notice) = choose_backend(args.backend)?;
+    let (chosen, notice) = choose_backend(args.backend, config.model)?;
     if let Some(n) = notice {
         eprintln!("{n}");
     }
@@ -153,6 +230,114 @@ fn run(args: &RunArgs) -> Result<()> {
         println!("report       {}", path.display());
     }
     check_finite(&report)
+}
+
+fn gen_data(args: &GenDataArgs) -> Result<()> {
+    if args.out.exists() && !args.force {
+        return Err(Error::file(
+            &args.out,
+            "already exists; pass --force to replace it",
+        ));
+    }
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("{msg} {bar:40} {percent}%").expect("static template"),
+    );
+    let data =
+        wgcloth::nn::dataset::generate(args.recorded, args.uniform, args.seed, |what, f| {
+            bar.set_message(what.to_string());
+            bar.set_position((f * 1000.0) as u64);
+        })?;
+    bar.finish_and_clear();
+    let meta = [
+        ("seed".to_string(), args.seed.to_string()),
+        ("recorded".to_string(), args.recorded.to_string()),
+        ("uniform".to_string(), args.uniform.to_string()),
+    ]
+    .into();
+    data.write(&args.out, meta, args.force)?;
+    println!(
+        "{}: {} samples ({} recorded, {} uniform), seed {}",
+        args.out.display(),
+        data.len(),
+        args.recorded,
+        args.uniform,
+        args.seed
+    );
+    Ok(())
+}
+
+fn train(args: &TrainArgs) -> Result<()> {
+    if args.out.exists() && !args.force {
+        return Err(Error::file(
+            &args.out,
+            "already exists; pass --force to replace it",
+        ));
+    }
+    let data = wgcloth::nn::dataset::Dataset::read(&args.data)?;
+    let defaults = wgcloth::nn::train::TrainOptions::default();
+    let opts = wgcloth::nn::train::TrainOptions {
+        hidden: args.hidden.clone().unwrap_or(defaults.hidden),
+        epochs: args.epochs,
+        batch: args.batch,
+        learning_rate: args.lr,
+        patience: args.patience,
+        seed: args.seed,
+        checkpoint: Some(args.out.with_extension("checkpoint.safetensors")),
+        ..defaults
+    };
+    let bar = progress_bar(opts.epochs as u64).with_style(
+        ProgressStyle::with_template("{bar:40} epoch {pos}/{len} {msg} {eta} left")
+            .expect("static template"),
+    );
+    let trained = wgcloth::nn::train::train(&data, &opts, |epoch, t, v| {
+        bar.set_position(epoch as u64);
+        bar.set_message(format!("train {t:.3e} validation {v:.3e}"));
+        eprintln!("epoch {epoch}: train {t:.4e}, validation {v:.4e}");
+    })?;
+    bar.finish_and_clear();
+    trained.weights.write(&args.out, args.force)?;
+    let _ = std::fs::remove_file(args.out.with_extension("checkpoint.safetensors"));
+    if let Some(plot) = &args.plot {
+        wgcloth::nn::plot::loss_curve(&trained.curve, plot)?;
+    }
+    println!(
+        "{}: best validation MSE {:.4e} (standardised) after {} epochs, {:.0} s, {} samples",
+        args.out.display(),
+        trained.best_validation,
+        trained.curve.len(),
+        trained.seconds,
+        data.len()
+    );
+    Ok(())
+}
+
+fn eval_net(args: &EvalNetArgs) -> Result<()> {
+    let file = wgcloth::nn::weights::WeightsFile::read(&args.file)?;
+    let held_out = args
+        .data
+        .as_deref()
+        .map(wgcloth::nn::dataset::Dataset::read)
+        .transpose()?;
+    let e = wgcloth::nn::eval::evaluate(&file, held_out.as_ref(), args.samples, args.seed);
+    let net = file.folded();
+    println!(
+        "eval-net: {} ({} layers, {} multiply-adds)",
+        args.file.display(),
+        net.layers.len(),
+        net.multiply_adds()
+    );
+    if let Some(m) = e.held_out_mse {
+        println!("held-out     standardised MSE {m:.4e}");
+    }
+    println!(
+        "uniform      standardised MSE {:.4e} ({} fresh samples of the declared domain)",
+        e.uniform_mse, e.uniform_samples
+    );
+    println!(
+        "jacobian     median relative error of the position Jacobian {:.3e}",
+        e.jacobian_median_relative_error
+    );
+    Ok(())
 }
 
 /// Exit code 1: the GPU and CPU disagree (the check ran, and failed).
@@ -211,6 +396,9 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Run(args) => run(args).map(Ok),
         Command::Validate(args) => validate(args),
+        Command::GenData(args) => gen_data(args).map(Ok),
+        Command::Train(args) => train(args).map(Ok),
+        Command::EvalNet(args) => eval_net(args).map(Ok),
     };
     match result {
         Ok(Ok(())) => ExitCode::SUCCESS,

@@ -27,10 +27,17 @@ pub enum Chosen {
     Gpu(Box<GpuContext>),
 }
 
-/// Resolves `auto`, and says why when it falls back to the CPU.
-pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
+/// Resolves `auto`, and says why when it falls back to the CPU (no
+/// adapter, or a model without GPU kernels).
+pub fn choose_backend(requested: Backend, model: ModelKind) -> Result<(Chosen, Option<String>)> {
     match requested {
         Backend::Cpu => Ok((Chosen::Cpu, None)),
+        Backend::Auto if model.is_network() => Ok((
+            Chosen::Cpu,
+            Some(format!(
+                "notice: model {model:?} has no GPU kernels yet; running on the CPU reference path"
+            )),
+        )),
         Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),
         Backend::Auto => Ok(match GpuContext::headless() {
             Ok(ctx) => (Chosen::Gpu(Box::new(ctx)), None),

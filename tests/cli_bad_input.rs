@@ -524,3 +524,23 @@ fn scene_beyond_the_adapters_buffer_limits_is_one_clear_error() {
     let line = expect_error("--grid 1100 on the GPU", &out, &["--grid"], &[]);
     assert!(line.contains("bytes"), "{line}");
 }
+
+#[test]
+fn friction_net_with_a_missing_weights_file_names_it() {
+    let out = run_tiny(&[
+        "--model",
+        "friction-net",
+        "--weights",
+        "no/such/net.safetensors",
+    ]);
+    expect_error("missing --weights", &out, &["no/such/net.safetensors"], &[]);
+}
+
+#[test]
+fn friction_net_with_a_corrupt_weights_file_names_it() {
+    let dir = TempDir::new("corrupt_weights");
+    let path = dir.path("net.safetensors");
+    std::fs::write(&path, b"not a network").unwrap();
+    let out = run_tiny(&["--model", "friction-net", "--weights", s(&path)]);
+    expect_error("corrupt --weights", &out, &[s(&path), "safetensors"], &[]);
+}

@@ -15,6 +15,8 @@ use rayon::prelude::*;
 use crate::config::{ContactConfig, ModelKind};
 use crate::cpu::collide::Contact;
 use crate::math::{outer, project_nsd, symmetric_part};
+use crate::nn::Mlp;
+use std::sync::Arc;
 
 /// A force and its Jacobians with respect to c and v_rel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -106,7 +108,7 @@ pub fn friction(c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
 }
 
 /// A collision model with its coefficients, as selected for a run.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Model {
     Naive {
         stiffness: f32,
@@ -115,22 +117,52 @@ pub enum Model {
         scale: f32,
         coefficients: Coefficients,
     },
+    /// g from the network (thesis 2.7); ∂g/∂c and ∂g/∂v_rel from its input
+    /// Jacobian, by forward mode through the layers.
+    FrictionNet {
+        net: Arc<Mlp>,
+        scale: f32,
+        coefficients: Coefficients,
+    },
+}
+
+/// g and its Jacobians from a friction network with inputs
+/// (c, v_rel, k_n, k_d, k_t, μ).
+pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
+    let x = [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu];
+    let (g, j) = net.forward_jacobian(&x, 6);
+    // j is row-major [3 outputs × 6 tangents]: columns 0–2 are ∂/∂c, 3–5 ∂/∂v.
+    let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
+    ForceJacobian {
+        force: Vec3::new(g[0], g[1], g[2]),
+        d_c: Mat3::from_cols(column(0), column(1), column(2)),
+        d_v: Mat3::from_cols(column(3), column(4), column(5)),
+    }
 }
 
 impl Model {
-    pub fn new(kind: ModelKind, c: &ContactConfig) -> Model {
+    /// The model of a run; `network` is the scene's (network models only).
+    pub fn new(kind: ModelKind, c: &ContactConfig, network: Option<&Arc<Mlp>>) -> Model {
+        let coefficients = Coefficients {
+            kn: c.kn,
+            kd: c.kd,
+            kt: c.kt,
+            mu: c.mu,
+        };
         match kind {
             ModelKind::Naive => Model::Naive {
                 stiffness: c.naive_stiffness,
             },
             ModelKind::Friction => Model::Friction {
                 scale: c.force_scale,
-                coefficients: Coefficients {
-                    kn: c.kn,
-                    kd: c.kd,
-                    kt: c.kt,
-                    mu: c.mu,
-                },
+                coefficients,
+            },
+            ModelKind::FrictionNet => Model::FrictionNet {
+                net: network
+                    .expect("Scene::new loads the network of a network model")
+                    .clone(),
+                scale: c.force_scale,
+                coefficients,
             },
         }
     }
@@ -143,6 +175,11 @@ impl Model {
                 scale,
                 coefficients,
             } => friction(c, v_rel, coefficients).scaled(*scale),
+            Model::FrictionNet {
+                net,
+                scale,
+                coefficients,
+            } => friction_net(net, c, v_rel, coefficients).scaled(*scale),
         }
     }
 }

@@ -93,7 +93,7 @@ impl CpuSim {
             damping_stiffness: cfg.cloth.damping_stiffness,
         };
         CpuSim {
-            model: Model::new(cfg.model, &cfg.contact),
+            model: Model::new(cfg.model, &cfg.contact, scene.network.as_ref()),
             tolerances: Tolerances {
                 thickness: cfg.contact.thickness,
                 max_depth: cfg.contact.max_depth,

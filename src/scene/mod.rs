@@ -10,15 +10,20 @@ use glam::{Quat, Vec3};
 
 use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
 use crate::error::{Error, Result};
+use crate::nn::Mlp;
+use crate::nn::weights::{NetKind, WeightsFile};
 pub use cloth::Cloth;
 pub use mesh::TriMesh;
 pub use rigid::{Motion, RigidBody};
+use std::sync::Arc;
 
 #[derive(Clone, Debug)]
 pub struct Scene {
     pub config: Config,
     pub cloth: Cloth,
     pub rigid: Option<RigidBody>,
+    /// The collision network, folded to physical units, for network models.
+    pub network: Option<Arc<Mlp>>,
 }
 
 fn quat(r: &Rotation) -> Quat {
@@ -76,10 +81,28 @@ impl Scene {
                 ))
             }
         };
+        let network = match config.model.is_network() {
+            false => None,
+            true => {
+                let path = &config.contact.weights;
+                let file = WeightsFile::read(path)?;
+                if file.kind != NetKind::Friction {
+                    return Err(Error::file(
+                        path,
+                        format!(
+                            "is a {} network; model friction-net needs a friction one",
+                            file.kind.name()
+                        ),
+                    ));
+                }
+                Some(Arc::new(file.folded()))
+            }
+        };
         Ok(Scene {
             config: config.clone(),
             cloth,
             rigid,
+            network,
         })
     }
 }

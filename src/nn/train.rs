@@ -1,0 +1,280 @@
+//! Training the friction network with candle (thesis 2.6–2.7): min-max
+//! input scaling (the declared domain's bounds), standardised outputs, Adam
+//! on minibatches with a cosine learning-rate decay, a held-out validation
+//! split, early stopping that keeps the best weights, checkpoints, and the
+//! loss curve.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{Linear, Module, Optimizer, VarBuilder, VarMap};
+
+use crate::error::{Error, Result};
+use crate::nn::dataset::{Dataset, Rng, domain_bounds};
+use crate::nn::mlp::Layer;
+use crate::nn::weights::{NetKind, WeightsFile};
+
+/// The thesis's architecture (2.7): 10 → 256, 256, 128 ×5 → 3.
+pub const THESIS_HIDDEN: [usize; 7] = [256, 256, 128, 128, 128, 128, 128];
+pub const NEGATIVE_SLOPE: f32 = 0.01;
+
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    pub hidden: Vec<usize>,
+    pub epochs: usize,
+    pub batch: usize,
+    pub learning_rate: f64,
+    /// Epochs without a better validation loss before stopping.
+    pub patience: usize,
+    pub validation_fraction: f32,
+    pub seed: u64,
+    /// Where the best weights so far are written after each improvement.
+    pub checkpoint: Option<PathBuf>,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            hidden: THESIS_HIDDEN.to_vec(),
+            epochs: 60,
+            batch: 512,
+            learning_rate: 1e-3,
+            patience: 10,
+            validation_fraction: 0.1,
+            seed: 1,
+            checkpoint: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Trained {
+    pub weights: WeightsFile,
+    /// Validation MSE of the untrained network.
+    pub initial_validation: f64,
+    /// (train, validation) standardised MSE per epoch.
+    pub curve: Vec<(f64, f64)>,
+    pub best_validation: f64,
+    pub seconds: f64,
+}
+
+fn candle(e: candle_core::Error) -> Error {
+    Error::Unsupported(format!("training failed: {e}"))
+}
+
+struct Net {
+    layers: Vec<Linear>,
+}
+
+impl Net {
+    fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        let mut a = x.clone();
+        for (k, l) in self.layers.iter().enumerate() {
+            a = l.forward(&a)?;
+            if k + 1 < self.layers.len() {
+                a = candle_nn::ops::leaky_relu(&a, NEGATIVE_SLOPE as f64)?;
+            }
+        }
+        Ok(a)
+    }
+}
+
+fn rows(t: &Tensor, idx: &[u32]) -> candle_core::Result<Tensor> {
+    t.index_select(&Tensor::new(idx, t.device())?, 0)
+}
+
+/// Standardised MSE of `net` on (x, y), in batches.
+fn evaluate(net: &Net, x: &Tensor, y: &Tensor, batch: usize) -> candle_core::Result<f64> {
+    let n = x.dim(0)?;
+    let mut sum = 0.0;
+    for start in (0..n).step_by(batch) {
+        let len = batch.min(n - start);
+        let d = (net.forward(&x.narrow(0, start, len)?)? - y.narrow(0, start, len)?)?;
+        sum += d.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
+    }
+    Ok(sum / (n * y.dim(1)?) as f64)
+}
+
+fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>> {
+    let vars = varmap.data().lock().expect("varmap lock");
+    (0..n_layers)
+        .map(|i| {
+            let w = vars[&format!("layer{i}.weight")]
+                .as_tensor()
+                .to_vec2::<f32>()?;
+            let b = vars[&format!("layer{i}.bias")]
+                .as_tensor()
+                .to_vec1::<f32>()?;
+            Ok(Layer {
+                inputs: w[0].len(),
+                outputs: w.len(),
+                weight: w.into_iter().flatten().collect(),
+                bias: b,
+            })
+        })
+        .collect()
+}
+
+pub fn train(
+    data: &Dataset,
+    opts: &TrainOptions,
+    mut progress: impl FnMut(usize, f64, f64),
+) -> Result<Trained> {
+    if data.len() < 20 {
+        return Err(Error::config(
+            "--data",
+            format!("{} samples are too few to train on", data.len()),
+        ));
+    }
+    if opts.batch == 0 || opts.epochs == 0 || opts.hidden.contains(&0) {
+        return Err(Error::config(
+            "train",
+            "epochs, batch and every hidden width must be ≥ 1",
+        ));
+    }
+    let start = Instant::now();
+    let dev = Device::Cpu;
+    let (lo, hi) = domain_bounds();
+    let n_val = ((data.len() as f32 * opts.validation_fraction) as usize).max(1);
+    let n_train = data.len() - n_val;
+    // Output scaler from the training part.
+    let mut mean = [0.0f64; 3];
+    let mut var = [0.0f64; 3];
+    for y in &data.targets[..n_train] {
+        for o in 0..3 {
+            mean[o] += y[o] as f64 / n_train as f64;
+        }
+    }
+    for y in &data.targets[..n_train] {
+        for o in 0..3 {
+            var[o] += (y[o] as f64 - mean[o]).powi(2) / n_train as f64;
+        }
+    }
+    let std: Vec<f32> = var.iter().map(|v| (v.sqrt() as f32).max(1e-6)).collect();
+    let mean: Vec<f32> = mean.iter().map(|m| *m as f32).collect();
+    let scaled_x: Vec<f32> = data
+        .inputs
+        .iter()
+        .flat_map(|x| (0..10).map(move |k| (x[k] - lo[k]) / (hi[k] - lo[k])))
+        .collect();
+    let scaled_y: Vec<f32> = data
+        .targets
+        .iter()
+        .flat_map(|y| (0..3).map(|o| (y[o] - mean[o]) / std[o]))
+        .collect();
+    let x_all = Tensor::from_vec(scaled_x, (data.len(), 10), &dev).map_err(candle)?;
+    let y_all = Tensor::from_vec(scaled_y, (data.len(), 3), &dev).map_err(candle)?;
+    let (x_train, y_train) = (
+        x_all.narrow(0, 0, n_train).map_err(candle)?,
+        y_all.narrow(0, 0, n_train).map_err(candle)?,
+    );
+    let (x_val, y_val) = (
+        x_all.narrow(0, n_train, n_val).map_err(candle)?,
+        y_all.narrow(0, n_train, n_val).map_err(candle)?,
+    );
+
+    let varmap = VarMap::new();
+    let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
+    let mut sizes = vec![10];
+    sizes.extend(&opts.hidden);
+    sizes.push(3);
+    let net = Net {
+        layers: sizes
+            .windows(2)
+            .enumerate()
+            .map(|(i, w)| candle_nn::linear(w[0], w[1], vb.pp(format!("layer{i}"))))
+            .collect::<candle_core::Result<_>>()
+            .map_err(candle)?,
+    };
+    let mut opt = candle_nn::AdamW::new(
+        varmap.all_vars(),
+        candle_nn::ParamsAdamW {
+            lr: opts.learning_rate,
+            weight_decay: 0.0,
+            ..Default::default()
+        },
+    )
+    .map_err(candle)?;
+
+    let initial_validation = evaluate(&net, &x_val, &y_val, 4096).map_err(candle)?;
+    let mut rng = Rng::new(opts.seed);
+    let mut order: Vec<u32> = (0..n_train as u32).collect();
+    let mut curve = Vec::new();
+    let mut best = (f64::INFINITY, Vec::new());
+    let mut since_best = 0;
+    let file = |layers: Vec<Layer>, notes: BTreeMap<String, String>| WeightsFile {
+        kind: NetKind::Friction,
+        layers,
+        negative_slope: NEGATIVE_SLOPE,
+        input_min: lo.to_vec(),
+        input_max: hi.to_vec(),
+        output_mean: mean.clone(),
+        output_std: std.clone(),
+        notes,
+    };
+    for epoch in 0..opts.epochs {
+        // Cosine decay to 1/100 of the initial rate over the planned epochs.
+        let phase = epoch as f64 / opts.epochs as f64;
+        opt.set_learning_rate(
+            opts.learning_rate * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * phase).cos())),
+        );
+        for k in (1..order.len()).rev() {
+            order.swap(k, (rng.next_u64() % (k as u64 + 1)) as usize);
+        }
+        let mut train_sum = 0.0;
+        for chunk in order.chunks(opts.batch) {
+            let (xb, yb) = (
+                rows(&x_train, chunk).map_err(candle)?,
+                rows(&y_train, chunk).map_err(candle)?,
+            );
+            let loss =
+                candle_nn::loss::mse(&net.forward(&xb).map_err(candle)?, &yb).map_err(candle)?;
+            opt.backward_step(&loss).map_err(candle)?;
+            train_sum += loss.to_scalar::<f32>().map_err(candle)? as f64 * chunk.len() as f64;
+        }
+        let train_mse = train_sum / n_train as f64;
+        let val_mse = evaluate(&net, &x_val, &y_val, 4096).map_err(candle)?;
+        curve.push((train_mse, val_mse));
+        progress(epoch + 1, train_mse, val_mse);
+        if val_mse < best.0 {
+            best = (val_mse, snapshot(&varmap, sizes.len() - 1).map_err(candle)?);
+            since_best = 0;
+            if let Some(path) = &opts.checkpoint {
+                file(best.1.clone(), BTreeMap::new()).write(path, true)?;
+            }
+        } else {
+            since_best += 1;
+            if since_best >= opts.patience {
+                break;
+            }
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let notes = BTreeMap::from([
+        (
+            "recipe".to_string(),
+            format!(
+                "hidden={:?} epochs={} batch={} lr={} cosine-to-1% adamw patience={} validation={} seed={} samples={}",
+                opts.hidden,
+                curve.len(),
+                opts.batch,
+                opts.learning_rate,
+                opts.patience,
+                opts.validation_fraction,
+                opts.seed,
+                data.len()
+            ),
+        ),
+        ("validation_mse".to_string(), format!("{:.4e}", best.0)),
+        ("train_seconds".to_string(), format!("{seconds:.0}")),
+    ]);
+    Ok(Trained {
+        weights: file(best.1, notes),
+        initial_validation,
+        curve,
+        best_validation: best.0,
+        seconds,
+    })
+}

@@ -1,0 +1,156 @@
+//! The learned friction model: data generation, training, and the network
+//! inside the contact model.
+
+mod common;
+
+use std::path::Path;
+
+use common::Rng;
+use glam::Vec3;
+use wgcloth::cpu::contact::{Coefficients, friction_net};
+use wgcloth::nn::dataset::{Dataset, generate};
+use wgcloth::nn::train::{TrainOptions, train};
+use wgcloth::nn::{Layer, Mlp};
+
+fn random_net(sizes: &[usize], seed: u64) -> Mlp {
+    let mut rng = Rng(seed);
+    Mlp {
+        layers: sizes
+            .windows(2)
+            .map(|w| Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| rng.range(-1.0, 1.0) / (w[0] as f32).sqrt())
+                    .collect(),
+                bias: (0..w[1]).map(|_| rng.range(-0.2, 0.2)).collect(),
+            })
+            .collect(),
+        negative_slope: 0.01,
+    }
+}
+
+#[test]
+fn network_force_jacobians_match_finite_differences() {
+    // First-layer weights divided by each input's range, as folding the
+    // min-max scaler does: c spans 0.1, v 4, the coefficients up to 1000.
+    let mut net = random_net(&[10, 24, 24, 3], 8);
+    let ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    for o in 0..24 {
+        for (i, r) in ranges.iter().enumerate() {
+            net.layers[0].weight[o * 10 + i] /= r;
+        }
+    }
+    let k = Coefficients {
+        kn: 500.0,
+        kd: 3.0,
+        kt: 200.0,
+        mu: 0.4,
+    };
+    let mut rng = Rng(4);
+    for _ in 0..20 {
+        let c = rng.vec3(-0.05, 0.05);
+        let v = rng.vec3(-1.0, 1.0);
+        let fj = friction_net(&net, c, v, &k);
+        // Piecewise linear: near a LeakyReLU kink the central difference
+        // mixes two pieces, but one one-sided difference is exact.
+        for (m, x, h, what) in [(fj.d_c, c, 1e-4, "∂g/∂c"), (fj.d_v, v, 1e-3, "∂g/∂v")] {
+            let g = |y: Vec3| if what == "∂g/∂c" { friction_net(&net, y, v, &k) } else { friction_net(&net, c, y, &k) }.force;
+            for col in 0..3 {
+                let mut e = Vec3::ZERO;
+                e[col] = h;
+                let (f0, fp, fm) = (g(x), g(x + e), g(x - e));
+                let candidates = [(fp - fm) / (2.0 * h), (fp - f0) / h, (f0 - fm) / h];
+                let got = m.col(col);
+                let best = candidates
+                    .iter()
+                    .map(|d| (*d - got).length())
+                    .fold(f32::INFINITY, f32::min);
+                assert!(
+                    best <= 1e-2 * got.length().max(0.1),
+                    "{what} column {col}: {got} vs {candidates:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn gen_data_is_deterministic_for_a_seed() {
+    let a = generate(300, 700, 7, |_, _| {}).unwrap();
+    let b = generate(300, 700, 7, |_, _| {}).unwrap();
+    let c = generate(300, 700, 8, |_, _| {}).unwrap();
+    assert_eq!(a.len(), 1000);
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    // Every sample lies in the declared domain.
+    for x in &a.inputs {
+        assert!(Vec3::new(x[0], x[1], x[2]).length() <= 0.05 + 1e-6);
+        assert!(Vec3::new(x[3], x[4], x[5]).length() <= 2.0 + 1e-6);
+        assert!((10.0..=1000.0).contains(&x[6]) && (0.0..=10.0).contains(&x[7]));
+        assert!((1.0..=1000.0).contains(&x[8]) && (0.0..=1.0).contains(&x[9]));
+    }
+}
+
+#[test]
+fn a_tiny_training_run_lowers_the_loss_tenfold() {
+    let data = generate(500, 3500, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![48, 48],
+        epochs: 40,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 40,
+        ..Default::default()
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+}
+
+#[test]
+fn training_refuses_empty_or_mismatched_data() {
+    let dir = std::env::temp_dir().join(format!("wgcloth-data-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.st");
+    Dataset::default()
+        .write(&empty, Default::default(), true)
+        .unwrap();
+    let err = Dataset::read(&empty).unwrap_err().to_string();
+    assert!(err.contains("no samples"), "{err}");
+    let tiny = Dataset {
+        inputs: vec![[0.0; 10]; 5],
+        targets: vec![[0.0; 3]; 5],
+    };
+    let err = train(&tiny, &TrainOptions::default(), |_, _, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("too few"), "{err}");
+    // Inputs and targets of different lengths.
+    let mut bytes = Dataset {
+        inputs: vec![[0.0; 10]; 4],
+        targets: vec![[0.0; 3]; 4],
+    }
+    .to_bytes(Default::default());
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let y = [0u8; 3 * 4 * 3];
+    let views = vec![
+        ("inputs".to_string(), st.tensor("inputs").unwrap()),
+        (
+            "targets".to_string(),
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![3, 3], &y).unwrap(),
+        ),
+    ];
+    bytes = safetensors::serialize(views, header.metadata().clone()).unwrap();
+    let mismatched = dir.join("mismatched.st");
+    std::fs::write(&mismatched, bytes).unwrap();
+    let err = Dataset::read(Path::new(&mismatched))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("4 inputs but 3 targets"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
