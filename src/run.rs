@@ -40,6 +40,15 @@ pub fn choose_backend(requested: Backend, model: ModelKind) -> Result<(Chosen, O
         )),
         Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),
         Backend::Auto => Ok(match GpuContext::headless() {
+            // A software rasteriser (lavapipe) runs the kernels on the same
+            // CPU cores, several times slower than the reference path.
+            Ok(ctx) if ctx.adapter.device_type == wgpu::DeviceType::Cpu => (
+                Chosen::Cpu,
+                Some(format!(
+                    "notice: the only GPU adapter is a software one ({}); running on the faster CPU reference path (--backend gpu forces it)",
+                    describe(&ctx.adapter)
+                )),
+            ),
             Ok(ctx) => (Chosen::Gpu(Box::new(ctx)), None),
             Err(e) => (
                 Chosen::Cpu,
