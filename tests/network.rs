@@ -154,3 +154,30 @@ fn training_refuses_empty_or_mismatched_data() {
     assert!(err.contains("4 inputs but 3 targets"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_shipped_network_keeps_the_thesis_scene_stable_and_out_of_the_sphere() {
+    use wgcloth::config::ModelKind;
+    use wgcloth::cpu::CpuSim;
+    use wgcloth::{Config, Scene};
+    let mut c = Config {
+        model: ModelKind::FrictionNet,
+        ..Default::default()
+    };
+    c.cloth.grid = [16, 16];
+    c.contact.weights =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/friction_mlp.safetensors");
+    let mut sim = CpuSim::new(Scene::new(&c).expect("the shipped weights load"));
+    let (mut deepest, mut contacts) = (0.0f32, 0);
+    for _ in 0..200 {
+        let s = sim.step();
+        assert!(sim.is_finite());
+        deepest = deepest.max(s.max_penetration);
+        contacts += s.contacts;
+    }
+    assert!(contacts > 500, "the sphere must hit the cloth");
+    assert!(
+        deepest < 0.01,
+        "a vertex went {deepest} m inside the sphere"
+    );
+}
