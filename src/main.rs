@@ -82,6 +82,9 @@ struct TrainArgs {
     /// Loss curve (PNG).
     #[arg(long, value_name = "FILE.png")]
     plot: Option<PathBuf>,
+    /// Continue from these weights (same architecture).
+    #[arg(long, value_name = "FILE.safetensors")]
+    init: Option<PathBuf>,
     /// Replace an existing weights file.
     #[arg(long)]
     force: bool,
@@ -283,6 +286,11 @@ fn train(args: &TrainArgs) -> Result<()> {
         patience: args.patience,
         seed: args.seed,
         checkpoint: Some(args.out.with_extension("checkpoint.safetensors")),
+        init: args
+            .init
+            .as_deref()
+            .map(wgcloth::nn::weights::WeightsFile::read)
+            .transpose()?,
         ..defaults
     };
     let bar = progress_bar(opts.epochs as u64).with_style(

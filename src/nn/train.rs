@@ -32,6 +32,8 @@ pub struct TrainOptions {
     pub seed: u64,
     /// Where the best weights so far are written after each improvement.
     pub checkpoint: Option<PathBuf>,
+    /// Start from these weights (same architecture; their scalers are kept).
+    pub init: Option<WeightsFile>,
 }
 
 impl Default for TrainOptions {
@@ -45,6 +47,7 @@ impl Default for TrainOptions {
             validation_fraction: 0.1,
             seed: 1,
             checkpoint: None,
+            init: None,
         }
     }
 }
@@ -152,8 +155,12 @@ pub fn train(
             var[o] += (y[o] as f64 - mean[o]).powi(2) / n_train as f64;
         }
     }
-    let std: Vec<f32> = var.iter().map(|v| (v.sqrt() as f32).max(1e-6)).collect();
-    let mean: Vec<f32> = mean.iter().map(|m| *m as f32).collect();
+    let mut std: Vec<f32> = var.iter().map(|v| (v.sqrt() as f32).max(1e-6)).collect();
+    let mut mean: Vec<f32> = mean.iter().map(|m| *m as f32).collect();
+    if let Some(init) = &opts.init {
+        // A warm start keeps the scaling its weights were trained with.
+        (mean, std) = (init.output_mean.clone(), init.output_std.clone());
+    }
     let scaled_x: Vec<f32> = data
         .inputs
         .iter()
@@ -188,6 +195,26 @@ pub fn train(
             .collect::<candle_core::Result<_>>()
             .map_err(candle)?,
     };
+    if let Some(init) = &opts.init {
+        let widths: Vec<usize> = init.layers.iter().map(|l| l.outputs).collect();
+        if init.layers.len() != net.layers.len() || widths[..widths.len() - 1] != opts.hidden[..] {
+            return Err(Error::config(
+                "--init",
+                format!(
+                    "its layers {widths:?} do not match --hidden {:?}",
+                    opts.hidden
+                ),
+            ));
+        }
+        let vars = varmap.data().lock().expect("varmap lock");
+        for (i, l) in init.layers.iter().enumerate() {
+            let w =
+                Tensor::from_vec(l.weight.clone(), (l.outputs, l.inputs), &dev).map_err(candle)?;
+            let b = Tensor::from_vec(l.bias.clone(), l.outputs, &dev).map_err(candle)?;
+            vars[&format!("layer{i}.weight")].set(&w).map_err(candle)?;
+            vars[&format!("layer{i}.bias")].set(&b).map_err(candle)?;
+        }
+    }
     let mut opt = candle_nn::AdamW::new(
         varmap.all_vars(),
         candle_nn::ParamsAdamW {
