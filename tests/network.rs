@@ -181,3 +181,41 @@ fn the_shipped_network_keeps_the_thesis_scene_stable_and_out_of_the_sphere() {
         "a vertex went {deepest} m inside the sphere"
     );
 }
+
+#[test]
+fn a_warm_start_begins_where_the_given_weights_left_off() {
+    let data = generate(200, 1800, 5, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![32, 32],
+        epochs: 15,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 15,
+        ..Default::default()
+    };
+    let first = train(&data, &opts, |_, _, _| {}).unwrap();
+    let again = TrainOptions {
+        init: Some(first.weights.clone()),
+        epochs: 1,
+        ..opts.clone()
+    };
+    let warm = train(&data, &again, |_, _, _| {}).unwrap();
+    eprintln!(
+        "cold start {:.3e}, trained {:.3e}, warm start {:.3e}",
+        first.initial_validation, first.best_validation, warm.initial_validation
+    );
+    assert!(
+        (warm.initial_validation - first.best_validation).abs()
+            <= 1e-6 * first.best_validation.max(1.0)
+    );
+    let wrong = TrainOptions {
+        hidden: vec![16, 32],
+        ..again
+    };
+    assert!(
+        train(&data, &wrong, |_, _, _| {})
+            .unwrap_err()
+            .to_string()
+            .contains("--init")
+    );
+}
