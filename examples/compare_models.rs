@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut config = Config::default();
     config.cloth.grid = [grid, grid];
     if let Some(w) = args.get(3) {
-        config.contact.weights = w.into();
+        config.contact.weights = Some(w.into());
     }
     let steps_per_period = (config.rigid.motion.period / config.solver.dt).round() as u64;
     let mut sims = [ModelKind::Friction, ModelKind::FrictionNet].map(|model| {

@@ -27,12 +27,34 @@ pub enum ModelKind {
     /// The friction force predicted by the trained network (thesis 2.6–2.7),
     /// its input Jacobian as the contact stiffness.
     FrictionNet,
+    /// The naive force predicted by the small network of thesis 2.4 from
+    /// the contact's triangle and point in a local frame.
+    NaiveNet,
 }
 
 impl ModelKind {
     /// Whether the model evaluates a network (and needs `contact.weights`).
     pub fn is_network(self) -> bool {
-        matches!(self, ModelKind::FrictionNet)
+        self.default_weights().is_some()
+    }
+
+    /// The name on the command line and in config files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Naive => "naive",
+            ModelKind::Friction => "friction",
+            ModelKind::FrictionNet => "friction-net",
+            ModelKind::NaiveNet => "naive-net",
+        }
+    }
+
+    /// The shipped weights a network model reads unless told otherwise.
+    pub fn default_weights(self) -> Option<&'static str> {
+        match self {
+            ModelKind::FrictionNet => Some("weights/friction_mlp.safetensors"),
+            ModelKind::NaiveNet => Some("weights/naive_mlp.safetensors"),
+            ModelKind::Naive | ModelKind::Friction => None,
+        }
     }
 }
 
@@ -208,8 +230,9 @@ pub struct ContactConfig {
     pub kt: f32,
     /// Coulomb coefficient μ.
     pub mu: f32,
-    /// The network of `friction-net` (a `wgcloth-mlp/1` file).
-    pub weights: PathBuf,
+    /// The network of a network model (a `wgcloth-mlp/1` file); by default
+    /// the model's shipped one under `weights/`.
+    pub weights: Option<PathBuf>,
 }
 
 impl Default for ContactConfig {
@@ -223,7 +246,7 @@ impl Default for ContactConfig {
             kd: 1.0,
             kt: 100.0,
             mu: 0.5,
-            weights: PathBuf::from("weights/friction_mlp.safetensors"),
+            weights: None,
         }
     }
 }
@@ -279,6 +302,18 @@ impl Default for Config {
 }
 
 impl Config {
+    /// The weights file a network model reads: `contact.weights`, else the
+    /// model's shipped file. None for the analytic models.
+    pub fn weights_path(&self) -> Option<PathBuf> {
+        let shipped = self.model.default_weights()?;
+        Some(
+            self.contact
+                .weights
+                .clone()
+                .unwrap_or_else(|| shipped.into()),
+        )
+    }
+
     /// Parses a TOML document; unknown or mistyped fields are errors naming
     /// the file and line.
     pub fn from_toml(text: &str, path: &Path) -> Result<Config> {
@@ -369,7 +404,9 @@ impl Config {
         positive("contact.thickness", &[k.thickness])?;
         positive("contact.max_depth", &[k.max_depth])?;
         match self.model {
-            ModelKind::Naive => positive("contact.naive_stiffness", &[k.naive_stiffness])?,
+            ModelKind::Naive | ModelKind::NaiveNet => {
+                positive("contact.naive_stiffness", &[k.naive_stiffness])?
+            }
             ModelKind::Friction | ModelKind::FrictionNet => {
                 positive("contact.force_scale", &[k.force_scale])?;
                 positive("contact.kn", &[k.kn])?;

@@ -8,6 +8,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use wgcloth::config::{ModelKind, SceneKind, Shape};
 use wgcloth::gpu::GpuContext;
+use wgcloth::nn::train::thesis_hidden;
+use wgcloth::nn::weights::NetKind;
 use wgcloth::run::{self, Backend, check_finite, choose_backend};
 use wgcloth::{Config, Error, Result, Scene};
 
@@ -28,11 +30,11 @@ enum Command {
     Run(RunArgs),
     /// Run the same scene on the GPU and the CPU and compare the results.
     Validate(ValidateArgs),
-    /// Record contacts and sample the domain: training data for the friction network.
+    /// Record contacts and sample the domain: training data for a network.
     GenData(GenDataArgs),
-    /// Train the friction network (candle) and write its weights file.
+    /// Train a network (candle) and write its weights file.
     Train(TrainArgs),
-    /// Accuracy of a friction network's weights file.
+    /// Accuracy of a network's weights file.
     EvalNet(EvalNetArgs),
 }
 
@@ -41,6 +43,9 @@ struct GenDataArgs {
     /// The data file to write (safetensors, `wgcloth-contacts/1`).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// Which network the data trains.
+    #[arg(long, value_enum, default_value = "friction")]
+    model: NetKind,
     /// Contacts recorded from randomised sphere runs.
     #[arg(long, default_value_t = 200_000)]
     recorded: usize,
@@ -59,14 +64,12 @@ struct TrainArgs {
     /// Training data from `wgcloth gen-data`.
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
-    /// The weights file to write.
-    #[arg(
-        long,
-        value_name = "FILE",
-        default_value = "weights/friction_mlp.safetensors"
-    )]
-    out: PathBuf,
-    /// Hidden layer widths (default: the thesis's 256,256,128,128,128,128,128).
+    /// The weights file to write [default: the shipped file of the data's
+    /// network, weights/friction_mlp.safetensors or weights/naive_mlp.safetensors].
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Hidden layer widths [default: the thesis's, 256,256,128,128,128,128,128
+    /// for friction and 16,16,16,16,16 for naive].
     #[arg(long, value_delimiter = ',')]
     hidden: Option<Vec<usize>>,
     #[arg(long, default_value_t = 60)]
@@ -159,7 +162,8 @@ struct SceneArgs {
     /// OBJ mesh for the rigid body.
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
-    /// Weights of the network model (default weights/friction_mlp.safetensors).
+    /// Weights of the network model [default: weights/friction_mlp.safetensors
+    /// for friction-net, weights/naive_mlp.safetensors for naive-net].
     #[arg(long, value_name = "FILE.safetensors")]
     weights: Option<PathBuf>,
 }
@@ -192,7 +196,7 @@ impl SceneArgs {
             c.solver.cg_tol = t;
         }
         if let Some(w) = &self.weights {
-            c.contact.weights = w.clone();
+            c.contact.weights = Some(w.clone());
         }
         if let Some(mesh) = &self.mesh {
             if c.scene == SceneKind::Hang {
@@ -236,20 +240,20 @@ fn run(args: &RunArgs) -> Result<()> {
 }
 
 fn gen_data(args: &GenDataArgs) -> Result<()> {
-    if args.out.exists() && !args.force {
-        return Err(Error::file(
-            &args.out,
-            "already exists; pass --force to replace it",
-        ));
-    }
+    refuse_existing(&args.out, args.force)?;
     let bar = ProgressBar::new(1000).with_style(
         ProgressStyle::with_template("{msg} {bar:40} {percent}%").expect("static template"),
     );
-    let data =
-        wgcloth::nn::dataset::generate(args.recorded, args.uniform, args.seed, |what, f| {
+    let data = wgcloth::nn::dataset::generate(
+        args.model,
+        args.recorded,
+        args.uniform,
+        args.seed,
+        |what, f| {
             bar.set_message(what.to_string());
             bar.set_position((f * 1000.0) as u64);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
     let meta = [
         ("seed".to_string(), args.seed.to_string()),
@@ -259,9 +263,10 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
     .into();
     data.write(&args.out, meta, args.force)?;
     println!(
-        "{}: {} samples ({} recorded, {} uniform), seed {}",
+        "{}: {} {} samples ({} recorded, {} uniform), seed {}",
         args.out.display(),
         data.len(),
+        args.model.name(),
         args.recorded,
         args.uniform,
         args.seed
@@ -269,29 +274,40 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
     Ok(())
 }
 
-fn train(args: &TrainArgs) -> Result<()> {
-    if args.out.exists() && !args.force {
-        return Err(Error::file(
-            &args.out,
+fn refuse_existing(path: &std::path::Path, force: bool) -> Result<()> {
+    match path.exists() && !force {
+        true => Err(Error::file(
+            path,
             "already exists; pass --force to replace it",
-        ));
+        )),
+        false => Ok(()),
+    }
+}
+
+fn train(args: &TrainArgs) -> Result<()> {
+    if let Some(out) = &args.out {
+        refuse_existing(out, args.force)?;
     }
     let data = wgcloth::nn::dataset::Dataset::read(&args.data)?;
-    let defaults = wgcloth::nn::train::TrainOptions::default();
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("weights/{}_mlp.safetensors", data.kind.name())));
+    refuse_existing(&out, args.force)?;
     let opts = wgcloth::nn::train::TrainOptions {
-        hidden: args.hidden.clone().unwrap_or(defaults.hidden),
+        hidden: (args.hidden.clone()).unwrap_or_else(|| thesis_hidden(data.kind)),
         epochs: args.epochs,
         batch: args.batch,
         learning_rate: args.lr,
         patience: args.patience,
         seed: args.seed,
-        checkpoint: Some(args.out.with_extension("checkpoint.safetensors")),
+        checkpoint: Some(out.with_extension("checkpoint.safetensors")),
         init: args
             .init
             .as_deref()
             .map(wgcloth::nn::weights::WeightsFile::read)
             .transpose()?,
-        ..defaults
+        ..Default::default()
     };
     let bar = progress_bar(opts.epochs as u64).with_style(
         ProgressStyle::with_template("{bar:40} epoch {pos}/{len} {msg} {eta} left")
@@ -303,14 +319,14 @@ fn train(args: &TrainArgs) -> Result<()> {
         eprintln!("epoch {epoch}: train {t:.4e}, validation {v:.4e}");
     })?;
     bar.finish_and_clear();
-    trained.weights.write(&args.out, args.force)?;
-    let _ = std::fs::remove_file(args.out.with_extension("checkpoint.safetensors"));
+    trained.weights.write(&out, args.force)?;
+    let _ = std::fs::remove_file(out.with_extension("checkpoint.safetensors"));
     if let Some(plot) = &args.plot {
         wgcloth::nn::plot::loss_curve(&trained.curve, plot)?;
     }
     println!(
         "{}: best validation MSE {:.4e} (standardised) after {} epochs, {:.0} s, {} samples",
-        args.out.display(),
+        out.display(),
         trained.best_validation,
         trained.curve.len(),
         trained.seconds,
@@ -326,6 +342,19 @@ fn eval_net(args: &EvalNetArgs) -> Result<()> {
         .as_deref()
         .map(wgcloth::nn::dataset::Dataset::read)
         .transpose()?;
+    if let (Some(d), Some(path)) = (&held_out, &args.data)
+        && d.kind != file.kind
+    {
+        return Err(Error::file(
+            path,
+            format!(
+                "holds {} data; {} is a {} network",
+                d.kind.name(),
+                args.file.display(),
+                file.kind.name()
+            ),
+        ));
+    }
     let e = wgcloth::nn::eval::evaluate(&file, held_out.as_ref(), args.samples, args.seed);
     let net = file.folded();
     println!(

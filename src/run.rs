@@ -35,7 +35,8 @@ pub fn choose_backend(requested: Backend, model: ModelKind) -> Result<(Chosen, O
         Backend::Auto if model.is_network() => Ok((
             Chosen::Cpu,
             Some(format!(
-                "notice: model {model:?} has no GPU kernels yet; running on the CPU reference path"
+                "notice: model {} has no GPU kernels yet; running on the CPU reference path",
+                model.name()
             )),
         )),
         Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),

@@ -544,3 +544,53 @@ fn friction_net_with_a_corrupt_weights_file_names_it() {
     let out = run_tiny(&["--model", "friction-net", "--weights", s(&path)]);
     expect_error("corrupt --weights", &out, &[s(&path), "safetensors"], &[]);
 }
+
+#[test]
+fn a_network_model_with_the_other_kind_of_network_names_both() {
+    let shipped = |name: &str| format!("{}/weights/{name}", env!("CARGO_MANIFEST_DIR"));
+    let friction = shipped("friction_mlp.safetensors");
+    let out = run_tiny(&["--model", "naive-net", "--weights", &friction]);
+    expect_error(
+        "naive-net with friction weights",
+        &out,
+        &[&friction, "naive-net", "friction network"],
+        &[],
+    );
+    let naive = shipped("naive_mlp.safetensors");
+    let out = run_tiny(&["--model", "friction-net", "--weights", &naive]);
+    expect_error(
+        "friction-net with naive weights",
+        &out,
+        &[&naive, "friction-net", "naive network"],
+        &[],
+    );
+}
+
+#[test]
+fn eval_net_with_data_of_the_other_network_names_both() {
+    let dir = TempDir::new("eval_mismatch");
+    let data = dir.path("naive.st");
+    let out = wgcloth(&[
+        "gen-data",
+        "--model",
+        "naive",
+        "--out",
+        s(&data),
+        "--recorded",
+        "0",
+        "--uniform",
+        "50",
+    ]);
+    assert!(out.status.success(), "{}", describe("gen-data", &out));
+    let friction = format!(
+        "{}/weights/friction_mlp.safetensors",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = wgcloth(&["eval-net", &friction, "--data", s(&data), "--samples", "10"]);
+    expect_error(
+        "eval-net mismatch",
+        &out,
+        &[s(&data), "naive data", "friction network"],
+        &[],
+    );
+}

@@ -4,11 +4,14 @@ mod common;
 
 use common::{Rng, assert_close, fd_jacobian};
 use glam::{Mat3, Quat, Vec3};
-use wgcloth::cpu::collide::{self, Contact, Tolerances};
-use wgcloth::cpu::contact::{Coefficients, ForceJacobian, Model, friction, naive};
+use wgcloth::cpu::collide::{self, Contact, Geometry, Tolerances};
+use wgcloth::cpu::contact::{
+    Coefficients, ForceJacobian, Model, friction, local_frame, naive, naive_net,
+};
 use wgcloth::cpu::rigid::{RigidFrame, transform};
 use wgcloth::cpu::springs::spring;
 use wgcloth::math::outer;
+use wgcloth::nn::{Layer, Mlp};
 use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
 
 #[test]
@@ -148,6 +151,11 @@ fn sphere_and_patch(
     (cloth, body, frame, vf, fv)
 }
 
+/// The analytic models never ask for the triangle and point.
+fn no_geometry() -> Geometry {
+    unreachable!("an analytic model asked for the contact geometry")
+}
+
 /// The chain rule of the assembly, checked on real contacts: with the
 /// surface frame (n, barycentric weights) frozen over the step, the force on
 /// cloth vertex k, β_k f(c(x), v_rel(v)), has ∂/∂x_l = β_k β_l (∂f/∂c) n nᵀ
@@ -166,10 +174,14 @@ fn check_chain_rule(contact: &Contact, x0: &[Vec3], model: &Model, v: &[Vec3]) {
         let depth = lin(x).dot(n) + offset;
         contact.beta[k]
             * model
-                .evaluate(n * depth, contact.relative_velocity(v))
+                .evaluate(n * depth, contact.relative_velocity(v), no_geometry)
                 .force
     };
-    let fj = model.evaluate(contact.collision_vector(), contact.relative_velocity(v));
+    let fj = model.evaluate(
+        contact.collision_vector(),
+        contact.relative_velocity(v),
+        no_geometry,
+    );
     for k in 0..count {
         for l in 0..count {
             let vl = contact.vertices[l] as usize;
@@ -216,7 +228,9 @@ fn contact_chain_rule_matches_finite_differences_in_both_directions() {
             for model in [&friction_model, &naive_model] {
                 check_chain_rule(c, &cloth.rest_positions, model, &v);
             }
-            let g = friction_model.evaluate(c.collision_vector(), target).force;
+            let g = friction_model
+                .evaluate(c.collision_vector(), target, no_geometry)
+                .force;
             let normal = g.dot(c.normal);
             let tangential = (g - normal * c.normal).length();
             assert!(normal > 0.0, "contact force pushes out");
@@ -232,5 +246,80 @@ fn contact_chain_rule_matches_finite_differences_in_both_directions() {
                 ),
             }
         }
+    }
+}
+
+/// A naive network that is exact by construction: f = (0, 0, −pz) in the
+/// local frame, pz passed through two LeakyReLU units, since
+/// σ(x) − σ(−x) = 1.01 x at slope 0.01.
+fn exact_naive_net() -> Mlp {
+    let pz = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    let minus_pz = pz.map(|w: f32| -w);
+    Mlp {
+        layers: vec![
+            Layer {
+                inputs: 7,
+                outputs: 2,
+                weight: [pz, minus_pz].concat(),
+                bias: vec![0.0; 2],
+            },
+            Layer {
+                inputs: 2,
+                outputs: 3,
+                weight: vec![0.0, 0.0, 0.0, 0.0, -1.0 / 1.01, 1.0 / 1.01],
+                bias: vec![0.0; 3],
+            },
+        ],
+        negative_slope: 0.01,
+    }
+}
+
+/// The local frame, the triangle's winding and the thickness shift, checked
+/// on real contacts in both directions: an exact naive network gives the
+/// naive model's force and contact stiffness.
+#[test]
+fn naive_net_with_an_exact_network_is_the_naive_model_in_both_directions() {
+    let (cloth, body, frame, vf, fv) = sphere_and_patch(0.19, Vec3::ZERO);
+    let net = exact_naive_net();
+    let x = &cloth.rest_positions;
+    for c in vf.iter().take(8).chain(fv.iter().take(8)) {
+        let g = c.geometry(&cloth, &body, &frame, x);
+        let lf = local_frame(&g).expect("a real triangle");
+        assert_eq!(lf.inputs[3], 0.0, "cz");
+        assert!((lf.inputs[6] - c.depth).abs() < 1e-5, "pz is d̃");
+        let got = naive_net(&net, &g);
+        let want = naive(c.collision_vector(), 1.0);
+        assert!(
+            (got.force - want.force).length() < 1e-5,
+            "{got:?} vs {want:?}"
+        );
+        let nn = outer(c.normal, c.normal);
+        assert_close(got.d_c * nn, want.d_c * nn, 1e-4, 1e-4, "(∂f/∂c) n nᵀ");
+        assert_eq!(got.d_v, Mat3::ZERO);
+    }
+}
+
+/// naive_net's Jacobian against finite differences of the point, for a
+/// generic (inexact) network.
+#[test]
+fn naive_net_jacobian_matches_finite_differences() {
+    let mut rng = Rng(11);
+    let mut net = exact_naive_net();
+    for w in net.layers[0].weight.iter_mut() {
+        *w += rng.range(-0.5, 0.5);
+    }
+    for w in net.layers[1].weight.iter_mut() {
+        *w += rng.range(-0.5, 0.5);
+    }
+    for _ in 0..10 {
+        let triangle = [
+            rng.vec3(-0.05, 0.05),
+            rng.vec3(-0.05, 0.05),
+            rng.vec3(-0.05, 0.05),
+        ];
+        let point = rng.vec3(-0.05, 0.05);
+        let f = |p: Vec3| naive_net(&net, &Geometry { triangle, point: p }).force;
+        let fj = naive_net(&net, &Geometry { triangle, point });
+        assert_close(fj.d_c, fd_jacobian(point, 1e-4, f), 1e-2, 1e-3, "∂f/∂p");
     }
 }

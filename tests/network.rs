@@ -10,6 +10,7 @@ use glam::Vec3;
 use wgcloth::cpu::contact::{Coefficients, friction_net};
 use wgcloth::nn::dataset::{Dataset, generate};
 use wgcloth::nn::train::{TrainOptions, train};
+use wgcloth::nn::weights::NetKind;
 use wgcloth::nn::{Layer, Mlp};
 
 fn random_net(sizes: &[usize], seed: u64) -> Mlp {
@@ -77,14 +78,14 @@ fn network_force_jacobians_match_finite_differences() {
 
 #[test]
 fn gen_data_is_deterministic_for_a_seed() {
-    let a = generate(300, 700, 7, |_, _| {}).unwrap();
-    let b = generate(300, 700, 7, |_, _| {}).unwrap();
-    let c = generate(300, 700, 8, |_, _| {}).unwrap();
+    let a = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
+    let b = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
+    let c = generate(NetKind::Friction, 300, 700, 8, |_, _| {}).unwrap();
     assert_eq!(a.len(), 1000);
     assert_eq!(a, b);
     assert_ne!(a, c);
     // Every sample lies in the declared domain.
-    for x in &a.inputs {
+    for x in a.inputs.chunks_exact(10) {
         assert!(Vec3::new(x[0], x[1], x[2]).length() <= 0.05 + 1e-6);
         assert!(Vec3::new(x[3], x[4], x[5]).length() <= 2.0 + 1e-6);
         assert!((10.0..=1000.0).contains(&x[6]) && (0.0..=10.0).contains(&x[7]));
@@ -93,11 +94,25 @@ fn gen_data_is_deterministic_for_a_seed() {
 }
 
 #[test]
+fn naive_data_is_deterministic_local_frame_geometry() {
+    let a = generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap();
+    assert_eq!(a, generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap());
+    assert_eq!((a.len(), a.width()), (1000, 7));
+    for (x, y) in a.inputs.chunks_exact(7).zip(&a.targets) {
+        // b on +x, c above the x axis in the xy-plane, the point at most
+        // 5 cm deep, and the naive force (0, 0, −pz).
+        assert!(x[0] > 0.0 && x[2] > 0.0 && x[3] == 0.0, "{x:?}");
+        assert!((-0.05..=0.0).contains(&x[6]), "{x:?}");
+        assert_eq!(*y, [0.0, 0.0, -x[6]]);
+    }
+}
+
+#[test]
 fn a_tiny_training_run_lowers_the_loss_tenfold() {
-    let data = generate(500, 3500, 3, |_, _| {}).unwrap();
+    let data = generate(NetKind::Friction, 500, 11500, 3, |_, _| {}).unwrap();
     let opts = TrainOptions {
-        hidden: vec![48, 48],
-        epochs: 40,
+        hidden: vec![64, 64],
+        epochs: 50,
         batch: 128,
         learning_rate: 3e-3,
         patience: 40,
@@ -109,6 +124,20 @@ fn a_tiny_training_run_lowers_the_loss_tenfold() {
         trained.initial_validation, trained.best_validation
     );
     assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+    // The naive network of thesis 2.4 (7 → 16 ×5 → 3) on its own data.
+    let data = generate(NetKind::Naive, 300, 1700, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![16; 5],
+        epochs: 40,
+        ..opts
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "naive: validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert_eq!(trained.weights.kind, NetKind::Naive);
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
 }
 
 #[test]
@@ -116,13 +145,14 @@ fn training_refuses_empty_or_mismatched_data() {
     let dir = std::env::temp_dir().join(format!("wgcloth-data-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let empty = dir.join("empty.st");
-    Dataset::default()
+    Dataset::new(NetKind::Friction)
         .write(&empty, Default::default(), true)
         .unwrap();
     let err = Dataset::read(&empty).unwrap_err().to_string();
     assert!(err.contains("no samples"), "{err}");
     let tiny = Dataset {
-        inputs: vec![[0.0; 10]; 5],
+        kind: NetKind::Friction,
+        inputs: vec![0.0; 10 * 5],
         targets: vec![[0.0; 3]; 5],
     };
     let err = train(&tiny, &TrainOptions::default(), |_, _, _| {})
@@ -131,7 +161,8 @@ fn training_refuses_empty_or_mismatched_data() {
     assert!(err.contains("too few"), "{err}");
     // Inputs and targets of different lengths.
     let mut bytes = Dataset {
-        inputs: vec![[0.0; 10]; 4],
+        kind: NetKind::Friction,
+        inputs: vec![0.0; 10 * 4],
         targets: vec![[0.0; 3]; 4],
     }
     .to_bytes(Default::default());
@@ -156,35 +187,52 @@ fn training_refuses_empty_or_mismatched_data() {
 }
 
 #[test]
-fn the_shipped_network_keeps_the_thesis_scene_stable_and_out_of_the_sphere() {
+fn the_shipped_networks_keep_the_thesis_scene_stable_and_out_of_the_sphere() {
     use wgcloth::config::ModelKind;
     use wgcloth::cpu::CpuSim;
+    use wgcloth::cpu::contact::naive;
     use wgcloth::{Config, Scene};
-    let mut c = Config {
-        model: ModelKind::FrictionNet,
-        ..Default::default()
-    };
-    c.cloth.grid = [16, 16];
-    c.contact.weights =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/friction_mlp.safetensors");
-    let mut sim = CpuSim::new(Scene::new(&c).expect("the shipped weights load"));
-    let (mut deepest, mut contacts) = (0.0f32, 0);
-    for _ in 0..200 {
-        let s = sim.step();
-        assert!(sim.is_finite());
-        deepest = deepest.max(s.max_penetration);
-        contacts += s.contacts;
+    for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
+        let mut c = Config {
+            model,
+            ..Default::default()
+        };
+        c.cloth.grid = [16, 16];
+        let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join(model.default_weights().unwrap());
+        c.contact.weights = Some(weights);
+        let mut sim = CpuSim::new(Scene::new(&c).expect("the shipped weights load"));
+        let (mut deepest, mut contacts, mut worst) = (0.0f32, 0, 0.0f32);
+        for _ in 0..200 {
+            let s = sim.step();
+            assert!(sim.is_finite(), "{}", model.name());
+            deepest = deepest.max(s.max_penetration);
+            contacts += s.contacts;
+            if model == ModelKind::NaiveNet {
+                // The naive network against the naive force on the same contacts.
+                for (contact, r) in sim.contacts().iter().zip(sim.responses()) {
+                    let exact = naive(contact.collision_vector(), c.contact.naive_stiffness).force;
+                    worst = worst.max((r.force - exact).length());
+                }
+            }
+        }
+        assert!(
+            contacts > 500,
+            "{}: the sphere must hit the cloth",
+            model.name()
+        );
+        assert!(
+            deepest < 0.01,
+            "{}: a vertex went {deepest} m inside the sphere",
+            model.name()
+        );
+        // The naive force reaches c·|d̃| = 1000 N/m × 0.05 m; 1% of that.
+        assert!(worst < 0.5, "naive-net force off by {worst} N");
     }
-    assert!(contacts > 500, "the sphere must hit the cloth");
-    assert!(
-        deepest < 0.01,
-        "a vertex went {deepest} m inside the sphere"
-    );
 }
 
 #[test]
 fn a_warm_start_begins_where_the_given_weights_left_off() {
-    let data = generate(200, 1800, 5, |_, _| {}).unwrap();
+    let data = generate(NetKind::Friction, 200, 1800, 5, |_, _| {}).unwrap();
     let opts = TrainOptions {
         hidden: vec![32, 32],
         epochs: 15,

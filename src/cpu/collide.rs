@@ -47,10 +47,50 @@ pub struct Contact {
     pub velocity_offset: Vec3,
 }
 
+/// A contact as the naive network of thesis 2.4 sees it: the surface
+/// triangle, wound so its normal is the contact normal, and the penetrating
+/// point, moved by the thickness ε against the normal so that its height
+/// above the triangle's plane is d̃ = d − ε.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    pub triangle: [Vec3; 3],
+    pub point: Vec3,
+}
+
 impl Contact {
     /// The thesis's collision vector c = n d̃ (network input).
     pub fn collision_vector(&self) -> Vec3 {
         self.normal * self.depth
+    }
+
+    /// The contact's triangle and point at cloth positions `x` and the
+    /// rigid body placed by `frame`.
+    pub fn geometry(
+        &self,
+        cloth: &Cloth,
+        body: &RigidBody,
+        frame: &RigidFrame,
+        x: &[Vec3],
+    ) -> Geometry {
+        let rigid = |i: u32| frame.vertices[i as usize];
+        let ([a, b, c], point) = match self.cloth_triangle {
+            None => (
+                body.mesh.triangles[self.rigid_feature as usize].map(rigid),
+                x[self.vertices[0] as usize],
+            ),
+            Some(t) => (
+                cloth.triangles[t as usize].map(|i| x[i as usize]),
+                rigid(self.rigid_feature),
+            ),
+        };
+        let triangle = match (b - a).cross(c - a).dot(self.normal) < 0.0 {
+            true => [a, c, b],
+            false => [a, b, c],
+        };
+        Geometry {
+            triangle,
+            point: point - (self.distance - self.depth) * self.normal,
+        }
     }
 
     pub fn vertex_count(&self) -> usize {

@@ -13,7 +13,7 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::config::{ContactConfig, ModelKind};
-use crate::cpu::collide::Contact;
+use crate::cpu::collide::{Contact, Geometry};
 use crate::math::{outer, project_nsd, symmetric_part};
 use crate::nn::Mlp;
 use std::sync::Arc;
@@ -124,13 +124,71 @@ pub enum Model {
         scale: f32,
         coefficients: Coefficients,
     },
+    /// f / c from the small network of thesis 2.4 in the contact's local
+    /// frame, ∂/∂p from its input Jacobian.
+    NaiveNet {
+        net: Arc<Mlp>,
+        stiffness: f32,
+    },
+}
+
+/// The naive network's local frame (thesis 2.4): the triangle's first
+/// corner a at the origin and b on +x. The thesis leaves the roll about x
+/// free; fixing it so the triangle lies in the xy-plane with its normal
+/// (the contact normal) along +z makes cz always 0 and pz = d̃, so the naive
+/// force is exactly linear in the frame, as the thesis found its data.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalFrame {
+    /// World → frame: rows e1 (along b − a), e2, e3 (the normal).
+    pub rotation: Mat3,
+    /// bx, cx, cy, cz, px, py, pz: the network's inputs.
+    pub inputs: [f32; 7],
+}
+
+/// The local frame of a contact's geometry; None for a degenerate triangle.
+pub fn local_frame(g: &Geometry) -> Option<LocalFrame> {
+    let [a, b, c] = g.triangle;
+    let e1 = (b - a).normalize_or_zero();
+    let e3 = (b - a).cross(c - a).normalize_or_zero();
+    if e1 == Vec3::ZERO || e3 == Vec3::ZERO {
+        return None;
+    }
+    let rotation = Mat3::from_cols(e1, e3.cross(e1), e3).transpose();
+    let [b, c, p] = [b, c, g.point].map(|q| rotation * (q - a));
+    Some(LocalFrame {
+        rotation,
+        inputs: [b.x, c.x, c.y, 0.0, p.x, p.y, p.z],
+    })
+}
+
+/// f / c and its Jacobians from a naive network. The network's ∂f/∂p,
+/// turned back to the world, stands in for ∂f/∂c: with n held fixed c moves
+/// with p only along n, and the chain rule keeps (∂f/∂c) n nᵀ, which for
+/// the exact naive force is −I n nᵀ = (−n nᵀ) n nᵀ either way.
+pub fn naive_net(net: &Mlp, g: &Geometry) -> ForceJacobian {
+    let Some(frame) = local_frame(g) else {
+        return ForceJacobian::ZERO;
+    };
+    let (f, j) = net.forward_jacobian(&frame.inputs, 4..7);
+    let back = frame.rotation.transpose();
+    // j is row-major [3 outputs × 3 tangents (px, py, pz)].
+    let d_p = Mat3::from_cols(
+        Vec3::new(j[0], j[3], j[6]),
+        Vec3::new(j[1], j[4], j[7]),
+        Vec3::new(j[2], j[5], j[8]),
+    );
+    ForceJacobian {
+        force: back * Vec3::new(f[0], f[1], f[2]),
+        d_c: back * d_p * frame.rotation,
+        d_v: Mat3::ZERO,
+    }
 }
 
 /// g and its Jacobians from a friction network with inputs
 /// (c, v_rel, k_n, k_d, k_t, μ).
 pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
     let x = [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu];
-    let (g, j) = net.forward_jacobian(&x, 6);
+    let (g, j) = net.forward_jacobian(&x, 0..6);
     // j is row-major [3 outputs × 6 tangents]: columns 0–2 are ∂/∂c, 3–5 ∂/∂v.
     let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
     ForceJacobian {
@@ -149,6 +207,11 @@ impl Model {
             kt: c.kt,
             mu: c.mu,
         };
+        let loaded = || {
+            network
+                .expect("Scene::new loads the network of a network model")
+                .clone()
+        };
         match kind {
             ModelKind::Naive => Model::Naive {
                 stiffness: c.naive_stiffness,
@@ -158,17 +221,26 @@ impl Model {
                 coefficients,
             },
             ModelKind::FrictionNet => Model::FrictionNet {
-                net: network
-                    .expect("Scene::new loads the network of a network model")
-                    .clone(),
+                net: loaded(),
                 scale: c.force_scale,
                 coefficients,
+            },
+            ModelKind::NaiveNet => Model::NaiveNet {
+                net: loaded(),
+                stiffness: c.naive_stiffness,
             },
         }
     }
 
-    /// Force on the penetrating point and its Jacobians, in force units.
-    pub fn evaluate(&self, c: Vec3, v_rel: Vec3) -> ForceJacobian {
+    /// Force on the penetrating point and its Jacobians, in force units, at
+    /// collision vector c and relative velocity v_rel; `geometry` is asked
+    /// for only by the models that read the triangle and point.
+    pub fn evaluate(
+        &self,
+        c: Vec3,
+        v_rel: Vec3,
+        geometry: impl FnOnce() -> Geometry,
+    ) -> ForceJacobian {
         match self {
             Model::Naive { stiffness } => naive(c, *stiffness),
             Model::Friction {
@@ -180,6 +252,7 @@ impl Model {
                 scale,
                 coefficients,
             } => friction_net(net, c, v_rel, coefficients).scaled(*scale),
+            Model::NaiveNet { net, stiffness } => naive_net(net, &geometry()).scaled(*stiffness),
         }
     }
 }
@@ -234,13 +307,20 @@ pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
     }
 }
 
-/// Evaluates the model for every contact at velocities `v`.
-pub fn respond(model: &Model, contacts: &[Contact], v: &[Vec3], out: &mut Vec<Response>) {
+/// Evaluates the model for every contact at velocities `v`; `geometry`
+/// gives a contact's triangle and point.
+pub fn respond(
+    model: &Model,
+    contacts: &[Contact],
+    v: &[Vec3],
+    geometry: impl Fn(&Contact) -> Geometry + Sync,
+    out: &mut Vec<Response>,
+) {
     contacts
         .par_iter()
         .map(|c| {
             let v_rel = c.relative_velocity(v);
-            let fj = model.evaluate(c.collision_vector(), v_rel);
+            let fj = model.evaluate(c.collision_vector(), v_rel, || geometry(c));
             response(&fj, c.normal, v_rel)
         })
         .collect_into_vec(out);

@@ -163,7 +163,18 @@ impl CpuSim {
             ));
             lap(1, &mut stats);
         }
-        contact::respond(&self.model, &self.contacts, v, &mut self.responses);
+        let (body, frame) = (&self.scene.rigid, &self.frame);
+        let geometry = |c: &Contact| {
+            let body = body.as_ref().expect("contacts need a rigid body");
+            c.geometry(cloth, body, frame, x)
+        };
+        contact::respond(
+            &self.model,
+            &self.contacts,
+            v,
+            geometry,
+            &mut self.responses,
+        );
         lap(2, &mut stats);
         springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks);
         lap(3, &mut stats);

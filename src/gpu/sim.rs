@@ -129,7 +129,9 @@ fn params_for(scene: &Scene) -> Params {
         model: match cfg.model {
             ModelKind::Naive => 0,
             ModelKind::Friction => 1,
-            ModelKind::FrictionNet => unreachable!("GpuSim::new rejects network models"),
+            ModelKind::FrictionNet | ModelKind::NaiveNet => {
+                unreachable!("GpuSim::new rejects network models")
+            }
         },
         cg_max_iters: cfg.solver.cg_iters,
         dt: cfg.solver.dt,

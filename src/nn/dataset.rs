@@ -1,125 +1,84 @@
-//! Contact data for training the friction network (thesis 2.4, 2.6):
-//! recorded contacts (c = n d̃ and v_rel from simulation runs over many
-//! sphere starts, paths and speeds) mixed with uniform samples of the
-//! declared input domain, each with freshly drawn coefficients (the
-//! thesis's second approach), targets from the analytic force g.
+//! Contact data for training the networks (thesis 2.4, 2.6): contacts
+//! recorded from simulation runs over many sphere starts, paths and speeds,
+//! mixed with uniform samples of the declared input domain, targets from
+//! the analytic force. Friction samples draw fresh coefficients each (the
+//! thesis's second approach); naive samples are local-frame geometry.
 //!
 //! File format (`wgcloth-contacts/1`): a safetensors file with f32 tensors
-//! `inputs` [N, 10] (cx cy cz vx vy vz kn kd kt mu) and `targets` [N, 3]
-//! (gx gy gz), metadata `format`, `seed`, `recorded`, `uniform`.
+//! `inputs` [N, 10] (cx cy cz vx vy vz kn kd kt mu) or [N, 7] (bx cx cy cz
+//! px py pz) and `targets` [N, 3], metadata `format`, `model` (`friction`,
+//! the default, or `naive`), `seed`, `recorded`, `uniform`.
 
 use std::collections::HashMap;
 use std::path::Path;
 
-use glam::Vec3;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 use crate::config::{Config, ModelKind, MotionKind};
 use crate::cpu::CpuSim;
-use crate::cpu::contact::{Coefficients, friction};
+use crate::cpu::contact::local_frame;
 use crate::error::{Error, Result};
+use crate::nn::domain::{
+    MAX_DEPTH, MAX_SPEED, Rng, Sample, bounds, friction_sample, naive_sample, random_coefficients,
+    uniform_sample,
+};
+use crate::nn::weights::NetKind;
 use crate::scene::Scene;
 
 pub const FORMAT: &str = "wgcloth-contacts/1";
 
-/// The declared input domain (DESIGN "The networks").
-pub const MAX_DEPTH: f32 = 0.05;
-pub const MAX_SPEED: f32 = 2.0;
-pub const KN: (f32, f32) = (10.0, 1000.0);
-pub const KD: (f32, f32) = (0.0, 10.0);
-pub const KT: (f32, f32) = (1.0, 1000.0);
-pub const MU: (f32, f32) = (0.0, 1.0);
-
-/// Input bounds of the domain, in input order: the min-max scaler.
-pub fn domain_bounds() -> ([f32; 10], [f32; 10]) {
-    let (c, v) = (MAX_DEPTH, MAX_SPEED);
-    (
-        [-c, -c, -c, -v, -v, -v, KN.0, KD.0, KT.0, MU.0],
-        [c, c, c, v, v, v, KN.1, KD.1, KT.1, MU.1],
-    )
-}
-
-/// A small seeded generator (splitmix64), so data is reproducible.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    pub fn range(&mut self, (lo, hi): (f32, f32)) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    /// Uniform in the ball of radius r.
-    pub fn in_ball(&mut self, r: f32) -> Vec3 {
-        loop {
-            let p = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - 1.0;
-            if p.length_squared() <= 1.0 {
-                return p * r;
-            }
-        }
-    }
-}
-
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Dataset {
-    pub inputs: Vec<[f32; 10]>,
+    pub kind: NetKind,
+    /// Row-major [len × kind's input count].
+    pub inputs: Vec<f32>,
     pub targets: Vec<[f32; 3]>,
 }
 
-/// One sample: the inputs and the analytic target g.
-pub fn sample(c: Vec3, v: Vec3, k: &Coefficients) -> ([f32; 10], [f32; 3]) {
-    let g = friction(c, v, k).force;
-    (
-        [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu],
-        g.to_array(),
-    )
+/// What a recorded contact contributes before coefficients are drawn:
+/// friction (c, v_rel), or the naive network's local-frame inputs.
+fn recorded_inputs(kind: NetKind, sim: &CpuSim) -> Vec<Vec<f32>> {
+    let (Some(body), Some(frame)) = (&sim.scene.rigid, sim.rigid_frame()) else {
+        return Vec::new();
+    };
+    let (x, v) = (&sim.state.x, &sim.state.v);
+    let in_domain = |s: &[f32]| {
+        let (lo, hi) = bounds(kind);
+        s.iter()
+            .zip(lo.iter().zip(&hi))
+            .all(|(x, (l, h))| l <= x && x <= h)
+    };
+    sim.contacts()
+        .iter()
+        .filter_map(|c| match kind {
+            NetKind::Friction => {
+                let (cv, vr) = (c.collision_vector(), c.relative_velocity(v));
+                (cv.length() <= MAX_DEPTH && vr.length() <= MAX_SPEED)
+                    .then(|| [cv.to_array(), vr.to_array()].concat())
+            }
+            NetKind::Naive => local_frame(&c.geometry(&sim.scene.cloth, body, frame, x))
+                .map(|f| f.inputs.to_vec())
+                .filter(|s| in_domain(s)),
+        })
+        .collect()
 }
 
-pub fn random_coefficients(rng: &mut Rng) -> Coefficients {
-    Coefficients {
-        kn: rng.range(KN),
-        kd: rng.range(KD),
-        kt: rng.range(KT),
-        mu: rng.range(MU),
-    }
-}
-
-/// A uniform sample of the declared domain: c in the ball of radius 0.05
-/// (turned so d̃ ≤ 0 is automatic: c = n d̃ takes any direction), v_rel in
-/// the ball of radius 2, coefficients uniform.
-pub fn uniform_sample(rng: &mut Rng) -> ([f32; 10], [f32; 3]) {
-    let c = rng.in_ball(MAX_DEPTH);
-    let v = rng.in_ball(MAX_SPEED);
-    sample(c, v, &random_coefficients(rng))
-}
-
-/// Contacts (c, v_rel) recorded from `runs` thesis-scene runs whose sphere
-/// start, path direction, amplitude and period are drawn at random.
+/// Contacts recorded from `runs` thesis-scene runs whose sphere start, path
+/// direction, amplitude, period and coefficients are drawn at random (with
+/// the naive model for naive data, as the thesis recorded).
 pub fn record_contacts(
+    kind: NetKind,
     runs: u32,
     grid: u32,
     rng: &mut Rng,
-    mut progress: impl FnMut(u32),
-) -> Result<Vec<(Vec3, Vec3)>> {
+) -> Result<Vec<Vec<f32>>> {
     let mut out = Vec::new();
-    for run in 0..runs {
+    for _ in 0..runs {
         let mut config = Config {
-            model: ModelKind::Friction,
+            model: match kind {
+                NetKind::Friction => ModelKind::Friction,
+                NetKind::Naive => ModelKind::Naive,
+            },
             ..Default::default()
         };
         config.cloth.grid = [grid, grid];
@@ -142,39 +101,56 @@ pub fn record_contacts(
         let mut sim = CpuSim::new(Scene::new(&config)?);
         for _ in 0..steps {
             sim.step();
-            for c in sim.contacts() {
-                let (cv, v) = (c.collision_vector(), c.relative_velocity(&sim.state.v));
-                if cv.length() <= MAX_DEPTH && v.length() <= MAX_SPEED {
-                    out.push((cv, v));
-                }
-            }
+            out.extend(recorded_inputs(kind, &sim));
         }
-        progress(run + 1);
     }
     Ok(out)
 }
 
 impl Dataset {
+    pub fn new(kind: NetKind) -> Dataset {
+        Dataset {
+            kind,
+            inputs: Vec::new(),
+            targets: Vec::new(),
+        }
+    }
+
+    /// Inputs per sample.
+    pub fn width(&self) -> usize {
+        self.kind.inputs().len()
+    }
+
     pub fn len(&self) -> usize {
-        self.inputs.len()
+        self.targets.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.inputs.is_empty()
+        self.targets.is_empty()
     }
 
-    pub fn push(&mut self, (x, y): ([f32; 10], [f32; 3])) {
-        self.inputs.push(x);
+    /// The inputs of sample i.
+    pub fn input(&self, i: usize) -> &[f32] {
+        &self.inputs[i * self.width()..(i + 1) * self.width()]
+    }
+
+    pub fn push(&mut self, (x, y): Sample) {
+        debug_assert_eq!(x.len(), self.width());
+        self.inputs.extend(x);
         self.targets.push(y);
     }
 
+    /// Swaps samples i and j.
+    fn swap(&mut self, i: usize, j: usize) {
+        let w = self.width();
+        for k in 0..w {
+            self.inputs.swap(i * w + k, j * w + k);
+        }
+        self.targets.swap(i, j);
+    }
+
     pub fn to_bytes(&self, meta: HashMap<String, String>) -> Vec<u8> {
-        let x: Vec<u8> = self
-            .inputs
-            .iter()
-            .flatten()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        let x: Vec<u8> = self.inputs.iter().flat_map(|v| v.to_le_bytes()).collect();
         let y: Vec<u8> = self
             .targets
             .iter()
@@ -183,10 +159,12 @@ impl Dataset {
             .collect();
         let mut meta = meta;
         meta.insert("format".into(), FORMAT.into());
+        meta.insert("model".into(), self.kind.name().into());
         let views = [
             (
                 "inputs",
-                TensorView::new(Dtype::F32, vec![self.len(), 10], &x).expect("consistent"),
+                TensorView::new(Dtype::F32, vec![self.len(), self.width()], &x)
+                    .expect("consistent"),
             ),
             (
                 "targets",
@@ -211,15 +189,21 @@ impl Dataset {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let (_, header) = SafeTensors::read_metadata(&bytes)
             .map_err(|e| Error::file(path, format!("not a contact data file: {e}")))?;
-        if header
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get("format"))
-            .map(String::as_str)
-            != Some(FORMAT)
-        {
+        let meta = |key: &str| header.metadata().as_ref().and_then(|m| m.get(key)).cloned();
+        if meta("format").as_deref() != Some(FORMAT) {
             return Err(Error::file(path, format!("not a {FORMAT} file")));
         }
+        let kind = match meta("model").as_deref() {
+            None | Some("friction") => NetKind::Friction,
+            Some("naive") => NetKind::Naive,
+            Some(other) => {
+                return Err(Error::file(
+                    path,
+                    format!("model {other:?} is neither \"friction\" nor \"naive\""),
+                ));
+            }
+        };
+        let width = kind.inputs().len();
         let st = SafeTensors::deserialize(&bytes)
             .map_err(|e| Error::file(path, format!("not a contact data file: {e}")))?;
         let floats = |name: &str, width: usize| -> Result<Vec<f32>> {
@@ -249,22 +233,20 @@ impl Dataset {
                 None => Ok(out),
             }
         };
-        let x = floats("inputs", 10)?;
+        let x = floats("inputs", width)?;
         let y = floats("targets", 3)?;
-        if x.len() / 10 != y.len() / 3 {
+        if x.len() / width != y.len() / 3 {
             return Err(Error::file(
                 path,
-                format!("{} inputs but {} targets", x.len() / 10, y.len() / 3),
+                format!("{} inputs but {} targets", x.len() / width, y.len() / 3),
             ));
         }
         if x.is_empty() {
             return Err(Error::file(path, "holds no samples"));
         }
         Ok(Dataset {
-            inputs: x
-                .chunks_exact(10)
-                .map(|c| c.try_into().expect("10 wide"))
-                .collect(),
+            kind,
+            inputs: x,
             targets: y
                 .chunks_exact(3)
                 .map(|c| c.try_into().expect("3 wide"))
@@ -273,21 +255,21 @@ impl Dataset {
     }
 }
 
-/// gen-data: `recorded` contacts from simulation (each with fresh random
-/// coefficients) plus `uniform` domain samples, shuffled; deterministic
-/// for a seed.
+/// gen-data: `recorded` contacts from simulation plus `uniform` domain
+/// samples of a network's inputs, shuffled; deterministic for a seed.
 pub fn generate(
+    kind: NetKind,
     recorded: usize,
     uniform: usize,
     seed: u64,
     mut progress: impl FnMut(&str, f32),
 ) -> Result<Dataset> {
     let mut rng = Rng::new(seed);
-    let mut data = Dataset::default();
+    let mut data = Dataset::new(kind);
     let mut contacts = Vec::new();
     let mut run = 0;
     while contacts.len() < recorded {
-        contacts.extend(record_contacts(1, 16, &mut rng, |_| {})?);
+        contacts.extend(record_contacts(kind, 1, 16, &mut rng)?);
         run += 1;
         progress(
             "simulating",
@@ -304,17 +286,25 @@ pub fn generate(
     for k in 0..recorded {
         let j = k + (rng.next_u64() % (contacts.len() - k) as u64) as usize;
         contacts.swap(k, j);
-        let (c, v) = contacts[k];
-        data.push(sample(c, v, &random_coefficients(&mut rng)));
+        let x = &contacts[k];
+        data.push(match kind {
+            NetKind::Friction => {
+                let (c, v) = (
+                    glam::Vec3::from_slice(&x[..3]),
+                    glam::Vec3::from_slice(&x[3..]),
+                );
+                friction_sample(c, v, &random_coefficients(&mut rng))
+            }
+            NetKind::Naive => naive_sample(x[..].try_into().expect("7 local-frame inputs")),
+        });
     }
     for _ in 0..uniform {
-        data.push(uniform_sample(&mut rng));
+        data.push(uniform_sample(kind, &mut rng));
     }
     progress("sampling", 1.0);
     for k in (1..data.len()).rev() {
         let j = (rng.next_u64() % (k as u64 + 1)) as usize;
-        data.inputs.swap(k, j);
-        data.targets.swap(k, j);
+        data.swap(k, j);
     }
     Ok(data)
 }

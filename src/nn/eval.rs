@@ -1,15 +1,15 @@
-//! Accuracy of a friction network (`wgcloth eval-net`): the thesis's
-//! measure, standardised MSE (prediction and target divided by the file's
-//! output std), on held-out data and on fresh uniform samples of the
-//! declared domain, and the error of its position Jacobian against the
-//! analytic one.
+//! Accuracy of a network (`wgcloth eval-net`): the thesis's measure,
+//! standardised MSE (prediction and target divided by the file's output
+//! std), on held-out data and on fresh uniform samples of the declared
+//! domain, and the error of its position Jacobian against the analytic one.
 
 use glam::{Mat3, Vec3};
 
 use crate::cpu::contact::{Coefficients, friction};
-use crate::nn::dataset::{Dataset, Rng, uniform_sample};
+use crate::nn::dataset::Dataset;
+use crate::nn::domain::{Rng, uniform_sample};
 use crate::nn::mlp::Mlp;
-use crate::nn::weights::WeightsFile;
+use crate::nn::weights::{NetKind, WeightsFile};
 
 #[derive(Clone, Debug)]
 pub struct Evaluation {
@@ -17,17 +17,17 @@ pub struct Evaluation {
     pub uniform_mse: f64,
     pub uniform_samples: usize,
     /// Median over in-contact uniform samples of |(J_net − J) n| / |J n|,
-    /// J = ∂g/∂c: the position Jacobian (J n) nᵀ that enters K_c.
+    /// with J = ∂g/∂c for the friction network (the position Jacobian
+    /// (J n) nᵀ that enters K_c) and ∂f/∂p in the local frame (n = +z) for
+    /// the naive one.
     pub jacobian_median_relative_error: f64,
 }
 
 pub fn standardised_mse(net: &Mlp, std: &[f32], data: &Dataset) -> f64 {
-    let sum: f64 = data
-        .inputs
-        .iter()
-        .zip(&data.targets)
-        .map(|(x, y)| {
-            let p = net.forward(x);
+    let sum: f64 = (0..data.len())
+        .map(|i| {
+            let p = net.forward(data.input(i));
+            let y = data.targets[i];
             (0..3)
                 .map(|o| (((p[o] - y[o]) / std[o]) as f64).powi(2))
                 .sum::<f64>()
@@ -36,15 +36,36 @@ pub fn standardised_mse(net: &Mlp, std: &[f32], data: &Dataset) -> f64 {
     sum / (3 * data.len()) as f64
 }
 
-/// The network's ∂g/∂c at one input.
-pub fn network_dc(net: &Mlp, x: &[f32; 10]) -> Mat3 {
-    let (_, j) = net.forward_jacobian(x, 3);
+/// The network's Jacobian with respect to the three inputs from `first`.
+pub fn network_jacobian(net: &Mlp, x: &[f32], first: usize) -> Mat3 {
+    let (_, j) = net.forward_jacobian(x, first..first + 3);
     // j is row-major [3 outputs × 3 tangents]; Mat3 wants columns.
     Mat3::from_cols(
         Vec3::new(j[0], j[3], j[6]),
         Vec3::new(j[1], j[4], j[7]),
         Vec3::new(j[2], j[5], j[8]),
     )
+}
+
+/// (network, analytic) position Jacobian along the contact normal at
+/// inputs x; None out of contact.
+fn normal_jacobians(kind: NetKind, net: &Mlp, x: &[f32]) -> Option<(Vec3, Vec3)> {
+    match kind {
+        NetKind::Friction => {
+            let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
+            let k = Coefficients {
+                kn: x[6],
+                kd: x[7],
+                kt: x[8],
+                mu: x[9],
+            };
+            let exact = friction(c, v, &k);
+            let n = -c.normalize_or_zero();
+            (exact.force != Vec3::ZERO).then(|| (network_jacobian(net, x, 0) * n, exact.d_c * n))
+        }
+        // f = −pz e_z: ∂f/∂p e_z = −e_z.
+        NetKind::Naive => Some((network_jacobian(net, x, 4) * Vec3::Z, -Vec3::Z)),
+    }
 }
 
 pub fn evaluate(
@@ -55,23 +76,11 @@ pub fn evaluate(
 ) -> Evaluation {
     let net = file.folded();
     let mut rng = Rng::new(seed);
-    let mut uniform = Dataset::default();
+    let mut uniform = Dataset::new(file.kind);
     let mut errors = Vec::new();
     for _ in 0..samples {
-        let s = uniform_sample(&mut rng);
-        let x = s.0;
-        let (c, v) = (Vec3::new(x[0], x[1], x[2]), Vec3::new(x[3], x[4], x[5]));
-        let k = Coefficients {
-            kn: x[6],
-            kd: x[7],
-            kt: x[8],
-            mu: x[9],
-        };
-        let exact = friction(c, v, &k);
-        if exact.force != Vec3::ZERO {
-            let n = -c.normalize();
-            let want = exact.d_c * n;
-            let got = network_dc(&net, &x) * n;
+        let s = uniform_sample(file.kind, &mut rng);
+        if let Some((got, want)) = normal_jacobians(file.kind, &net, &s.0) {
             errors.push(((got - want).length() / want.length().max(1e-12)) as f64);
         }
         uniform.push(s);

@@ -3,6 +3,8 @@
 //! input and standard output scaling are folded into the first and last
 //! layers by `weights::load`), and its input Jacobian by forward mode.
 
+use std::ops::Range;
+
 /// One dense layer: y = W x + b, W row-major [outputs × inputs].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Layer {
@@ -38,18 +40,19 @@ impl Mlp {
 
     /// The network's output at `x`.
     pub fn forward(&self, x: &[f32]) -> Vec<f32> {
-        self.forward_jacobian(x, 0).0
+        self.forward_jacobian(x, 0..0).0
     }
 
-    /// The output and its Jacobian with respect to the first `tangents`
-    /// inputs, row-major [outputs × tangents]. Forward mode: each layer
-    /// carries the activations and their derivatives, T ← diag(σ'(z)) W T.
-    pub fn forward_jacobian(&self, x: &[f32], tangents: usize) -> (Vec<f32>, Vec<f32>) {
+    /// The output and its Jacobian with respect to the inputs `wrt`,
+    /// row-major [outputs × wrt.len()]. Forward mode: each layer carries
+    /// the activations and their derivatives, T ← diag(σ'(z)) W T.
+    pub fn forward_jacobian(&self, x: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
+        let tangents = wrt.len();
         let mut a = x.to_vec();
-        // t[i * tangents + j] = ∂a_i / ∂x_j; the identity on the inputs.
+        // t[i * tangents + j] = ∂a_i / ∂x_(wrt.start + j): a unit seed per input.
         let mut t = vec![0.0f32; x.len() * tangents];
-        for j in 0..tangents {
-            t[j * tangents + j] = 1.0;
+        for (j, i) in wrt.enumerate() {
+            t[i * tangents + j] = 1.0;
         }
         for (k, layer) in self.layers.iter().enumerate() {
             let mut z = layer.bias.clone();
@@ -112,10 +115,21 @@ mod tests {
     }
 
     #[test]
+    fn jacobian_of_an_inner_input_range_matches_the_full_one() {
+        let net = random(&[7, 16, 16, 3], 4);
+        let x: Vec<f32> = (0..7).map(|i| 0.2 * (i as f32 * 2.3).cos()).collect();
+        let (_, full) = net.forward_jacobian(&x, 0..7);
+        let (_, tail) = net.forward_jacobian(&x, 4..7);
+        for o in 0..3 {
+            assert_eq!(&full[o * 7 + 4..o * 7 + 7], &tail[o * 3..o * 3 + 3]);
+        }
+    }
+
+    #[test]
     fn jacobian_matches_finite_differences() {
         let net = random(&[10, 32, 24, 16, 3], 9);
         let x: Vec<f32> = (0..10).map(|i| 0.3 * (i as f32 * 1.7).sin()).collect();
-        let (y, jac) = net.forward_jacobian(&x, 6);
+        let (y, jac) = net.forward_jacobian(&x, 0..6);
         assert_eq!(y, net.forward(&x));
         let h = 1e-3;
         for j in 0..6 {

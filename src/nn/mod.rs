@@ -2,6 +2,7 @@
 //! input Jacobian, the weights file, contact data, and training.
 
 pub mod dataset;
+pub mod domain;
 pub mod eval;
 pub mod mlp;
 pub mod plot;

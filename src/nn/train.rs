@@ -1,4 +1,4 @@
-//! Training the friction network with candle (thesis 2.6–2.7): min-max
+//! Training the networks with candle (thesis 2.4, 2.6–2.7): min-max
 //! input scaling (the declared domain's bounds), standardised outputs, Adam
 //! on minibatches with a cosine learning-rate decay, a held-out validation
 //! split, early stopping that keeps the best weights, checkpoints, and the
@@ -12,12 +12,23 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::{Linear, Module, Optimizer, VarBuilder, VarMap};
 
 use crate::error::{Error, Result};
-use crate::nn::dataset::{Dataset, Rng, domain_bounds};
+use crate::nn::dataset::Dataset;
+use crate::nn::domain::{Rng, bounds};
 use crate::nn::mlp::Layer;
 use crate::nn::weights::{NetKind, WeightsFile};
 
 /// The thesis's architecture (2.7): 10 → 256, 256, 128 ×5 → 3.
 pub const THESIS_HIDDEN: [usize; 7] = [256, 256, 128, 128, 128, 128, 128];
+/// The thesis's naive network (2.4): 7 → 16 ×5 → 3.
+pub const THESIS_NAIVE_HIDDEN: [usize; 5] = [16; 5];
+
+/// The thesis's architecture for a network kind.
+pub fn thesis_hidden(kind: NetKind) -> Vec<usize> {
+    match kind {
+        NetKind::Friction => THESIS_HIDDEN.to_vec(),
+        NetKind::Naive => THESIS_NAIVE_HIDDEN.to_vec(),
+    }
+}
 pub const NEGATIVE_SLOPE: f32 = 0.01;
 
 #[derive(Clone, Debug)]
@@ -120,6 +131,26 @@ fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>>
         .collect()
 }
 
+/// The initial layers, uniform in ±1/√inputs (PyTorch's and candle's
+/// default) but drawn from our seeded generator, so a run is repeatable.
+fn seeded_layers(sizes: &[usize], seed: u64) -> Vec<Layer> {
+    let mut rng = Rng::new(seed ^ 0x5eed_1a7e);
+    sizes
+        .windows(2)
+        .map(|w| {
+            let bound = 1.0 / (w[0] as f32).sqrt();
+            let mut draw =
+                |n: usize| -> Vec<f32> { (0..n).map(|_| rng.range((-bound, bound))).collect() };
+            Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: draw(w[0] * w[1]),
+                bias: draw(w[1]),
+            }
+        })
+        .collect()
+}
+
 pub fn train(
     data: &Dataset,
     opts: &TrainOptions,
@@ -139,7 +170,8 @@ pub fn train(
     }
     let start = Instant::now();
     let dev = Device::Cpu;
-    let (lo, hi) = domain_bounds();
+    let (lo, hi) = bounds(data.kind);
+    let width = data.width();
     let n_val = ((data.len() as f32 * opts.validation_fraction) as usize).max(1);
     let n_train = data.len() - n_val;
     // Output scaler from the training part.
@@ -155,7 +187,13 @@ pub fn train(
             var[o] += (y[o] as f64 - mean[o]).powi(2) / n_train as f64;
         }
     }
-    let mut std: Vec<f32> = var.iter().map(|v| (v.sqrt() as f32).max(1e-6)).collect();
+    // An output that never varies (the naive frame's fx, fy) is scaled by
+    // the largest std instead of being blown up by its own.
+    let widest = var.iter().fold(0.0f64, |a, v| a.max(v.sqrt())).max(1e-6);
+    let mut std: Vec<f32> = var
+        .iter()
+        .map(|v| v.sqrt().max(1e-3 * widest) as f32)
+        .collect();
     let mut mean: Vec<f32> = mean.iter().map(|m| *m as f32).collect();
     if let Some(init) = &opts.init {
         // A warm start keeps the scaling its weights were trained with.
@@ -163,15 +201,15 @@ pub fn train(
     }
     let scaled_x: Vec<f32> = data
         .inputs
-        .iter()
-        .flat_map(|x| (0..10).map(move |k| (x[k] - lo[k]) / (hi[k] - lo[k])))
+        .chunks_exact(width)
+        .flat_map(|x| (0..width).map(|k| (x[k] - lo[k]) / (hi[k] - lo[k])))
         .collect();
     let scaled_y: Vec<f32> = data
         .targets
         .iter()
         .flat_map(|y| (0..3).map(|o| (y[o] - mean[o]) / std[o]))
         .collect();
-    let x_all = Tensor::from_vec(scaled_x, (data.len(), 10), &dev).map_err(candle)?;
+    let x_all = Tensor::from_vec(scaled_x, (data.len(), width), &dev).map_err(candle)?;
     let y_all = Tensor::from_vec(scaled_y, (data.len(), 3), &dev).map_err(candle)?;
     let (x_train, y_train) = (
         x_all.narrow(0, 0, n_train).map_err(candle)?,
@@ -184,7 +222,7 @@ pub fn train(
 
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
-    let mut sizes = vec![10];
+    let mut sizes = vec![width];
     sizes.extend(&opts.hidden);
     sizes.push(3);
     let net = Net {
@@ -195,26 +233,42 @@ pub fn train(
             .collect::<candle_core::Result<_>>()
             .map_err(candle)?,
     };
-    if let Some(init) = &opts.init {
-        let widths: Vec<usize> = init.layers.iter().map(|l| l.outputs).collect();
-        if init.layers.len() != net.layers.len() || widths[..widths.len() - 1] != opts.hidden[..] {
-            return Err(Error::config(
-                "--init",
-                format!(
-                    "its layers {widths:?} do not match --hidden {:?}",
-                    opts.hidden
-                ),
-            ));
+    let initial = match &opts.init {
+        Some(init) => {
+            if init.kind != data.kind {
+                return Err(Error::config(
+                    "--init",
+                    format!(
+                        "is a {} network; the data is for a {} one",
+                        init.kind.name(),
+                        data.kind.name()
+                    ),
+                ));
+            }
+            let widths: Vec<usize> = init.layers.iter().map(|l| l.outputs).collect();
+            if init.layers.len() != net.layers.len()
+                || widths[..widths.len() - 1] != opts.hidden[..]
+            {
+                return Err(Error::config(
+                    "--init",
+                    format!(
+                        "its layers {widths:?} do not match --hidden {:?}",
+                        opts.hidden
+                    ),
+                ));
+            }
+            init.layers.clone()
         }
-        let vars = varmap.data().lock().expect("varmap lock");
-        for (i, l) in init.layers.iter().enumerate() {
-            let w =
-                Tensor::from_vec(l.weight.clone(), (l.outputs, l.inputs), &dev).map_err(candle)?;
-            let b = Tensor::from_vec(l.bias.clone(), l.outputs, &dev).map_err(candle)?;
-            vars[&format!("layer{i}.weight")].set(&w).map_err(candle)?;
-            vars[&format!("layer{i}.bias")].set(&b).map_err(candle)?;
-        }
+        None => seeded_layers(&sizes, opts.seed),
+    };
+    let vars = varmap.data().lock().expect("varmap lock");
+    for (i, l) in initial.iter().enumerate() {
+        let w = Tensor::from_vec(l.weight.clone(), (l.outputs, l.inputs), &dev).map_err(candle)?;
+        let b = Tensor::from_vec(l.bias.clone(), l.outputs, &dev).map_err(candle)?;
+        vars[&format!("layer{i}.weight")].set(&w).map_err(candle)?;
+        vars[&format!("layer{i}.bias")].set(&b).map_err(candle)?;
     }
+    drop(vars);
     let mut opt = candle_nn::AdamW::new(
         varmap.all_vars(),
         candle_nn::ParamsAdamW {
@@ -232,11 +286,11 @@ pub fn train(
     let mut best = (f64::INFINITY, Vec::new());
     let mut since_best = 0;
     let file = |layers: Vec<Layer>, notes: BTreeMap<String, String>| WeightsFile {
-        kind: NetKind::Friction,
+        kind: data.kind,
         layers,
         negative_slope: NEGATIVE_SLOPE,
-        input_min: lo.to_vec(),
-        input_max: hi.to_vec(),
+        input_min: lo.clone(),
+        input_max: hi.clone(),
         output_mean: mean.clone(),
         output_std: std.clone(),
         notes,

@@ -26,7 +26,7 @@ pub const FRICTION_OUTPUTS: [&str; 3] = ["gx", "gy", "gz"];
 pub const NAIVE_INPUTS: [&str; 7] = ["bx", "cx", "cy", "cz", "px", "py", "pz"];
 pub const NAIVE_OUTPUTS: [&str; 3] = ["fx", "fy", "fz"];
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum NetKind {
     Friction,
     Naive,

@@ -8,7 +8,7 @@ pub mod rigid;
 
 use glam::{Quat, Vec3};
 
-use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
+use crate::config::{Config, ModelKind, MotionKind, Pins, Rotation, SceneKind, Shape};
 use crate::error::{Error, Result};
 use crate::nn::Mlp;
 use crate::nn::weights::{NetKind, WeightsFile};
@@ -81,17 +81,22 @@ impl Scene {
                 ))
             }
         };
-        let network = match config.model.is_network() {
-            false => None,
-            true => {
-                let path = &config.contact.weights;
-                let file = WeightsFile::read(path)?;
-                if file.kind != NetKind::Friction {
+        let network = match config.weights_path() {
+            None => None,
+            Some(path) => {
+                let file = WeightsFile::read(&path)?;
+                let wanted = match config.model {
+                    ModelKind::NaiveNet => NetKind::Naive,
+                    _ => NetKind::Friction,
+                };
+                if file.kind != wanted {
                     return Err(Error::file(
-                        path,
+                        &path,
                         format!(
-                            "is a {} network; model friction-net needs a friction one",
-                            file.kind.name()
+                            "is a {} network; model {} needs a {} one",
+                            file.kind.name(),
+                            config.model.name(),
+                            wanted.name()
                         ),
                     ));
                 }
