@@ -222,7 +222,7 @@ fn progress_bar(steps: u64) -> ProgressBar {
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
     let scene = Scene::new(&config)?;
-    let (chosen, notice) = choose_backend(args.backend, config.model)?;
+    let (chosen, notice) = choose_backend(args.backend)?;
     if let Some(n) = notice {
         eprintln!("{n}");
     }

@@ -28,17 +28,10 @@ pub enum Chosen {
 }
 
 /// Resolves `auto`, and says why when it falls back to the CPU (no
-/// adapter, or a model without GPU kernels).
-pub fn choose_backend(requested: Backend, model: ModelKind) -> Result<(Chosen, Option<String>)> {
+/// adapter, or only a software one).
+pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
     match requested {
         Backend::Cpu => Ok((Chosen::Cpu, None)),
-        Backend::Auto if model.is_network() => Ok((
-            Chosen::Cpu,
-            Some(format!(
-                "notice: model {} has no GPU kernels yet; running on the CPU reference path",
-                model.name()
-            )),
-        )),
         Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),
         Backend::Auto => Ok(match GpuContext::headless() {
             // A software rasteriser (lavapipe) runs the kernels on the same

@@ -143,11 +143,18 @@ const IN_CONTACT: usize = 70;
 #[test]
 fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
     let Some((ctx, kernels)) = gpu() else { return };
-    for model in [ModelKind::Friction, ModelKind::Naive] {
+    let models = [
+        ModelKind::Friction,
+        ModelKind::Naive,
+        ModelKind::FrictionNet,
+        ModelKind::NaiveNet,
+    ];
+    for model in models {
         let scene = sphere(20, model);
         let mut cpu = cpu_after(&scene, IN_CONTACT);
         let gpu = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
         gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+        let speed = max_norm(&cpu.state.v);
         gpu.step();
         cpu.step();
 
@@ -179,6 +186,8 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
             "{model:?}: face–vertex contact count"
         );
         let responses = cpu.responses();
+        let mut kinks = 0;
+        let mut kink_dev = 0.0f32;
         let mut force_dev = 0.0f32;
         let mut force_max = 0.0f32;
         for (k, c) in cpu.contacts().iter().enumerate() {
@@ -203,27 +212,45 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
             force_dev = force_dev.max((Vec3::from(r.force) - responses[k].force).length());
             force_max = force_max.max(responses[k].force.length());
             let (dev, norm) = mat_dev(&[r.damping.to_mat3()], &[responses[k].damping]);
-            assert!(
-                dev <= 1e-3 * norm + 1e-4,
-                "{model:?}: contact damping {dev} vs {norm}"
-            );
+            if dev > 1e-3 * norm + 1e-4 {
+                // A network is piecewise linear: where a unit's input is
+                // within rounding of 0 the two sides may take different
+                // pieces and the Jacobian jumps by that unit's share.
+                kinks += 1;
+                kink_dev += dev;
+                assert!(
+                    model.is_network() && dev <= 2e-2 * norm,
+                    "{model:?}: contact damping {dev} vs {norm}"
+                );
+            }
         }
         assert!(
             force_dev <= 1e-4 * force_max,
             "{model:?}: contact forces {force_dev} vs {force_max}"
         );
+        assert!(
+            kinks * 50 <= cpu.contacts().len(),
+            "{model:?}: {kinks} of {} contacts differ",
+            cpu.contacts().len()
+        );
 
         let (gd, go, gb) = gpu.read_system().unwrap();
         let (a, b) = cpu.system();
+        // A kink's damping enters blocks scaled by h β_k β_l ≤ 1.
         let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
-        assert!(dev <= 1e-4 * norm, "{model:?}: A diagonal {dev} vs {norm}");
+        assert!(
+            dev <= 1e-4 * norm + kink_dev,
+            "{model:?}: A diagonal {dev} vs {norm}"
+        );
         let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
         assert!(
-            dev <= 1e-4 * norm,
+            dev <= 1e-4 * norm + kink_dev,
             "{model:?}: A off-diagonal {dev} vs {norm}"
         );
+        // ... and b as h D v_rel, with |v_rel| ≤ |v| + the sphere's ≤ 1 m/s.
+        let h = scene.config.solver.dt;
         assert!(
-            max_dev(&gb, b) <= 1e-4 * max_norm(b),
+            max_dev(&gb, b) <= 1e-4 * max_norm(b) + kink_dev * h * (speed + 1.0),
             "{model:?}: b {} vs {}",
             max_dev(&gb, b),
             max_norm(b)
@@ -266,6 +293,30 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
             state.contacts_total
         );
         assert!((deepest - cpu_deepest).abs() < 1e-3);
+    }
+}
+
+/// The network models over 100 steps of the thesis scene pass `wgcloth
+/// validate`: the GPU stays within the scene's own sensitivity of the CPU
+/// (a network's kinks amplify rounding as contact does).
+#[test]
+fn thesis_scene_with_either_network_validates_against_the_cpu() {
+    let Some((ctx, _)) = gpu() else { return };
+    for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
+        let v = wgcloth::run::validate(&ctx, sphere(16, model), 100, |_| {}).unwrap();
+        eprintln!(
+            "{model:?}: deviation {:.3e} m, sensitivity {:.3e} m, contacts {} vs {}",
+            v.max_deviation, v.sensitivity, v.gpu_contacts, v.cpu_contacts
+        );
+        assert!(v.cpu_contacts > 500, "the sphere must hit the cloth");
+        assert!(
+            v.max_deviation <= 1e-4 + 4.0 * v.sensitivity,
+            "{model:?}: {} m apart, sensitivity {} m",
+            v.max_deviation,
+            v.sensitivity
+        );
+        let ratio = v.gpu_contacts as f64 / v.cpu_contacts as f64;
+        assert!((ratio - 1.0).abs() < 0.05, "{model:?}: contacts {ratio}");
     }
 }
 
@@ -385,4 +436,194 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     );
     // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
     assert!((gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0);
+}
+
+/// A random network with the given layer sizes (deterministic).
+fn random_mlp(sizes: &[usize], seed: u64) -> wgcloth::nn::Mlp {
+    let mut s = seed;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    wgcloth::nn::Mlp {
+        layers: sizes
+            .windows(2)
+            .map(|w| wgcloth::nn::Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| next() * 1.5 / (w[0] as f32).sqrt())
+                    .collect(),
+                bias: (0..w[1]).map(|_| 0.1 * next()).collect(),
+            })
+            .collect(),
+        negative_slope: 0.01,
+    }
+}
+
+/// Runs `net` on the GPU over `inputs` (one row per contact) and returns
+/// the outputs, [contact × (1 + |wrt|) × 3].
+fn gpu_batch(
+    ctx: &GpuContext,
+    kernels: &Arc<Kernels>,
+    net: &wgcloth::nn::Mlp,
+    wrt: std::ops::Range<usize>,
+    inputs: &[Vec<f32>],
+    max_chunk: usize,
+) -> Vec<f32> {
+    use wgcloth::gpu::mlp::{BatchBuffers, output_bytes};
+    use wgpu::util::DeviceExt;
+    let d = &ctx.device;
+    let flat: Vec<f32> = inputs.iter().flatten().copied().collect();
+    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+    let make = |label, contents: &[u8]| {
+        d.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: storage,
+        })
+    };
+    let input_buffer = make("inputs", bytemuck::cast_slice(&flat));
+    let count = make("count", bytemuck::bytes_of(&(inputs.len() as u32)));
+    let out_bytes = output_bytes(inputs.len(), &wrt);
+    let outputs = d.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("outputs"),
+        size: out_bytes,
+        usage: storage,
+        mapped_at_creation: false,
+    });
+    let gpu_net = wgcloth::gpu::GpuMlp::chunked(
+        kernels.clone(),
+        d,
+        net,
+        wrt,
+        inputs.len(),
+        max_chunk,
+        BatchBuffers {
+            inputs: &input_buffer,
+            count: &count,
+            outputs: &outputs,
+        },
+    )
+    .unwrap();
+    let staging = d.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("staging"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = d.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        gpu_net.record(&mut pass);
+    }
+    encoder.copy_buffer_to_buffer(&outputs, 0, &staging, 0, out_bytes);
+    ctx.queue.submit([encoder.finish()]);
+    staging.map_async(wgpu::MapMode::Read, .., |r| r.unwrap());
+    d.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    let view = staging.get_mapped_range(..).unwrap();
+    bytemuck::pod_collect_to_vec(&view[..])
+}
+
+#[test]
+fn network_kernels_match_the_cpu_network_and_its_jacobian() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    // Layer sizes that do and do not divide the tiles; batches smaller and
+    // larger than a tile, in one chunk and in several.
+    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 5] = [
+        (&[10, 256, 256, 128, 128, 3], 0..6, 300, usize::MAX),
+        (&[7, 16, 16, 16, 16, 16, 3], 4..7, 130, usize::MAX),
+        (&[10, 37, 70, 5, 3], 0..6, 1, usize::MAX),
+        (&[10, 65, 3], 0..6, 200, 47),
+        (&[3, 1, 3], 0..3, 64, 10),
+    ];
+    for (k, (sizes, wrt, n, max_chunk)) in cases.into_iter().enumerate() {
+        let net = random_mlp(sizes, 7 + k as u64);
+        let mut s = 99 + k as u64;
+        let inputs: Vec<Vec<f32>> = (0..n)
+            .map(|_| {
+                (0..sizes[0])
+                    .map(|_| {
+                        s = s
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+                    })
+                    .collect()
+            })
+            .collect();
+        let got = gpu_batch(&ctx, &kernels, &net, wrt.clone(), &inputs, max_chunk);
+        let rows = 1 + wrt.len();
+        let (mut worst, mut scale) = (0.0f32, 0.0f32);
+        for (c, x) in inputs.iter().enumerate() {
+            let (y, j) = net.forward_jacobian(x, wrt.clone());
+            for o in 0..3 {
+                let gpu_value = got[3 * c * rows + o];
+                worst = worst.max((gpu_value - y[o]).abs());
+                scale = scale.max(y[o].abs());
+                for t in 0..wrt.len() {
+                    let gpu_d = got[3 * (c * rows + 1 + t) + o];
+                    worst = worst.max((gpu_d - j[o * wrt.len() + t]).abs());
+                    scale = scale.max(j[o * wrt.len() + t].abs());
+                }
+            }
+        }
+        eprintln!("network {sizes:?}, {n} contacts: largest difference {worst:.2e} of {scale:.2e}");
+        assert!(
+            worst <= 1e-4 * scale,
+            "network {sizes:?}: {worst} vs {scale}"
+        );
+    }
+}
+
+#[test]
+fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
+    let Some((ctx, _)) = gpu() else { return };
+    drop(ctx);
+    // A device that binds at most 1 MiB per storage buffer.
+    let adapter = GpuContext::pick_adapter().unwrap();
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        ..adapter.limits()
+    };
+    let (device, _queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .unwrap();
+    let kernels = Arc::new(Kernels::new(&device).unwrap());
+    let buffer = |size| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        })
+    };
+    let (inputs, count, outputs) = (buffer(64), buffer(64), buffer(1 << 12));
+    let io = || wgcloth::gpu::mlp::BatchBuffers {
+        inputs: &inputs,
+        count: &count,
+        outputs: &outputs,
+    };
+    // 10 × 30000 weights: 1.2 MB.
+    let wide = random_mlp(&[10, 30000, 3], 1);
+    let err = wgcloth::gpu::GpuMlp::new(kernels.clone(), &device, &wide, 0..6, 4, io())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("weights") && err.contains("bytes"), "{err}");
+    // Weights that fit (0.5 MB), activations of one contact that do not:
+    // 7 rows × 40000 floats = 1.1 MB.
+    let one_wide = random_mlp(&[6, 1, 40000, 1, 3], 2);
+    let err = wgcloth::gpu::GpuMlp::new(kernels, &device, &one_wide, 0..6, 4, io())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("activations") && err.contains("bytes"),
+        "{err}"
+    );
 }

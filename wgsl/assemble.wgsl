@@ -47,12 +47,10 @@ fn sorted_triangle_contacts(t: u32, out: ptr<function, array<u32, MAX_TRIANGLE_C
     return count;
 }
 
+// Σ β_k v_k (a vertex–face contact has β = (1, 0, 0)).
 fn cloth_velocity(c: Contact) -> vec3<f32> {
-    var s = c.beta.x * v[c.vertices.x].xyz;
-    if c.triangle != NO_TRIANGLE {
-        s += c.beta.y * v[c.vertices.y].xyz + c.beta.z * v[c.vertices.z].xyz;
-    }
-    return s;
+    return c.beta.x * v[c.vertices.x].xyz + c.beta.y * v[c.vertices.y].xyz
+        + c.beta.z * v[c.vertices.z].xyz;
 }
 
 @compute @workgroup_size(WORKGROUP)

@@ -108,7 +108,7 @@ fn vertex_face(@builtin(global_invocation_id) id: vec3<u32>) {
     var c = no_contact();
     if best_t != NO_TRIANGLE {
         c = Contact(rotate(frame.rotation, body_face_normals[best_t].xyz), best.x - params.thickness,
-                    vec3<f32>(1.0, 0.0, 0.0), best.x, -frame.velocity, 1u, vec3<u32>(i), NO_TRIANGLE);
+                    vec3<f32>(1.0, 0.0, 0.0), best.x, -frame.velocity, 1u, vec3<u32>(i), best_t);
         atomicAdd(&state.contacts_last, 1u);
     }
     vf_contacts[i] = c;

@@ -16,8 +16,14 @@ struct Params {
     rigid_rotation: vec4<f32>,
     motion_vector: vec3<f32>, cells_x: u32,
     cells_y: u32, tiles_x: u32, tiles_y: u32, supertiles_x: u32,
-    supertiles_y: u32, pad0: u32, pad1: u32, pad2: u32,
+    supertiles_y: u32, net_width: u32, net_rows: u32, pad0: u32,
 }
+
+// `Params::model` (mirrors `gpu::sim::params_for`).
+const MODEL_NAIVE: u32 = 0u;
+const MODEL_FRICTION: u32 = 1u;
+const MODEL_FRICTION_NET: u32 = 2u;
+const MODEL_NAIVE_NET: u32 = 3u;
 
 // Time and run statistics, on the GPU so a step needs no host writes.
 // Mirrors `gpu::layout::StepState`.
@@ -107,6 +113,7 @@ struct Contact {
     offset: vec3<f32>,
     valid: u32,
     vertices: vec3<u32>,
+    // The cloth triangle (face–vertex) or the rigid triangle (vertex–face).
     triangle: u32,
 }
 

@@ -1,6 +1,8 @@
 // Stage "contact": each contact's force and Jacobian blocks from the
 // selected model. CPU twin: src/cpu/contact.rs (same equations, same
-// branch structure).
+// branch structure). The network models gather the step's contacts into a
+// batch (`gather`), run the network over it (stages "batch" and "mlp") and
+// read its outputs back into responses (`respond_batch`).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> v: array<vec4<f32>>;
@@ -8,6 +10,20 @@
 @group(0) @binding(3) var<storage, read> fv_contacts: array<Contact>;
 @group(0) @binding(4) var<storage, read_write> vf_responses: array<Response>;
 @group(0) @binding(5) var<storage, read_write> fv_responses: array<Response>;
+// The naive network's geometry: cloth positions and triangles, the placed
+// rigid body's vertices and triangles.
+@group(0) @binding(6) var<storage, read> x: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read> triangles: array<u32>;
+@group(0) @binding(8) var<storage, read> rigid_vertices: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read> body_triangles: array<u32>;
+// The batch: its size, each entry's contact slot (vertex–face slots first,
+// then face–vertex), the network inputs [entry × width] and outputs
+// [entry × R × 3]: row 0 the output, row 1 + t its derivative along input
+// wrt_start + t.
+@group(0) @binding(10) var<storage, read_write> net_count: array<atomic<u32>>;
+@group(0) @binding(11) var<storage, read_write> net_list: array<u32>;
+@group(0) @binding(12) var<storage, read_write> net_inputs: array<f32>;
+@group(0) @binding(13) var<storage, read> net_outputs: array<f32>;
 
 // A force with its Jacobians ∂f/∂c and ∂f/∂v_rel.
 struct ForceJacobian {
@@ -68,7 +84,7 @@ fn friction(c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
 }
 
 fn evaluate(c: vec3<f32>, v_rel: vec3<f32>) -> ForceJacobian {
-    if params.model == 0u {
+    if params.model == MODEL_NAIVE {
         return naive(c);
     }
     let g = friction(c, v_rel);
@@ -177,5 +193,145 @@ fn face_vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
     if k < params.n_rigid_vertices && fv_contacts[k].valid != 0u {
         fv_responses[k] = respond(fv_contacts[k]);
+    }
+}
+
+// --- The network models (thesis 2.4, 2.7). ---
+
+fn slot_contact(s: u32) -> Contact {
+    if s < params.n_vertices {
+        return vf_contacts[s];
+    }
+    return fv_contacts[s - params.n_vertices];
+}
+
+// The naive network's local frame (mirrors cpu::contact::local_frame): the
+// contact's triangle wound along its normal, a at the origin, b on +x, the
+// triangle in the xy-plane; the point moved by ε against the normal.
+struct LocalFrame {
+    rotation: mat3x3<f32>,
+    b: vec3<f32>,
+    c: vec3<f32>,
+    p: vec3<f32>,
+    valid: bool,
+}
+
+fn local_frame(s: u32, k: Contact) -> LocalFrame {
+    var tri: array<vec3<f32>, 3>;
+    var point: vec3<f32>;
+    if s < params.n_vertices {
+        for (var i = 0u; i < 3u; i++) {
+            tri[i] = rigid_vertices[body_triangles[3u * k.triangle + i]].xyz;
+        }
+        point = x[s].xyz;
+    } else {
+        for (var i = 0u; i < 3u; i++) {
+            tri[i] = x[triangles[3u * k.triangle + i]].xyz;
+        }
+        point = rigid_vertices[s - params.n_vertices].xyz;
+    }
+    var a = tri[0];
+    var b = tri[1];
+    var c = tri[2];
+    if dot(cross(b - a, c - a), k.normal) < 0.0 {
+        b = tri[2];
+        c = tri[1];
+    }
+    point -= (k.distance - k.depth) * k.normal;
+    let ab = b - a;
+    let normal = cross(ab, c - a);
+    var f: LocalFrame;
+    f.valid = dot(ab, ab) > 0.0 && dot(normal, normal) > 0.0;
+    if !f.valid {
+        return f;
+    }
+    let e1 = normalize(ab);
+    let e3 = normalize(normal);
+    f.rotation = transpose(mat3x3<f32>(e1, cross(e3, e1), e3));
+    f.b = f.rotation * ab;
+    f.c = f.rotation * (c - a);
+    f.p = f.rotation * (point - a);
+    return f;
+}
+
+@compute @workgroup_size(1)
+fn reset_batch() {
+    atomicStore(&net_count[0], 0u);
+}
+
+// Appends every valid contact to the batch with its network inputs.
+@compute @workgroup_size(WORKGROUP)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if s >= params.n_vertices + params.n_rigid_vertices {
+        return;
+    }
+    let k = slot_contact(s);
+    if k.valid == 0u {
+        return;
+    }
+    let entry = atomicAdd(&net_count[0], 1u);
+    net_list[entry] = s;
+    let base = entry * params.net_width;
+    if params.model == MODEL_FRICTION_NET {
+        let c = k.normal * k.depth;
+        let v_rel = relative_velocity(k);
+        let row = array<f32, 10>(c.x, c.y, c.z, v_rel.x, v_rel.y, v_rel.z,
+                                 params.kn, params.kd, params.kt, params.mu);
+        for (var i = 0u; i < 10u; i++) {
+            net_inputs[base + i] = row[i];
+        }
+    } else {
+        let f = local_frame(s, k);
+        let row = array<f32, 7>(f.b.x, f.c.x, f.c.y, 0.0, f.p.x, f.p.y, f.p.z);
+        for (var i = 0u; i < 7u; i++) {
+            net_inputs[base + i] = row[i];
+        }
+    }
+}
+
+// Row `row` of a batch entry's outputs.
+fn output_row(entry: u32, row: u32) -> vec3<f32> {
+    let o = 3u * (entry * params.net_rows + row);
+    return vec3<f32>(net_outputs[o], net_outputs[o + 1u], net_outputs[o + 2u]);
+}
+
+// The Jacobian whose column j is output row first + j.
+fn output_jacobian(entry: u32, first: u32) -> mat3x3<f32> {
+    return mat3x3<f32>(output_row(entry, first), output_row(entry, first + 1u),
+                       output_row(entry, first + 2u));
+}
+
+// The network's force and Jacobians for batch entry `entry` (mirrors
+// cpu::contact::friction_net and naive_net, scaled to force units).
+fn network_force(entry: u32, s: u32, k: Contact) -> ForceJacobian {
+    let g = output_row(entry, 0u);
+    if params.model == MODEL_FRICTION_NET {
+        let sc = params.force_scale;
+        return ForceJacobian(sc * g, sc * output_jacobian(entry, 1u), sc * output_jacobian(entry, 4u));
+    }
+    let f = local_frame(s, k);
+    if !f.valid {
+        return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    }
+    let back = transpose(f.rotation);
+    let st = params.naive_stiffness;
+    return ForceJacobian(st * (back * g), st * (back * output_jacobian(entry, 1u) * f.rotation), ZERO3);
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
+    let entry = id.x;
+    if entry >= atomicLoad(&net_count[0]) {
+        return;
+    }
+    let s = net_list[entry];
+    let k = slot_contact(s);
+    let v_rel = relative_velocity(k);
+    let r = response(network_force(entry, s, k), k.normal, v_rel);
+    if s < params.n_vertices {
+        vf_responses[s] = r;
+    } else {
+        fv_responses[s - params.n_vertices] = r;
     }
 }

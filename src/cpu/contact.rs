@@ -16,6 +16,7 @@ use crate::config::{ContactConfig, ModelKind};
 use crate::cpu::collide::{Contact, Geometry};
 use crate::math::{outer, project_nsd, symmetric_part};
 use crate::nn::Mlp;
+use std::ops::Range;
 use std::sync::Arc;
 
 /// A force and its Jacobians with respect to c and v_rel.
@@ -169,7 +170,7 @@ pub fn naive_net(net: &Mlp, g: &Geometry) -> ForceJacobian {
     let Some(frame) = local_frame(g) else {
         return ForceJacobian::ZERO;
     };
-    let (f, j) = net.forward_jacobian(&frame.inputs, 4..7);
+    let (f, j) = net.forward_jacobian(&frame.inputs, NAIVE_NET_WRT);
     let back = frame.rotation.transpose();
     // j is row-major [3 outputs × 3 tangents (px, py, pz)].
     let d_p = Mat3::from_cols(
@@ -184,11 +185,25 @@ pub fn naive_net(net: &Mlp, g: &Geometry) -> ForceJacobian {
     }
 }
 
+/// The inputs each network's Jacobian is taken along: c and v_rel for the
+/// friction network, the point p for the naive one.
+pub const FRICTION_NET_WRT: Range<usize> = 0..6;
+pub const NAIVE_NET_WRT: Range<usize> = 4..7;
+
+/// The Jacobian inputs of a network model; None for the analytic ones.
+pub fn network_wrt(kind: ModelKind) -> Option<Range<usize>> {
+    match kind {
+        ModelKind::FrictionNet => Some(FRICTION_NET_WRT),
+        ModelKind::NaiveNet => Some(NAIVE_NET_WRT),
+        ModelKind::Naive | ModelKind::Friction => None,
+    }
+}
+
 /// g and its Jacobians from a friction network with inputs
 /// (c, v_rel, k_n, k_d, k_t, μ).
 pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
     let x = [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu];
-    let (g, j) = net.forward_jacobian(&x, 0..6);
+    let (g, j) = net.forward_jacobian(&x, FRICTION_NET_WRT);
     // j is row-major [3 outputs × 6 tangents]: columns 0–2 are ∂/∂c, 3–5 ∂/∂v.
     let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
     ForceJacobian {

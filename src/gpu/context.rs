@@ -22,11 +22,16 @@ pub fn describe(info: &wgpu::AdapterInfo) -> String {
 }
 
 impl GpuContext {
+    /// A device on [`GpuContext::pick_adapter`]'s adapter.
+    pub fn headless() -> Result<GpuContext> {
+        Self::from_adapter(&Self::pick_adapter()?)
+    }
+
     /// Picks an adapter: `WGPU_BACKEND` limits the backends,
     /// `WGPU_ADAPTER_NAME` (a case-insensitive substring) picks by name,
     /// otherwise the high-performance default. Errors say which adapters
     /// exist when none fits.
-    pub fn headless() -> Result<GpuContext> {
+    pub fn pick_adapter() -> Result<wgpu::Adapter> {
         // GL has no usable compute path here and its probing only adds
         // noise; WGPU_BACKEND can still ask for it.
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
@@ -58,7 +63,7 @@ impl GpuContext {
                 ))
             })?,
         };
-        Self::from_adapter(&adapter)
+        Ok(adapter)
     }
 
     /// Opens a device on `adapter` with its full limits and, where present,

@@ -15,10 +15,26 @@ pub struct Stage {
 
 pub struct Kernels {
     stages: BTreeMap<&'static str, Stage>,
+    mlp_threads: u32,
+}
+
+/// Threads per edge of the network layer's tile (wgsl/mlp.wgsl): 16 × 16
+/// (64 × 64 outputs) where the adapter allows it, else 8 × 8.
+pub fn mlp_threads(limits: &wgpu::Limits) -> u32 {
+    let fits = |t: u32| {
+        // Two tiles of MLP_K × 4t floats in workgroup memory.
+        let storage = 2 * 16 * 4 * t * 4;
+        t * t <= limits.max_compute_invocations_per_workgroup
+            && t <= limits.max_compute_workgroup_size_x
+            && t <= limits.max_compute_workgroup_size_y
+            && storage <= limits.max_compute_workgroup_storage_size
+    };
+    if fits(16) { 16 } else { 8 }
 }
 
 impl Kernels {
     pub fn new(device: &wgpu::Device) -> Result<Kernels> {
+        let mlp_threads = mlp_threads(&device.limits());
         let mut stages = BTreeMap::new();
         for (name, _) in STAGES {
             let reflected =
@@ -48,7 +64,7 @@ impl Kernels {
             });
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(name),
-                source: wgpu::ShaderSource::Wgsl(shaders::source(name).into()),
+                source: wgpu::ShaderSource::Wgsl(shaders::source_for(name, mlp_threads).into()),
             });
             let pipelines = reflected
                 .entry_points
@@ -74,7 +90,15 @@ impl Kernels {
                 },
             );
         }
-        Ok(Kernels { stages })
+        Ok(Kernels {
+            stages,
+            mlp_threads,
+        })
+    }
+
+    /// Rows (and outputs) per workgroup tile of the network layer.
+    pub fn mlp_tile(&self) -> u32 {
+        4 * self.mlp_threads
     }
 
     pub fn pipeline(&self, stage: &str, entry: &str) -> &wgpu::ComputePipeline {

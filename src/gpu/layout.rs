@@ -42,7 +42,10 @@ pub struct Params {
     pub tiles_y: u32,
     pub supertiles_x: u32,
     pub supertiles_y: u32,
-    pub pad: [u32; 3],
+    /// Network inputs per contact, and rows per contact (1 + Jacobian columns).
+    pub net_width: u32,
+    pub net_rows: u32,
+    pub pad: u32,
 }
 
 /// Clock and run statistics kept on the GPU.
@@ -81,6 +84,8 @@ impl Sym3 {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Contact {
+    /// `triangle` is the cloth triangle of a face–vertex contact and the
+    /// rigid triangle of a vertex–face one.
     pub normal: [f32; 3],
     pub depth: f32,
     pub beta: [f32; 3],

@@ -5,9 +5,11 @@
 pub mod context;
 pub mod kernels;
 pub mod layout;
+pub mod mlp;
 pub mod shaders;
 pub mod sim;
 
 pub use context::GpuContext;
 pub use kernels::Kernels;
+pub use mlp::GpuMlp;
 pub use sim::GpuSim;

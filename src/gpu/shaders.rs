@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use wgpu::naga;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 8] = [
+pub const STAGES: [(&str, &str); 10] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
@@ -17,7 +17,27 @@ pub const STAGES: [(&str, &str); 8] = [
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
     ("measure", include_str!("../../wgsl/measure.wgsl")),
+    ("batch", include_str!("../../wgsl/batch.wgsl")),
+    ("mlp", include_str!("../../wgsl/mlp.wgsl")),
 ];
+
+/// The network layer's threads per tile edge as written in wgsl/mlp.wgsl;
+/// [`source_for`] replaces it.
+const MLP_THREADS_DECLARED: &str = "const MLP_THREADS: u32 = 16u;";
+
+/// A stage's source for a device: the network layer's tile edge set to
+/// `mlp_threads`.
+pub fn source_for(stage: &str, mlp_threads: u32) -> String {
+    let src = source(stage);
+    assert!(
+        stage != "mlp" || src.contains(MLP_THREADS_DECLARED),
+        "wgsl/mlp.wgsl must declare `{MLP_THREADS_DECLARED}`"
+    );
+    src.replace(
+        MLP_THREADS_DECLARED,
+        &format!("const MLP_THREADS: u32 = {mlp_threads}u;"),
+    )
+}
 
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
@@ -28,6 +48,9 @@ pub const INCLUDES: [(&str, &str, &[&str]); 1] = [(
     include_str!("../../wgsl/bvh.wgsl"),
     &["collide", "measure"],
 )];
+
+/// Stages that do not depend on the scene and get no common code.
+pub const STANDALONE: [&str; 2] = ["batch", "mlp"];
 
 /// Common code, the stage's includes, then the stage's own code.
 pub fn source(stage: &str) -> String {
@@ -41,7 +64,10 @@ pub fn source(stage: &str) -> String {
         .filter(|(_, _, users)| users.contains(&stage))
         .map(|(_, text, _)| format!("{text}\n"))
         .collect();
-    format!("{COMMON}\n{includes}{body}")
+    match STANDALONE.contains(&stage) {
+        true => body.to_string(),
+        false => format!("{COMMON}\n{includes}{body}"),
+    }
 }
 
 /// A binding of group 0 as the WGSL declares it.
@@ -112,9 +138,15 @@ mod tests {
         for (stage, _) in STAGES {
             let r = reflect(stage).unwrap_or_else(|e| panic!("{stage}.wgsl:\n{e}"));
             assert!(!r.entry_points.is_empty(), "{stage} has no entry point");
+            // The network stages have their own uniforms.
+            let uniform = match stage {
+                "mlp" => "layer_params",
+                "batch" => "batch",
+                _ => "params",
+            };
             assert!(
-                r.bindings.contains_key("params"),
-                "{stage} does not read params"
+                r.bindings.contains_key(uniform),
+                "{stage} does not read {uniform}"
             );
         }
     }

@@ -10,11 +10,13 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use crate::config::ModelKind;
+use crate::cpu::contact::network_wrt;
 use crate::error::{Error, Result};
 use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, StepState, Sym3,
 };
+use crate::gpu::mlp::{BatchBuffers, GpuMlp, output_bytes};
 use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
@@ -77,6 +79,10 @@ struct Buffers {
     frame: wgpu::Buffer,
     tile_bounds: wgpu::Buffer,
     supertile_bounds: wgpu::Buffer,
+    net_count: wgpu::Buffer,
+    net_list: wgpu::Buffer,
+    net_inputs: wgpu::Buffer,
+    net_outputs: wgpu::Buffer,
 }
 
 struct BindGroups {
@@ -106,6 +112,8 @@ pub struct GpuSim {
     buffers: Buffers,
     groups: BindGroups,
     timer: Option<Timer>,
+    /// The network of a network model.
+    network: Option<GpuMlp>,
 }
 
 fn groups(n: u32) -> u32 {
@@ -126,13 +134,15 @@ fn params_for(scene: &Scene) -> Params {
         n_vertices: cloth.vertex_count() as u32,
         n_springs: cloth.springs.len() as u32,
         n_triangles: cloth.triangles.len() as u32,
+        // MODEL_* in wgsl/common.wgsl.
         model: match cfg.model {
             ModelKind::Naive => 0,
             ModelKind::Friction => 1,
-            ModelKind::FrictionNet | ModelKind::NaiveNet => {
-                unreachable!("GpuSim::new rejects network models")
-            }
+            ModelKind::FrictionNet => 2,
+            ModelKind::NaiveNet => 3,
         },
+        net_width: scene.network.as_ref().map_or(0, |n| n.inputs() as u32),
+        net_rows: network_wrt(cfg.model).map_or(0, |w| 1 + w.len() as u32),
         cg_max_iters: cfg.solver.cg_iters,
         dt: cfg.solver.dt,
         vertex_mass: cloth.vertex_mass,
@@ -270,6 +280,8 @@ impl Buffers {
                 .collect()
         });
         let bvh_order = body.map_or(vec![], |b| b.bvh.order.clone());
+        // A network batch holds every contact slot, at most.
+        let batch = if params.net_rows > 0 { n + r } else { 0 };
         Buffers {
             params: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("params"),
@@ -348,6 +360,10 @@ impl Buffers {
             frame: zeroed("rigid frame", size_of::<RigidFrame>()),
             tile_bounds: zeroed("tile bounds", tiles * 2 * vec4),
             supertile_bounds: zeroed("super-tile bounds", supertiles * 2 * vec4),
+            net_count: zeroed("network batch size", 4),
+            net_list: zeroed("network batch contacts", batch * 4),
+            net_inputs: zeroed("network inputs", batch * params.net_width as usize * 4),
+            net_outputs: zeroed("network outputs", batch * params.net_rows as usize * 3 * 4),
         }
     }
 }
@@ -428,6 +444,14 @@ impl BindGroups {
                     ("fv_contacts", &bf.fv_contacts),
                     ("vf_responses", &bf.vf_responses),
                     ("fv_responses", &bf.fv_responses),
+                    ("x", &bf.x),
+                    ("triangles", &bf.triangles),
+                    ("rigid_vertices", &bf.rigid_vertices),
+                    ("body_triangles", &bf.body_triangles),
+                    ("net_count", &bf.net_count),
+                    ("net_list", &bf.net_list),
+                    ("net_inputs", &bf.net_inputs),
+                    ("net_outputs", &bf.net_outputs),
                 ],
             ),
             measure: kernels.bind(
@@ -521,6 +545,25 @@ impl GpuSim {
         let params = params_for(scene);
         let buffers = Buffers::new(device, scene, &params);
         let groups = BindGroups::new(&kernels, device, &buffers);
+        let network = match (&scene.network, network_wrt(scene.config.model)) {
+            (Some(net), Some(wrt)) if params.has_rigid != 0 => {
+                let capacity = (params.n_vertices + params.n_rigid_vertices) as usize;
+                debug_assert!(buffers.net_outputs.size() >= output_bytes(capacity, &wrt));
+                Some(GpuMlp::new(
+                    kernels.clone(),
+                    device,
+                    net,
+                    wrt,
+                    capacity,
+                    BatchBuffers {
+                        inputs: &buffers.net_inputs,
+                        count: &buffers.net_count,
+                        outputs: &buffers.net_outputs,
+                    },
+                )?)
+            }
+            _ => None,
+        };
         let timer = device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
@@ -546,6 +589,7 @@ impl GpuSim {
             buffers,
             groups,
             timer,
+            network,
         })
     }
 
@@ -626,10 +670,22 @@ impl GpuSim {
                     run(("collide", "vertex_face"), &g.collide, n);
                     run(("collide", "face_vertex"), &g.collide, r);
                 }
-                "contact" => {
-                    run(("contact", "vertex_face"), &g.contact, n);
-                    run(("contact", "face_vertex"), &g.contact, r);
-                }
+                "contact" => match &self.network {
+                    None => {
+                        run(("contact", "vertex_face"), &g.contact, n);
+                        run(("contact", "face_vertex"), &g.contact, r);
+                    }
+                    Some(net) => {
+                        run(("contact", "reset_batch"), &g.contact, 1);
+                        run(("contact", "gather"), &g.contact, n + r);
+                        count += net.record(&mut pass);
+                        let (args, offset) = net.per_contact_dispatch();
+                        pass.set_pipeline(self.kernels.pipeline("contact", "respond_batch"));
+                        pass.set_bind_group(0, &g.contact, &[]);
+                        pass.dispatch_workgroups_indirect(args, offset);
+                        count += 1;
+                    }
+                },
                 "springs" => run(("springs", "main"), &g.springs, s),
                 "assemble" => {
                     run(("assemble", "vertex"), &g.assemble, n);

@@ -295,17 +295,27 @@ pub fn train(
         output_std: std.clone(),
         notes,
     };
+    // A warm start ramps the rate up over its first epoch: Adam's fresh
+    // moment estimates would otherwise move every weight by about the full
+    // rate at once and undo much of the training it starts from.
+    let warmup = if opts.init.is_some() {
+        order.len().div_ceil(opts.batch)
+    } else {
+        0
+    };
+    let mut step = 0;
     for epoch in 0..opts.epochs {
         // Cosine decay to 1/100 of the initial rate over the planned epochs.
         let phase = epoch as f64 / opts.epochs as f64;
-        opt.set_learning_rate(
-            opts.learning_rate * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * phase).cos())),
-        );
+        let rate =
+            opts.learning_rate * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * phase).cos()));
         for k in (1..order.len()).rev() {
             order.swap(k, (rng.next_u64() % (k as u64 + 1)) as usize);
         }
         let mut train_sum = 0.0;
         for chunk in order.chunks(opts.batch) {
+            step += 1;
+            opt.set_learning_rate(rate * (step as f64 / warmup.max(1) as f64).min(1.0));
             let (xb, yb) = (
                 rows(&x_train, chunk).map_err(candle)?,
                 rows(&y_train, chunk).map_err(candle)?,
