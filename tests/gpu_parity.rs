@@ -471,60 +471,14 @@ fn gpu_batch(
     net: &wgcloth::nn::Mlp,
     wrt: std::ops::Range<usize>,
     inputs: &[Vec<f32>],
-    max_chunk: usize,
-) -> Vec<f32> {
-    use wgcloth::gpu::mlp::{BatchBuffers, output_bytes};
-    use wgpu::util::DeviceExt;
-    let d = &ctx.device;
+    shape: wgcloth::gpu::mlp::BatchShape,
+) -> wgcloth::Result<Vec<f32>> {
+    let batch =
+        wgcloth::gpu::mlp::NetworkBatch::new(kernels.clone(), &ctx.device, net, wrt, shape)?;
     let flat: Vec<f32> = inputs.iter().flatten().copied().collect();
-    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-    let make = |label, contents: &[u8]| {
-        d.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage: storage,
-        })
-    };
-    let input_buffer = make("inputs", bytemuck::cast_slice(&flat));
-    let count = make("count", bytemuck::bytes_of(&(inputs.len() as u32)));
-    let out_bytes = output_bytes(inputs.len(), &wrt);
-    let outputs = d.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("outputs"),
-        size: out_bytes,
-        usage: storage,
-        mapped_at_creation: false,
-    });
-    let gpu_net = wgcloth::gpu::GpuMlp::chunked(
-        kernels.clone(),
-        d,
-        net,
-        wrt,
-        inputs.len(),
-        max_chunk,
-        BatchBuffers {
-            inputs: &input_buffer,
-            count: &count,
-            outputs: &outputs,
-        },
-    )
-    .unwrap();
-    let staging = d.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("staging"),
-        size: out_bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = d.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        gpu_net.record(&mut pass);
-    }
-    encoder.copy_buffer_to_buffer(&outputs, 0, &staging, 0, out_bytes);
-    ctx.queue.submit([encoder.finish()]);
-    staging.map_async(wgpu::MapMode::Read, .., |r| r.unwrap());
-    d.poll(wgpu::PollType::wait_indefinitely()).unwrap();
-    let view = staging.get_mapped_range(..).unwrap();
-    bytemuck::pod_collect_to_vec(&view[..])
+    batch.upload(&ctx.queue, &flat)?;
+    batch.run(&ctx.device, &ctx.queue);
+    batch.read_outputs(&ctx.device, &ctx.queue)
 }
 
 #[test]
@@ -532,8 +486,10 @@ fn network_kernels_match_the_cpu_network_and_its_jacobian() {
     let Some((ctx, kernels)) = gpu() else { return };
     // Layer sizes that do and do not divide the tiles; batches smaller and
     // larger than a tile, in one chunk and in several.
-    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 5] = [
+    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 7] = [
         (&[10, 256, 256, 128, 128, 3], 0..6, 300, usize::MAX),
+        (&[10, 128, 128, 64, 3], 0..6, 300, usize::MAX),
+        (&[10, 64, 64, 48, 3], 0..6, 300, usize::MAX),
         (&[7, 16, 16, 16, 16, 16, 3], 4..7, 130, usize::MAX),
         (&[10, 37, 70, 5, 3], 0..6, 1, usize::MAX),
         (&[10, 65, 3], 0..6, 200, 47),
@@ -554,28 +510,55 @@ fn network_kernels_match_the_cpu_network_and_its_jacobian() {
                     .collect()
             })
             .collect();
-        let got = gpu_batch(&ctx, &kernels, &net, wrt.clone(), &inputs, max_chunk);
-        let rows = 1 + wrt.len();
-        let (mut worst, mut scale) = (0.0f32, 0.0f32);
-        for (c, x) in inputs.iter().enumerate() {
-            let (y, j) = net.forward_jacobian(x, wrt.clone());
-            for o in 0..3 {
-                let gpu_value = got[3 * c * rows + o];
-                worst = worst.max((gpu_value - y[o]).abs());
-                scale = scale.max(y[o].abs());
-                for t in 0..wrt.len() {
-                    let gpu_d = got[3 * (c * rows + 1 + t) + o];
-                    worst = worst.max((gpu_d - j[o * wrt.len() + t]).abs());
-                    scale = scale.max(j[o * wrt.len() + t].abs());
-                }
+        use wgcloth::gpu::mlp::{BatchShape, NetworkKernel};
+        for kernel in [NetworkKernel::Tiled, NetworkKernel::PerContact] {
+            let shape = BatchShape {
+                capacity: n,
+                max_chunk,
+                kernel,
+            };
+            let what = format!("{kernel:?} {sizes:?}");
+            match gpu_batch(&ctx, &kernels, &net, wrt.clone(), &inputs, shape) {
+                Ok(got) => check_batch(&net, &wrt, &inputs, &got, &what),
+                // Too much work per invocation for lavapipe's loop limit.
+                Err(e) => assert!(
+                    kernel == NetworkKernel::PerContact
+                        && kernels.software()
+                        && e.to_string().contains("loop iterations"),
+                    "{what}: {e}"
+                ),
             }
         }
-        eprintln!("network {sizes:?}, {n} contacts: largest difference {worst:.2e} of {scale:.2e}");
-        assert!(
-            worst <= 1e-4 * scale,
-            "network {sizes:?}: {worst} vs {scale}"
-        );
     }
+}
+
+/// GPU batch outputs against the CPU network and its Jacobian.
+fn check_batch(
+    net: &wgcloth::nn::Mlp,
+    wrt: &std::ops::Range<usize>,
+    inputs: &[Vec<f32>],
+    got: &[f32],
+    what: &str,
+) {
+    let rows = 1 + wrt.len();
+    let (mut worst, mut scale) = (0.0f32, 0.0f32);
+    for (c, x) in inputs.iter().enumerate() {
+        let (y, j) = net.forward_jacobian(x, wrt.clone());
+        for o in 0..3 {
+            worst = worst.max((got[3 * c * rows + o] - y[o]).abs());
+            scale = scale.max(y[o].abs());
+            for t in 0..wrt.len() {
+                let gpu_d = got[3 * (c * rows + 1 + t) + o];
+                worst = worst.max((gpu_d - j[o * wrt.len() + t]).abs());
+                scale = scale.max(j[o * wrt.len() + t].abs());
+            }
+        }
+    }
+    eprintln!(
+        "{what}, {} contacts: largest difference {worst:.2e} of {scale:.2e}",
+        inputs.len()
+    );
+    assert!(worst <= 1e-4 * scale, "{what}: {worst} vs {scale}");
 }
 
 #[test]
@@ -610,7 +593,11 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
     };
     // 10 × 30000 weights: 1.2 MB.
     let wide = random_mlp(&[10, 30000, 3], 1);
-    let err = wgcloth::gpu::GpuMlp::new(kernels.clone(), &device, &wide, 0..6, 4, io())
+    let shape = wgcloth::gpu::mlp::BatchShape {
+        kernel: wgcloth::gpu::mlp::NetworkKernel::Tiled,
+        ..wgcloth::gpu::mlp::BatchShape::new(4)
+    };
+    let err = wgcloth::gpu::GpuMlp::new(kernels.clone(), &device, &wide, 0..6, shape, io())
         .err()
         .expect("refused")
         .to_string();
@@ -618,7 +605,7 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
     // Weights that fit (0.5 MB), activations of one contact that do not:
     // 7 rows × 40000 floats = 1.1 MB.
     let one_wide = random_mlp(&[6, 1, 40000, 1, 3], 2);
-    let err = wgcloth::gpu::GpuMlp::new(kernels, &device, &one_wide, 0..6, 4, io())
+    let err = wgcloth::gpu::GpuMlp::new(kernels, &device, &one_wide, 0..6, shape, io())
         .err()
         .expect("refused")
         .to_string();

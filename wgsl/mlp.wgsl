@@ -10,12 +10,15 @@
 // which is the chain rule T ← diag(σ'(z)) W T. The first layer loads the
 // inputs and unit seeds instead. Layer sizes come from the weights file;
 // large batches run in chunks so the activations fit the binding limits.
+//
+// `per_contact` is the same network with one contact per invocation and no
+// workgroup memory or barriers: the form a CPU adapter (lavapipe) runs
+// well, where a barrier switches every invocation's context.
 
 // Threads per tile edge; gpu::kernels picks 16 or 8 from the adapter's limits.
 const MLP_THREADS: u32 = 16u;
 // Each thread computes a 4×4 block of the output tile.
-const MLP_PER_THREAD: u32 = 4u;
-const MLP_TILE: u32 = MLP_THREADS * MLP_PER_THREAD;
+const MLP_TILE: u32 = MLP_THREADS * 4u;
 // Inputs per step through the tiles.
 const MLP_K: u32 = 16u;
 
@@ -23,7 +26,7 @@ const MLP_K: u32 = 16u;
 struct LayerParams {
     inputs: u32, outputs: u32, weight_offset: u32, bias_offset: u32,
     rows_per_contact: u32, wrt_start: u32, first: u32, chunk_start: u32,
-    chunk_contacts: u32, out_row_offset: u32, negative_slope: f32, pad0: u32,
+    chunk_contacts: u32, out_row_offset: u32, negative_slope: f32, n_layers: u32,
 }
 
 @group(0) @binding(0) var<uniform> layer_params: LayerParams;
@@ -37,9 +40,13 @@ struct LayerParams {
 @group(0) @binding(3) var<storage, read_write> z_out: array<f32>;
 // The number of contacts in the batch.
 @group(0) @binding(4) var<storage, read> count: array<u32>;
+// Per layer: inputs, outputs, weight offset, bias offset (`per_contact`).
+@group(0) @binding(5) var<storage, read> layer_table: array<vec4<u32>>;
 
-var<workgroup> a_tile: array<array<f32, MLP_TILE>, MLP_K>;
-var<workgroup> w_tile: array<array<f32, MLP_TILE>, MLP_K>;
+// Element m of a tile row is component m % 4 of vec4 m / 4: each thread
+// reads its 4 rows and its 4 outputs with one load each.
+var<workgroup> a_tile: array<array<vec4<f32>, MLP_THREADS>, MLP_K>;
+var<workgroup> w_tile: array<array<vec4<f32>, MLP_THREADS>, MLP_K>;
 
 fn chunk_rows() -> u32 {
     let n = count[0];
@@ -74,6 +81,8 @@ fn load_w(o: u32, k: u32) -> f32 {
     return weights[layer_params.weight_offset + o * layer_params.inputs + k];
 }
 
+// Thread (x, y) computes rows row0 + 4y .. 4y + 3 and outputs
+// out0 + 4x .. 4x + 3 of the workgroup's tile.
 @compute @workgroup_size(MLP_THREADS, MLP_THREADS)
 fn layer(
     @builtin(workgroup_id) group: vec3<u32>,
@@ -83,43 +92,105 @@ fn layer(
     let rows = chunk_rows();
     let row0 = group.x * MLP_TILE;
     let out0 = group.y * MLP_TILE;
-    var acc: array<array<f32, MLP_PER_THREAD>, MLP_PER_THREAD>;
+    // acc_i holds row 4y + i, outputs 4x .. 4x + 3.
+    var acc0 = vec4<f32>(0.0);
+    var acc1 = vec4<f32>(0.0);
+    var acc2 = vec4<f32>(0.0);
+    var acc3 = vec4<f32>(0.0);
     for (var k0 = 0u; k0 < layer_params.inputs; k0 += MLP_K) {
         // k fastest, so neighbouring threads read neighbouring floats.
         for (var e = li; e < MLP_K * MLP_TILE; e += MLP_THREADS * MLP_THREADS) {
             let kk = e % MLP_K;
             let m = e / MLP_K;
-            a_tile[kk][m] = load_a(row0 + m, k0 + kk, rows);
-            w_tile[kk][m] = load_w(out0 + m, k0 + kk);
+            a_tile[kk][m / 4u][m % 4u] = load_a(row0 + m, k0 + kk, rows);
+            w_tile[kk][m / 4u][m % 4u] = load_w(out0 + m, k0 + kk);
         }
         workgroupBarrier();
         for (var kk = 0u; kk < MLP_K; kk++) {
-            var a: array<f32, MLP_PER_THREAD>;
-            var w: array<f32, MLP_PER_THREAD>;
-            for (var i = 0u; i < MLP_PER_THREAD; i++) {
-                a[i] = a_tile[kk][lid.y + i * MLP_THREADS];
-                w[i] = w_tile[kk][lid.x + i * MLP_THREADS];
-            }
-            for (var i = 0u; i < MLP_PER_THREAD; i++) {
-                for (var j = 0u; j < MLP_PER_THREAD; j++) {
-                    acc[i][j] = fma(a[i], w[j], acc[i][j]);
-                }
-            }
+            let a = a_tile[kk][lid.y];
+            let w = w_tile[kk][lid.x];
+            acc0 = fma(vec4<f32>(a.x), w, acc0);
+            acc1 = fma(vec4<f32>(a.y), w, acc1);
+            acc2 = fma(vec4<f32>(a.z), w, acc2);
+            acc3 = fma(vec4<f32>(a.w), w, acc3);
         }
         workgroupBarrier();
     }
-    for (var i = 0u; i < MLP_PER_THREAD; i++) {
-        let r = row0 + lid.y + i * MLP_THREADS;
+    let acc = array<vec4<f32>, 4>(acc0, acc1, acc2, acc3);
+    for (var i = 0u; i < 4u; i++) {
+        let r = row0 + 4u * lid.y + i;
         if r >= rows {
             continue;
         }
         let value_row = r % layer_params.rows_per_contact == 0u;
-        for (var j = 0u; j < MLP_PER_THREAD; j++) {
-            let o = out0 + lid.x + j * MLP_THREADS;
+        for (var j = 0u; j < 4u; j++) {
+            let o = out0 + 4u * lid.x + j;
             if o < layer_params.outputs {
                 let bias = select(0.0, weights[layer_params.bias_offset + o], value_row);
                 z_out[(layer_params.out_row_offset + r) * layer_params.outputs + o] = acc[i][j] + bias;
             }
+        }
+    }
+}
+
+// Widest layer and most layers `per_contact` holds (gpu::mlp checks).
+const MLP_MAX_WIDTH: u32 = 256u;
+const MLP_MAX_LAYERS: u32 = 16u;
+
+// One contact per invocation: the value row through every layer, keeping
+// each hidden unit's sign as a bit, then each Jacobian row through the
+// same layers with those signs. Reads the batch inputs (z_in) and writes
+// the batch outputs (z_out) directly. Weight rows are padded to whole
+// vec4s here, so the inner loop takes four inputs at a time (lavapipe
+// also stops any invocation after 65,535 loop iterations).
+@compute @workgroup_size(64)
+fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
+    let c = id.x;
+    if c >= count[0] {
+        return;
+    }
+    let rows = layer_params.rows_per_contact;
+    let n_layers = layer_params.n_layers;
+    let n_in = layer_table[0].x;
+    let n_out = layer_table[n_layers - 1u].y;
+    // Activation k is component k % 4 of a[k / 4].
+    var a: array<vec4<f32>, MLP_MAX_WIDTH / 4u>;
+    var z: array<f32, MLP_MAX_WIDTH>;
+    var negative: array<u32, MLP_MAX_WIDTH * MLP_MAX_LAYERS / 32u>;
+    for (var t = 0u; t < rows; t++) {
+        for (var k = 0u; k < n_in; k++) {
+            let seed = select(0.0, 1.0, k + 1u == layer_params.wrt_start + t);
+            a[k / 4u][k % 4u] = select(seed, z_in[c * n_in + k], t == 0u);
+        }
+        for (var l = 0u; l < n_layers; l++) {
+            let info = layer_table[l];
+            let quads = (info.x + 3u) / 4u;
+            for (var o = 0u; o < info.y; o++) {
+                var sum = select(0.0, weights[info.w + o], t == 0u);
+                let row = info.z + 4u * quads * o;
+                for (var q = 0u; q < quads; q++) {
+                    let i = row + 4u * q;
+                    let w = vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]);
+                    sum += dot(w, a[q]);
+                }
+                z[o] = sum;
+            }
+            if l + 1u == n_layers {
+                break;
+            }
+            for (var o = 0u; o < info.y; o++) {
+                let bit = l * MLP_MAX_WIDTH + o;
+                let mask = 1u << (bit % 32u);
+                if t == 0u {
+                    let word = negative[bit / 32u];
+                    negative[bit / 32u] = select(word & ~mask, word | mask, z[o] < 0.0);
+                }
+                let slope = select(1.0, layer_params.negative_slope, (negative[bit / 32u] & mask) != 0u);
+                a[o / 4u][o % 4u] = z[o] * slope;
+            }
+        }
+        for (var o = 0u; o < n_out; o++) {
+            z_out[(c * rows + t) * n_out + o] = z[o];
         }
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 
+use bytemuck::Pod;
 use std::sync::{Arc, Mutex};
 
 /// A device and queue with what the simulator needs to know of them.
@@ -122,4 +123,38 @@ impl GpuContext {
             None => Ok(()),
         }
     }
+}
+
+/// Copies `buffer` back to the host (blocks until the GPU is done), as
+/// whole elements of `T` (small buffers are padded to 64 bytes).
+pub fn read_buffer<T: Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+) -> Result<Vec<T>> {
+    let size = buffer.size();
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| Error::Gpu(format!("waiting for the device failed: {e}")))?;
+    rx.recv()
+        .map_err(|_| Error::Gpu("readback never completed".into()))?
+        .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
+    let view = staging
+        .get_mapped_range(..)
+        .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
+    let whole = view.len() / size_of::<T>() * size_of::<T>();
+    Ok(bytemuck::pod_collect_to_vec(&view[..whole]))
 }

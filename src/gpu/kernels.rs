@@ -16,6 +16,7 @@ pub struct Stage {
 pub struct Kernels {
     stages: BTreeMap<&'static str, Stage>,
     mlp_threads: u32,
+    software: bool,
 }
 
 /// Threads per edge of the network layer's tile (wgsl/mlp.wgsl): 16 × 16
@@ -93,7 +94,13 @@ impl Kernels {
         Ok(Kernels {
             stages,
             mlp_threads,
+            software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
         })
+    }
+
+    /// Whether the device is a CPU adapter (lavapipe).
+    pub fn software(&self) -> bool {
+        self.software
     }
 
     /// Rows (and outputs) per workgroup tile of the network layer.

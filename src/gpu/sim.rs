@@ -12,11 +12,12 @@ use wgpu::util::DeviceExt;
 use crate::config::ModelKind;
 use crate::cpu::contact::network_wrt;
 use crate::error::{Error, Result};
+use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, StepState, Sym3,
 };
-use crate::gpu::mlp::{BatchBuffers, GpuMlp, output_bytes};
+use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, output_bytes};
 use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
@@ -554,7 +555,7 @@ impl GpuSim {
                     device,
                     net,
                     wrt,
-                    capacity,
+                    BatchShape::new(capacity),
                     BatchBuffers {
                         inputs: &buffers.net_inputs,
                         count: &buffers.net_count,
@@ -734,34 +735,8 @@ impl GpuSim {
         count
     }
 
-    /// Copies `buffer` back to the host (blocks until the GPU is done).
     fn read<T: Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
-        let size = buffer.size();
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
-        self.queue.submit([encoder.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu(format!("waiting for the device failed: {e}")))?;
-        rx.recv()
-            .map_err(|_| Error::Gpu("readback never completed".into()))?
-            .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
-        let view = staging
-            .get_mapped_range(..)
-            .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
-        // Whole elements only: small buffers are padded to 64 bytes.
-        let whole = view.len() / size_of::<T>() * size_of::<T>();
-        Ok(bytemuck::pod_collect_to_vec(&view[..whole]))
+        read_buffer(&self.device, &self.queue, buffer)
     }
 
     fn read_vec3(&self, buffer: &wgpu::Buffer) -> Result<Vec<Vec3>> {

@@ -1,0 +1,222 @@
+//! Criterion benchmarks of the learned models, CPU and GPU side by side:
+//!
+//! - `network/<net>/<backend>/<contacts>`: the network and its input
+//!   Jacobian over a batch of contacts (throughput in contacts/s; the
+//!   floating-point work per contact is printed first, so GFLOP/s is
+//!   contacts/s × that). Sizes run from 1k to 1M contacts while a batch
+//!   stays under a work budget (smaller on a software adapter).
+//! - `step64/<backend>/<model>`: one step of the thesis sphere scene at
+//!   64², analytic models against their networks.
+//! - `period/<backend>/<model>`: the thesis's headline measure, the wall
+//!   time to simulate one sphere period (2 s, 200 steps) at 32².
+//!
+//! `cargo bench --bench network`
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use rayon::prelude::*;
+use wgcloth::config::ModelKind;
+use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
+use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
+use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::nn::Mlp;
+use wgcloth::nn::domain::{Rng, uniform_sample};
+use wgcloth::nn::weights::{NetKind, WeightsFile};
+use wgcloth::{Config, Scene};
+
+const SIZES: [usize; 6] = [1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000];
+
+fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
+    match GpuContext::headless() {
+        Ok(ctx) => {
+            let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels"));
+            eprintln!("GPU: {}", wgcloth::gpu::context::describe(&ctx.adapter));
+            Some((ctx, kernels))
+        }
+        Err(e) => {
+            eprintln!("no GPU benchmarks: {e}");
+            None
+        }
+    }
+}
+
+fn shipped(name: &str) -> WeightsFile {
+    WeightsFile::read(std::path::Path::new(&format!("weights/{name}"))).expect("shipped weights")
+}
+
+/// The shipped networks with their Jacobian inputs.
+fn networks() -> Vec<(&'static str, Mlp, Range<usize>, NetKind)> {
+    let mut nets = vec![
+        (
+            "friction",
+            shipped("friction_mlp.safetensors").folded(),
+            FRICTION_NET_WRT,
+            NetKind::Friction,
+        ),
+        (
+            "naive",
+            shipped("naive_mlp.safetensors").folded(),
+            NAIVE_NET_WRT,
+            NetKind::Naive,
+        ),
+    ];
+    if std::path::Path::new("weights/friction_mlp_small.safetensors").exists() {
+        nets.push((
+            "friction-small",
+            shipped("friction_mlp_small.safetensors").folded(),
+            FRICTION_NET_WRT,
+            NetKind::Friction,
+        ));
+    }
+    nets
+}
+
+fn network(c: &mut Criterion) {
+    let gpu = gpu();
+    let software = gpu
+        .as_ref()
+        .is_some_and(|(ctx, _)| ctx.adapter.device_type == wgpu::DeviceType::Cpu);
+    for (name, net, wrt, kind) in networks() {
+        let rows = 1 + wrt.len();
+        let flop = 2 * net.multiply_adds() * rows;
+        eprintln!(
+            "network {name}: {flop} floating-point operations per contact (forward + Jacobian)"
+        );
+        let mut rng = Rng::new(5);
+        let inputs: Vec<f32> = (0..SIZES[SIZES.len() - 1])
+            .flat_map(|_| uniform_sample(kind, &mut rng).0)
+            .collect();
+        let width = net.inputs();
+        let mut group = c.benchmark_group(format!("network/{name}"));
+        group.sample_size(10);
+        // Work per batch: 4 GFLOP on the CPU or a software adapter, 2 TFLOP
+        // on a real GPU.
+        let cpu_budget = 4e9;
+        let gpu_budget = if software { 4e9 } else { 2e12 };
+        for n in SIZES {
+            let work = (n * flop) as f64;
+            group.throughput(Throughput::Elements(n as u64));
+            let batch = &inputs[..n * width];
+            if work <= cpu_budget {
+                group.bench_function(BenchmarkId::new("cpu", n), |b| {
+                    b.iter(|| {
+                        batch
+                            .par_chunks(width)
+                            .map(|x| net.forward_jacobian(x, wrt.clone()).0[0])
+                            .sum::<f32>()
+                    })
+                });
+            }
+            if let Some((ctx, kernels)) = gpu.as_ref().filter(|_| work <= gpu_budget) {
+                let on_gpu = NetworkBatch::new(
+                    kernels.clone(),
+                    &ctx.device,
+                    &net,
+                    wrt.clone(),
+                    BatchShape::new(n),
+                )
+                .expect("fits the adapter");
+                on_gpu.upload(&ctx.queue, batch).expect("batch fits");
+                group.bench_function(BenchmarkId::new("gpu", n), |b| {
+                    b.iter(|| {
+                        on_gpu.run(&ctx.device, &ctx.queue);
+                        ctx.finish().expect("device healthy");
+                    })
+                });
+            }
+        }
+        group.finish();
+    }
+}
+
+fn sphere(grid: u32, model: ModelKind) -> Scene {
+    let mut c = Config {
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    c.solver.cg_iters = 25;
+    c.solver.cg_tol = 0.0;
+    Scene::new(&c).expect("valid benchmark scene")
+}
+
+const MODELS: [ModelKind; 4] = [
+    ModelKind::Friction,
+    ModelKind::FrictionNet,
+    ModelKind::Naive,
+    ModelKind::NaiveNet,
+];
+
+/// Steps before timing a single step, so the sphere is pushing the cloth.
+const WARM_STEPS: usize = 80;
+
+fn step64(c: &mut Criterion) {
+    let gpu = gpu();
+    for backend in ["cpu", "gpu"] {
+        let mut group = c.benchmark_group(format!("step64/{backend}"));
+        group.sample_size(10);
+        for model in MODELS {
+            let scene = sphere(64, model);
+            if backend == "cpu" {
+                let mut sim = CpuSim::new(scene);
+                for _ in 0..WARM_STEPS {
+                    sim.step();
+                }
+                group.bench_function(model.name(), |b| b.iter(|| sim.step()));
+            } else if let Some((ctx, kernels)) = &gpu {
+                let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
+                    .expect("fits the adapter");
+                for _ in 0..WARM_STEPS {
+                    sim.step();
+                }
+                group.bench_function(model.name(), |b| {
+                    b.iter(|| {
+                        sim.step();
+                        ctx.finish().expect("device healthy");
+                    })
+                });
+            }
+        }
+        group.finish();
+    }
+}
+
+fn period(c: &mut Criterion) {
+    let gpu = gpu();
+    let steps = 200; // one period of the default sphere motion at h = 0.01
+    for backend in ["cpu", "gpu"] {
+        let mut group = c.benchmark_group(format!("period/{backend}"));
+        group.sample_size(10);
+        for model in MODELS {
+            let scene = sphere(32, model);
+            if backend == "cpu" {
+                group.bench_function(model.name(), |b| {
+                    b.iter(|| {
+                        let mut sim = CpuSim::new(scene.clone());
+                        for _ in 0..steps {
+                            sim.step();
+                        }
+                    })
+                });
+            } else if let Some((ctx, kernels)) = &gpu {
+                group.bench_function(model.name(), |b| {
+                    b.iter(|| {
+                        let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
+                            .expect("fits the adapter");
+                        for _ in 0..steps {
+                            sim.step();
+                        }
+                        ctx.finish().expect("device healthy");
+                    })
+                });
+            }
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, network, step64, period);
+criterion_main!(benches);
