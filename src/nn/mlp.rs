@@ -44,44 +44,68 @@ impl Mlp {
     }
 
     /// The output and its Jacobian with respect to the inputs `wrt`,
-    /// row-major [outputs × wrt.len()]. Forward mode: each layer carries
-    /// the activations and their derivatives, T ← diag(σ'(z)) W T.
+    /// row-major [outputs × wrt.len()]. Forward mode: row 0 carries the
+    /// activations and row 1 + j their derivatives along input
+    /// wrt.start + j; each layer maps every row through W (the bias only
+    /// on row 0) and scales the derivative rows by σ'(z) of row 0, the
+    /// chain rule T ← diag(σ'(z)) W T. The rows stay contiguous so each
+    /// output is one vectorised dot product.
     pub fn forward_jacobian(&self, x: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
-        let tangents = wrt.len();
-        let mut a = x.to_vec();
-        // t[i * tangents + j] = ∂a_i / ∂x_(wrt.start + j): a unit seed per input.
-        let mut t = vec![0.0f32; x.len() * tangents];
+        let rows = 1 + wrt.len();
+        let mut width = x.len();
+        // Row 0: the inputs; row 1 + j: the unit seed of input wrt.start + j.
+        let mut a = vec![0.0f32; rows * width];
+        a[..width].copy_from_slice(x);
         for (j, i) in wrt.enumerate() {
-            t[i * tangents + j] = 1.0;
+            a[(1 + j) * width + i] = 1.0;
         }
+        let mut z = Vec::new();
         for (k, layer) in self.layers.iter().enumerate() {
-            let mut z = layer.bias.clone();
-            let mut tz = vec![0.0f32; layer.outputs * tangents];
-            for o in 0..layer.outputs {
-                let row = &layer.weight[o * layer.inputs..(o + 1) * layer.inputs];
-                let out = &mut tz[o * tangents..(o + 1) * tangents];
-                for (i, &w) in row.iter().enumerate() {
-                    z[o] += w * a[i];
-                    for (dst, src) in out.iter_mut().zip(&t[i * tangents..(i + 1) * tangents]) {
-                        *dst += w * src;
-                    }
+            z.clear();
+            z.resize(rows * layer.outputs, 0.0);
+            for (o, w) in layer.weight.chunks_exact(layer.inputs).enumerate() {
+                z[o] = layer.bias[o] + dot(w, &a[..width]);
+                for r in 1..rows {
+                    z[r * layer.outputs + o] = dot(w, &a[r * width..(r + 1) * width]);
                 }
             }
             if self.is_hidden(k) {
                 for o in 0..layer.outputs {
                     if z[o] < 0.0 {
-                        z[o] *= self.negative_slope;
-                        for d in &mut tz[o * tangents..(o + 1) * tangents] {
-                            *d *= self.negative_slope;
+                        for r in 0..rows {
+                            z[r * layer.outputs + o] *= self.negative_slope;
                         }
                     }
                 }
             }
-            a = z;
-            t = tz;
+            std::mem::swap(&mut a, &mut z);
+            width = layer.outputs;
         }
-        (a, t)
+        // Row-major [outputs × tangents] from the derivative rows.
+        let tangents = rows - 1;
+        let mut jacobian = vec![0.0f32; width * tangents];
+        for j in 0..tangents {
+            for o in 0..width {
+                jacobian[o * tangents + j] = a[(1 + j) * width + o];
+            }
+        }
+        a.truncate(width);
+        (a, jacobian)
     }
+}
+
+/// a · b in eight independent partial sums, which the compiler keeps in
+/// vector registers.
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    let mut acc = [0.0f32; 8];
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    acc.iter().sum::<f32>() + tail
 }
 
 #[cfg(test)]
