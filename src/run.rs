@@ -10,6 +10,7 @@ use serde::Serialize;
 use crate::config::{ModelKind, SceneKind};
 use crate::cpu::{self, CpuSim, STAGES};
 use crate::error::{Error, Result};
+use crate::gpu::mlp::NetworkKernel;
 use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use crate::scene::Scene;
 
@@ -59,6 +60,9 @@ pub struct Report {
     pub backend: String,
     pub adapter: String,
     pub model: ModelKind,
+    /// A network model's weights file, layer widths, multiply-adds per
+    /// evaluation, and on the GPU the kernel that runs it.
+    pub network: Option<String>,
     pub scene: SceneKind,
     pub grid: [u32; 2],
     pub steps: u64,
@@ -167,6 +171,7 @@ fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> Report {
             rayon::current_num_threads()
         ),
         model: config.model,
+        network: describe_network(&sim.scene, None),
         scene: config.scene,
         grid: config.cloth.grid,
         steps: sim.state.step,
@@ -183,6 +188,22 @@ fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> Report {
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
     }
+}
+
+/// "FILE: 10-256-…-3, N multiply-adds[, KERNEL kernel]" for a network model.
+fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<String> {
+    let (net, path) = (scene.network.as_ref()?, scene.config.weights_path()?);
+    let mut widths = vec![net.inputs().to_string()];
+    widths.extend(net.layers.iter().map(|l| l.outputs.to_string()));
+    let kernel = kernel
+        .map(|k| format!(", {} kernel", k.name()))
+        .unwrap_or_default();
+    Some(format!(
+        "{}: {}, {} multiply-adds{kernel}",
+        path.display(),
+        widths.join("-"),
+        net.multiply_adds()
+    ))
 }
 
 fn run_gpu(
@@ -213,6 +234,7 @@ fn run_gpu(
         backend: "gpu".into(),
         adapter: describe(&ctx.adapter),
         model: config.model,
+        network: describe_network(&scene, sim.network_kernel()),
         scene: config.scene,
         grid: config.cloth.grid,
         steps: state.steps as u64,
@@ -311,6 +333,7 @@ impl Report {
         format!(
             "wgcloth run: scene {:?}, model {:?}, grid {}x{}, {} steps of {} s\n\
              backend      {} — {}\n\
+             {}\
              ms/step      {:.3} (median{dispatches})\n\
              stages (ms)  {}\n\
              pcg          {:.1} iterations/step, worst relative residual {:.2e}, {} breakdowns\n\
@@ -325,6 +348,10 @@ impl Report {
             self.dt,
             self.backend,
             self.adapter,
+            self.network
+                .as_ref()
+                .map(|n| format!("network      {n}\n"))
+                .unwrap_or_default(),
             self.ms_per_step,
             if stages.is_empty() {
                 "(no timestamp queries on this adapter)".into()

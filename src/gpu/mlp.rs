@@ -99,6 +99,16 @@ pub enum NetworkKernel {
     PerContact,
 }
 
+impl NetworkKernel {
+    pub fn name(self) -> &'static str {
+        match self {
+            NetworkKernel::Auto => "auto",
+            NetworkKernel::Tiled => "tiled",
+            NetworkKernel::PerContact => "per-contact",
+        }
+    }
+}
+
 /// How large a batch is and how it runs.
 #[derive(Clone, Copy, Debug)]
 pub struct BatchShape {

@@ -17,7 +17,7 @@ use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, StepState, Sym3,
 };
-use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, output_bytes};
+use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
@@ -602,6 +602,11 @@ impl GpuSim {
     /// Cloth triangles as `u32` indices into [`Self::positions`].
     pub fn indices(&self) -> &wgpu::Buffer {
         &self.buffers.triangles
+    }
+
+    /// The kernel running a network model's network.
+    pub fn network_kernel(&self) -> Option<NetworkKernel> {
+        self.network.as_ref().map(GpuMlp::kernel)
     }
 
     pub fn index_count(&self) -> u32 {
