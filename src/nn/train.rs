@@ -295,9 +295,9 @@ pub fn train(
         output_std: std.clone(),
         notes,
     };
-    // A warm start ramps the rate up over its first epoch: Adam's fresh
-    // moment estimates would otherwise move every weight by about the full
-    // rate at once and undo much of the training it starts from.
+    // A warm start ramps the rate up over its first epoch, the usual guard
+    // against Adam's fresh moment estimates taking full-size steps from
+    // trained weights.
     let warmup = if opts.init.is_some() {
         order.len().div_ceil(opts.batch)
     } else {
