@@ -6,7 +6,8 @@
 //!   contacts/s × that). Sizes run from 1k to 1M contacts while a batch
 //!   stays under a work budget (smaller on a software adapter).
 //! - `step64/<backend>/<model>`: one step of the thesis sphere scene at
-//!   64², analytic models against their networks.
+//!   64² from the same in-contact state, analytic models against their
+//!   networks.
 //! - `period/<backend>/<model>`: the thesis's headline measure, the wall
 //!   time to simulate one sphere period (2 s, 200 steps) at 32².
 //!
@@ -150,11 +151,17 @@ const MODELS: [ModelKind; 4] = [
     ModelKind::NaiveNet,
 ];
 
-/// Steps before timing a single step, so the sphere is pushing the cloth.
+/// Steps of the analytic friction model before timing, so the sphere is
+/// pushing the cloth; every model then steps from that same state.
 const WARM_STEPS: usize = 80;
 
 fn step64(c: &mut Criterion) {
     let gpu = gpu();
+    let mut warm = CpuSim::new(sphere(64, ModelKind::Friction));
+    for _ in 0..WARM_STEPS {
+        warm.step();
+    }
+    let start = warm.state.clone();
     for backend in ["cpu", "gpu"] {
         let mut group = c.benchmark_group(format!("step64/{backend}"));
         group.sample_size(10);
@@ -162,18 +169,19 @@ fn step64(c: &mut Criterion) {
             let scene = sphere(64, model);
             if backend == "cpu" {
                 let mut sim = CpuSim::new(scene);
-                for _ in 0..WARM_STEPS {
-                    sim.step();
-                }
-                group.bench_function(model.name(), |b| b.iter(|| sim.step()));
+                group.bench_function(model.name(), |b| {
+                    b.iter(|| {
+                        sim.state.clone_from(&start);
+                        sim.step()
+                    })
+                });
             } else if let Some((ctx, kernels)) = &gpu {
                 let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
                     .expect("fits the adapter");
-                for _ in 0..WARM_STEPS {
-                    sim.step();
-                }
+                let time = start.time as f32;
                 group.bench_function(model.name(), |b| {
                     b.iter(|| {
+                        sim.upload_state(&start.x, &start.v, time);
                         sim.step();
                         ctx.finish().expect("device healthy");
                     })
