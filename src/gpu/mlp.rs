@@ -6,8 +6,8 @@
 //!
 //! Two kernels evaluate it: `layer`, one tiled matrix product per layer
 //! through workgroup memory, for GPUs; and `per_contact`, one contact per
-//! invocation without barriers, for CPU adapters such as lavapipe (where a
-//! barrier costs a context switch per invocation) and small networks.
+//! invocation without barriers, for CPU adapters such as lavapipe, which
+//! run it about 3× faster than `layer` on small networks.
 
 use std::ops::Range;
 use std::sync::Arc;
