@@ -42,8 +42,8 @@ fn recorded_inputs(kind: NetKind, sim: &CpuSim) -> Vec<Vec<f32>> {
         return Vec::new();
     };
     let (x, v) = (&sim.state.x, &sim.state.v);
+    let (lo, hi) = bounds(kind);
     let in_domain = |s: &[f32]| {
-        let (lo, hi) = bounds(kind);
         s.iter()
             .zip(lo.iter().zip(&hi))
             .all(|(x, (l, h))| l <= x && x <= h)
