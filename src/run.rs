@@ -331,7 +331,7 @@ impl Report {
             .map(|d| format!(", {d} dispatches/step"))
             .unwrap_or_default();
         format!(
-            "wgcloth run: scene {:?}, model {:?}, grid {}x{}, {} steps of {} s\n\
+            "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
              backend      {} — {}\n\
              {}\
              ms/step      {:.3} (median{dispatches})\n\
@@ -341,7 +341,7 @@ impl Report {
              penetration  {:.4} m deepest (thickness not counted)\n\
              state        {} (final energy {:.4} J)",
             self.scene,
-            self.model,
+            self.model.name(),
             self.grid[0],
             self.grid[1],
             self.steps,
