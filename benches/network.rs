@@ -13,36 +13,23 @@
 //!
 //! `cargo bench --bench network`
 
+mod common;
+
 use std::ops::Range;
-use std::sync::Arc;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use rayon::prelude::*;
-use wgcloth::config::ModelKind;
+use wgcloth::Scene;
+use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
+use wgcloth::gpu::GpuSim;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::nn::Mlp;
 use wgcloth::nn::domain::{Rng, uniform_sample};
 use wgcloth::nn::weights::{NetKind, WeightsFile};
-use wgcloth::{Config, Scene};
 
 const SIZES: [usize; 6] = [1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000];
-
-fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
-    match GpuContext::headless() {
-        Ok(ctx) => {
-            let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels"));
-            eprintln!("GPU: {}", wgcloth::gpu::context::describe(&ctx.adapter));
-            Some((ctx, kernels))
-        }
-        Err(e) => {
-            eprintln!("no GPU benchmarks: {e}");
-            None
-        }
-    }
-}
 
 fn shipped(name: &str) -> WeightsFile {
     WeightsFile::read(std::path::Path::new(&format!("weights/{name}"))).expect("shipped weights")
@@ -76,7 +63,7 @@ fn networks() -> Vec<(&'static str, Mlp, Range<usize>, NetKind)> {
 }
 
 fn network(c: &mut Criterion) {
-    let gpu = gpu();
+    let gpu = common::gpu();
     let software = gpu
         .as_ref()
         .is_some_and(|(ctx, _)| ctx.adapter.device_type == wgpu::DeviceType::Cpu);
@@ -134,14 +121,7 @@ fn network(c: &mut Criterion) {
 }
 
 fn sphere(grid: u32, model: ModelKind) -> Scene {
-    let mut c = Config {
-        model,
-        ..Default::default()
-    };
-    c.cloth.grid = [grid, grid];
-    c.solver.cg_iters = 25;
-    c.solver.cg_tol = 0.0;
-    Scene::new(&c).expect("valid benchmark scene")
+    common::scene(SceneKind::Sphere, model, grid)
 }
 
 const MODELS: [ModelKind; 4] = [
@@ -156,7 +136,7 @@ const MODELS: [ModelKind; 4] = [
 const WARM_STEPS: usize = 80;
 
 fn step64(c: &mut Criterion) {
-    let gpu = gpu();
+    let gpu = common::gpu();
     let mut warm = CpuSim::new(sphere(64, ModelKind::Friction));
     for _ in 0..WARM_STEPS {
         warm.step();
@@ -193,7 +173,7 @@ fn step64(c: &mut Criterion) {
 }
 
 fn period(c: &mut Criterion) {
-    let gpu = gpu();
+    let gpu = common::gpu();
     let steps = 200; // one period of the default sphere motion at h = 0.01
     for backend in ["cpu", "gpu"] {
         let mut group = c.benchmark_group(format!("period/{backend}"));

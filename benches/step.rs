@@ -6,48 +6,25 @@
 //!
 //! `cargo bench --bench step`
 
-use std::sync::Arc;
+mod common;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
-use wgcloth::{Config, Scene};
+use wgcloth::gpu::GpuSim;
 
 /// Steps run before timing, so the sphere is pushing the cloth.
 fn warm_steps(scene: SceneKind) -> usize {
     if scene == SceneKind::Sphere { 80 } else { 5 }
 }
 
-fn scene(kind: SceneKind, grid: u32) -> Scene {
-    let mut c = Config {
-        scene: kind,
-        model: ModelKind::Friction,
-        ..Default::default()
-    };
-    c.cloth.grid = [grid, grid];
-    c.solver.cg_iters = 25;
-    c.solver.cg_tol = 0.0;
-    Scene::new(&c).expect("valid benchmark scene")
-}
-
 fn step(c: &mut Criterion) {
-    let gpu = match GpuContext::headless() {
-        Ok(ctx) => {
-            let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels"));
-            eprintln!("GPU: {}", wgcloth::gpu::context::describe(&ctx.adapter));
-            Some((ctx, kernels))
-        }
-        Err(e) => {
-            eprintln!("no GPU benchmarks: {e}");
-            None
-        }
-    };
+    let gpu = common::gpu();
     for kind in [SceneKind::Hang, SceneKind::Sphere] {
         let mut group = c.benchmark_group(format!("step/{kind:?}").to_lowercase());
         group.sample_size(10);
         for grid in [32u32, 64, 128] {
-            let s = scene(kind, grid);
+            let s = common::scene(kind, ModelKind::Friction, grid);
             let mut cpu = CpuSim::new(s.clone());
             for _ in 0..warm_steps(kind) {
                 cpu.step();
