@@ -22,7 +22,7 @@ use crate::nn::domain::{
     MAX_DEPTH, MAX_SPEED, Rng, Sample, bounds, friction_sample, naive_sample, random_coefficients,
     uniform_sample,
 };
-use crate::nn::weights::NetKind;
+use crate::nn::weights::{self, NetKind};
 use crate::scene::Scene;
 
 pub const FORMAT: &str = "wgcloth-contacts/1";
@@ -206,32 +206,13 @@ impl Dataset {
         let width = kind.inputs().len();
         let st = SafeTensors::deserialize(&bytes)
             .map_err(|e| Error::file(path, format!("not a contact data file: {e}")))?;
+        // Any number of rows, each `width` wide.
         let floats = |name: &str, width: usize| -> Result<Vec<f32>> {
             let v = st
                 .tensor(name)
                 .map_err(|_| Error::file(path, format!("tensor `{name}` is missing")))?;
-            if v.dtype() != Dtype::F32 || v.shape().len() != 2 || v.shape()[1] != width {
-                return Err(Error::file(
-                    path,
-                    format!(
-                        "tensor `{name}` must be F32 [N, {width}], is {:?} {:?}",
-                        v.dtype(),
-                        v.shape()
-                    ),
-                ));
-            }
-            let out: Vec<f32> = v
-                .data()
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            match out.iter().position(|x| !x.is_finite()) {
-                Some(k) => Err(Error::file(
-                    path,
-                    format!("tensor `{name}` has a non-finite value at index {k}"),
-                )),
-                None => Ok(out),
-            }
+            let rows = v.shape().first().copied().unwrap_or(0);
+            weights::floats(&v, name, &[rows, width], path)
         };
         let x = floats("inputs", width)?;
         let y = floats("targets", 3)?;

@@ -69,7 +69,13 @@ pub struct WeightsFile {
     pub notes: BTreeMap<String, String>,
 }
 
-fn floats(view: &TensorView, name: &str, shape: &[usize], path: &Path) -> Result<Vec<f32>> {
+/// A tensor's values, checked to be finite f32 of the given shape.
+pub(crate) fn floats(
+    view: &TensorView,
+    name: &str,
+    shape: &[usize],
+    path: &Path,
+) -> Result<Vec<f32>> {
     if view.dtype() != Dtype::F32 {
         return Err(Error::file(
             path,
