@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::nn::weights::{NetKind, WeightsFile};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -33,7 +34,7 @@ pub enum ModelKind {
 }
 
 impl ModelKind {
-    /// Whether the model evaluates a network (and needs `contact.weights`).
+    /// Whether the model evaluates a network.
     pub fn is_network(self) -> bool {
         self.default_weights().is_some()
     }
@@ -50,9 +51,23 @@ impl ModelKind {
 
     /// The shipped weights a network model reads unless told otherwise.
     pub fn default_weights(self) -> Option<&'static str> {
+        self.shipped_weights().map(|(path, _)| path)
+    }
+
+    /// The shipped weights file's path in the repository and its bytes,
+    /// compiled in so that the network models run from any directory.
+    pub fn shipped_weights(self) -> Option<(&'static str, &'static [u8])> {
+        macro_rules! shipped {
+            ($file:literal) => {
+                Some((
+                    concat!("weights/", $file),
+                    include_bytes!(concat!("../weights/", $file)),
+                ))
+            };
+        }
         match self {
-            ModelKind::FrictionNet => Some("weights/friction_mlp.safetensors"),
-            ModelKind::NaiveNet => Some("weights/naive_mlp.safetensors"),
+            ModelKind::FrictionNet => shipped!("friction_mlp.safetensors"),
+            ModelKind::NaiveNet => shipped!("naive_mlp.safetensors"),
             ModelKind::Naive | ModelKind::Friction => None,
         }
     }
@@ -303,7 +318,7 @@ impl Default for Config {
 
 impl Config {
     /// The weights file a network model reads: `contact.weights`, else the
-    /// model's shipped file. None for the analytic models.
+    /// model's shipped file (built in). None for the analytic models.
     pub fn weights_path(&self) -> Option<PathBuf> {
         let shipped = self.model.default_weights()?;
         Some(
@@ -312,6 +327,38 @@ impl Config {
                 .clone()
                 .unwrap_or_else(|| shipped.into()),
         )
+    }
+
+    /// The network model's weights: `contact.weights` read from disk, else
+    /// the built-in copy of the shipped file. None for the analytic models;
+    /// an error for a network of the other model.
+    pub fn read_weights(&self) -> Result<Option<WeightsFile>> {
+        let Some((shipped, bytes)) = self.model.shipped_weights() else {
+            return Ok(None);
+        };
+        let (file, path) = match &self.contact.weights {
+            Some(path) => (WeightsFile::read(path)?, path.as_path()),
+            None => (
+                WeightsFile::parse(bytes, Path::new(shipped))?,
+                Path::new(shipped),
+            ),
+        };
+        let wanted = match self.model {
+            ModelKind::NaiveNet => NetKind::Naive,
+            _ => NetKind::Friction,
+        };
+        if file.kind != wanted {
+            return Err(Error::file(
+                path,
+                format!(
+                    "is a {} network; model {} needs a {} one",
+                    file.kind.name(),
+                    self.model.name(),
+                    wanted.name()
+                ),
+            ));
+        }
+        Ok(Some(file))
     }
 
     /// Parses a TOML document; unknown or mistyped fields are errors naming

@@ -162,8 +162,9 @@ struct SceneArgs {
     /// OBJ mesh for the rigid body.
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
-    /// Weights of the network model [default: weights/friction_mlp.safetensors
-    /// for friction-net, weights/naive_mlp.safetensors for naive-net].
+    /// Weights of the network model [default: the built-in copy of
+    /// weights/friction_mlp.safetensors for friction-net,
+    /// weights/naive_mlp.safetensors for naive-net].
     #[arg(long, value_name = "FILE.safetensors")]
     weights: Option<PathBuf>,
 }

@@ -193,13 +193,17 @@ fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> Report {
 /// "FILE: 10-256-…-3, N multiply-adds[, KERNEL kernel]" for a network model.
 fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<String> {
     let (net, path) = (scene.network.as_ref()?, scene.config.weights_path()?);
+    let built_in = match scene.config.contact.weights {
+        None => " (built in)",
+        Some(_) => "",
+    };
     let mut widths = vec![net.inputs().to_string()];
     widths.extend(net.layers.iter().map(|l| l.outputs.to_string()));
     let kernel = kernel
         .map(|k| format!(", {} kernel", k.name()))
         .unwrap_or_default();
     Some(format!(
-        "{}: {}, {} multiply-adds{kernel}",
+        "{}{built_in}: {}, {} multiply-adds{kernel}",
         path.display(),
         widths.join("-"),
         net.multiply_adds()

@@ -546,6 +546,29 @@ fn friction_net_with_a_corrupt_weights_file_names_it() {
 }
 
 #[test]
+fn network_models_run_from_any_directory_on_their_built_in_weights() {
+    let dir = TempDir::new("built_in_weights");
+    for (model, file) in [
+        (
+            "friction-net",
+            "weights/friction_mlp.safetensors (built in)",
+        ),
+        ("naive-net", "weights/naive_mlp.safetensors (built in)"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
+            .args(["run", "--backend", "cpu", "--model", model])
+            .args(TINY)
+            .current_dir(&dir.0)
+            .env("RUST_LOG", "warn")
+            .output()
+            .expect("failed to start the wgcloth binary");
+        assert!(out.status.success(), "{}", describe(model, &out));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains(file), "{model}: {text}");
+    }
+}
+
+#[test]
 fn a_network_model_with_the_other_kind_of_network_names_both() {
     let shipped = |name: &str| format!("{}/weights/{name}", env!("CARGO_MANIFEST_DIR"));
     let friction = shipped("friction_mlp.safetensors");

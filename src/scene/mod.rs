@@ -8,10 +8,9 @@ pub mod rigid;
 
 use glam::{Quat, Vec3};
 
-use crate::config::{Config, ModelKind, MotionKind, Pins, Rotation, SceneKind, Shape};
+use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
 use crate::error::{Error, Result};
 use crate::nn::Mlp;
-use crate::nn::weights::{NetKind, WeightsFile};
 pub use cloth::Cloth;
 pub use mesh::TriMesh;
 pub use rigid::{Motion, RigidBody};
@@ -81,28 +80,7 @@ impl Scene {
                 ))
             }
         };
-        let network = match config.weights_path() {
-            None => None,
-            Some(path) => {
-                let file = WeightsFile::read(&path)?;
-                let wanted = match config.model {
-                    ModelKind::NaiveNet => NetKind::Naive,
-                    _ => NetKind::Friction,
-                };
-                if file.kind != wanted {
-                    return Err(Error::file(
-                        &path,
-                        format!(
-                            "is a {} network; model {} needs a {} one",
-                            file.kind.name(),
-                            config.model.name(),
-                            wanted.name()
-                        ),
-                    ));
-                }
-                Some(Arc::new(file.folded()))
-            }
-        };
+        let network = config.read_weights()?.map(|file| Arc::new(file.folded()));
         Ok(Scene {
             config: config.clone(),
             cloth,
