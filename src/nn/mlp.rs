@@ -1,7 +1,7 @@
 //! The collision network as the simulator evaluates it: dense layers with
 //! LeakyReLU between them, in plain physical units (the file's min-max
 //! input and standard output scaling are folded into the first and last
-//! layers by `weights::load`), and its input Jacobian by forward mode.
+//! layers by `weights::load`), and its input Jacobian by reverse mode.
 
 use std::ops::Range;
 
@@ -44,52 +44,61 @@ impl Mlp {
     }
 
     /// The output and its Jacobian with respect to the inputs `wrt`,
-    /// row-major [outputs × wrt.len()]. Forward mode: row 0 carries the
-    /// activations and row 1 + j their derivatives along input
-    /// wrt.start + j; each layer maps every row through W (the bias only
-    /// on row 0) and scales the derivative rows by σ'(z) of row 0, the
-    /// chain rule T ← diag(σ'(z)) W T. The rows stay contiguous so each
-    /// output is one vectorised dot product.
+    /// row-major [outputs × wrt.len()]. Reverse mode: one forward pass
+    /// keeps each hidden unit's slope σ'(z), then the rows of ∂y/∂a are
+    /// carried back through the layers, Δ ← (Δ diag(σ'(z))) W. That costs
+    /// one forward pass plus one per output (4 for the friction network)
+    /// where forward mode costs one plus one per input (7).
     pub fn forward_jacobian(&self, x: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
-        let rows = 1 + wrt.len();
-        let mut width = x.len();
-        // Row 0: the inputs; row 1 + j: the unit seed of input wrt.start + j.
-        let mut a = vec![0.0f32; rows * width];
-        a[..width].copy_from_slice(x);
-        for (j, i) in wrt.enumerate() {
-            a[(1 + j) * width + i] = 1.0;
-        }
-        let mut z = Vec::new();
+        let mut slopes: Vec<Vec<f32>> = Vec::with_capacity(self.layers.len());
+        let mut a = x.to_vec();
         for (k, layer) in self.layers.iter().enumerate() {
-            z.clear();
-            z.resize(rows * layer.outputs, 0.0);
-            for (o, w) in layer.weight.chunks_exact(layer.inputs).enumerate() {
-                z[o] = layer.bias[o] + dot(w, &a[..width]);
-                for r in 1..rows {
-                    z[r * layer.outputs + o] = dot(w, &a[r * width..(r + 1) * width]);
-                }
-            }
+            let mut z: Vec<f32> = layer
+                .weight
+                .chunks_exact(layer.inputs)
+                .zip(&layer.bias)
+                .map(|(w, b)| b + dot(w, &a))
+                .collect();
+            let mut slope = vec![1.0f32; layer.outputs];
             if self.is_hidden(k) {
-                for o in 0..layer.outputs {
-                    if z[o] < 0.0 {
-                        for r in 0..rows {
-                            z[r * layer.outputs + o] *= self.negative_slope;
-                        }
+                for (zo, so) in z.iter_mut().zip(&mut slope) {
+                    if *zo < 0.0 {
+                        *so = self.negative_slope;
+                        *zo *= self.negative_slope;
                     }
                 }
             }
-            std::mem::swap(&mut a, &mut z);
-            width = layer.outputs;
+            slopes.push(slope);
+            a = z;
         }
-        // Row-major [outputs × tangents] from the derivative rows.
-        let tangents = rows - 1;
-        let mut jacobian = vec![0.0f32; width * tangents];
-        for j in 0..tangents {
-            for o in 0..width {
-                jacobian[o * tangents + j] = a[(1 + j) * width + o];
+        if wrt.is_empty() {
+            return (a, Vec::new());
+        }
+        // Δ = ∂y/∂a_k, one row per output, starting from the identity.
+        let outputs = a.len();
+        let mut delta = vec![0.0f32; outputs * outputs];
+        for o in 0..outputs {
+            delta[o * outputs + o] = 1.0;
+        }
+        for (layer, slope) in self.layers.iter().zip(&slopes).rev() {
+            let mut next = vec![0.0f32; outputs * layer.inputs];
+            // Row by row of W, so each weight row is read once for all
+            // outputs; the updates are vectorised axpys.
+            for (o, w) in layer.weight.chunks_exact(layer.inputs).enumerate() {
+                for r in 0..outputs {
+                    let d = delta[r * layer.outputs + o] * slope[o];
+                    let row = &mut next[r * layer.inputs..(r + 1) * layer.inputs];
+                    for (n, wi) in row.iter_mut().zip(w) {
+                        *n += d * wi;
+                    }
+                }
             }
+            delta = next;
         }
-        a.truncate(width);
+        let width = x.len();
+        let jacobian = (0..outputs)
+            .flat_map(|r| delta[r * width + wrt.start..r * width + wrt.end].to_vec())
+            .collect();
         (a, jacobian)
     }
 }
