@@ -11,9 +11,10 @@
 // inputs and unit seeds instead. Layer sizes come from the weights file;
 // large batches run in chunks so the activations fit the binding limits.
 //
-// `per_contact` is the same network with one contact per invocation and no
-// workgroup memory or barriers, for CPU adapters (lavapipe), which run it
-// about 3× faster than the tiled kernel on small networks.
+// `per_contact` is the same network with one contact per invocation, no
+// workgroup memory or barriers, and its Jacobian in reverse mode, for CPU
+// adapters (lavapipe), which run it about 3× faster than the tiled kernel
+// on small networks.
 
 // Threads per tile edge; gpu::kernels picks 16 or 8 from the adapter's limits.
 const MLP_THREADS: u32 = 16u;
@@ -137,12 +138,15 @@ fn layer(
 const MLP_MAX_WIDTH: u32 = 256u;
 const MLP_MAX_LAYERS: u32 = 16u;
 
-// One contact per invocation: the value row through every layer, keeping
-// each hidden unit's sign as a bit, then each Jacobian row through the
-// same layers with those signs. Reads the batch inputs (z_in) and writes
-// the batch outputs (z_out) directly. Weight rows are padded to whole
-// vec4s here, so the inner loop takes four inputs at a time (lavapipe
-// also stops any invocation after 65,535 loop iterations).
+// One contact per invocation, in reverse mode: the value row through every
+// layer, keeping each hidden unit's sign as a bit, then for each output o
+// the row ∂y_o/∂a carried back through the layers with those signs,
+// Δ ← (Δ diag(σ'(z))) W, as `Mlp::forward_jacobian` does. That is 1 + 3
+// passes over the weights where forward mode takes 1 + T. Reads the batch
+// inputs (z_in) and writes the batch outputs (z_out) in the tiled kernel's
+// layout. Weight rows are padded to whole vec4s here, so the inner loops
+// take four inputs at a time (lavapipe also stops any invocation after
+// 65,535 loop iterations).
 @compute @workgroup_size(64)
 fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = id.x;
@@ -157,40 +161,68 @@ fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
     var a: array<vec4<f32>, MLP_MAX_WIDTH / 4u>;
     var z: array<f32, MLP_MAX_WIDTH>;
     var negative: array<u32, MLP_MAX_WIDTH * MLP_MAX_LAYERS / 32u>;
-    for (var t = 0u; t < rows; t++) {
-        for (var k = 0u; k < n_in; k++) {
-            let seed = select(0.0, 1.0, k + 1u == layer_params.wrt_start + t);
-            a[k / 4u][k % 4u] = select(seed, z_in[c * n_in + k], t == 0u);
+    for (var k = 0u; k < n_in; k++) {
+        a[k / 4u][k % 4u] = z_in[c * n_in + k];
+    }
+    for (var l = 0u; l < n_layers; l++) {
+        let info = layer_table[l];
+        let quads = (info.x + 3u) / 4u;
+        for (var o = 0u; o < info.y; o++) {
+            var sum = weights[info.w + o];
+            let row = info.z + 4u * quads * o;
+            for (var q = 0u; q < quads; q++) {
+                let i = row + 4u * q;
+                let w = vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]);
+                sum += dot(w, a[q]);
+            }
+            z[o] = sum;
         }
-        for (var l = 0u; l < n_layers; l++) {
-            let info = layer_table[l];
+        if l + 1u == n_layers {
+            break;
+        }
+        for (var o = 0u; o < info.y; o++) {
+            let bit = l * MLP_MAX_WIDTH + o;
+            let negative_here = z[o] < 0.0;
+            if negative_here {
+                negative[bit / 32u] |= 1u << (bit % 32u);
+            } else {
+                negative[bit / 32u] &= ~(1u << (bit % 32u));
+            }
+            a[o / 4u][o % 4u] = select(z[o], z[o] * layer_params.negative_slope, negative_here);
+        }
+    }
+    for (var o = 0u; o < n_out; o++) {
+        z_out[c * rows * n_out + o] = z[o];
+    }
+    // Reverse passes: Δ lives in z (one unit per element), the next Δ
+    // accumulates in a (four inputs per vec4).
+    for (var r = 0u; r < n_out; r++) {
+        for (var o = 0u; o < n_out; o++) {
+            z[o] = select(0.0, 1.0, o == r);
+        }
+        for (var l = n_layers; l > 0u; l--) {
+            let info = layer_table[l - 1u];
             let quads = (info.x + 3u) / 4u;
+            for (var q = 0u; q < quads; q++) {
+                a[q] = vec4<f32>(0.0);
+            }
             for (var o = 0u; o < info.y; o++) {
-                var sum = select(0.0, weights[info.w + o], t == 0u);
+                let bit = (l - 1u) * MLP_MAX_WIDTH + o;
+                let hidden = l < n_layers;
+                let negative_here = hidden && (negative[bit / 32u] & (1u << (bit % 32u))) != 0u;
+                let d = select(z[o], z[o] * layer_params.negative_slope, negative_here);
                 let row = info.z + 4u * quads * o;
                 for (var q = 0u; q < quads; q++) {
                     let i = row + 4u * q;
-                    let w = vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]);
-                    sum += dot(w, a[q]);
+                    a[q] = fma(vec4<f32>(d), vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]), a[q]);
                 }
-                z[o] = sum;
             }
-            if l + 1u == n_layers {
-                break;
-            }
-            for (var o = 0u; o < info.y; o++) {
-                let bit = l * MLP_MAX_WIDTH + o;
-                let mask = 1u << (bit % 32u);
-                if t == 0u {
-                    let word = negative[bit / 32u];
-                    negative[bit / 32u] = select(word & ~mask, word | mask, z[o] < 0.0);
-                }
-                let slope = select(1.0, layer_params.negative_slope, (negative[bit / 32u] & mask) != 0u);
-                a[o / 4u][o % 4u] = z[o] * slope;
+            for (var k = 0u; k < info.x; k++) {
+                z[k] = a[k / 4u][k % 4u];
             }
         }
-        for (var o = 0u; o < n_out; o++) {
-            z_out[(c * rows + t) * n_out + o] = z[o];
+        for (var t = 1u; t < rows; t++) {
+            z_out[(c * rows + t) * n_out + r] = z[layer_params.wrt_start + t - 1u];
         }
     }
 }

@@ -63,14 +63,16 @@ const PER_CONTACT_GROUP: u32 = 64;
 /// (`LP_MAX_TGSI_LOOP_ITERATIONS`), silently.
 const LAVAPIPE_LOOP_LIMIT: usize = 65_535;
 
-/// Loop iterations of one `per_contact` invocation (an upper bound).
+/// Loop iterations of one `per_contact` invocation (an upper bound): the
+/// forward pass and one reverse pass per output, each touching every
+/// weight quad once plus a few loops per unit.
 fn per_contact_iterations(net: &Mlp, rows: usize) -> usize {
-    let per_row: usize = net
+    let per_pass: usize = net
         .layers
         .iter()
-        .map(|l| l.outputs * (l.inputs.div_ceil(4) + 2))
+        .map(|l| l.outputs * (l.inputs.div_ceil(4) + 2) + l.inputs + l.inputs.div_ceil(4))
         .sum();
-    rows * (1 + net.inputs() + per_row)
+    (1 + net.outputs()) * (net.inputs() + net.outputs() + per_pass) + rows
 }
 
 /// Every layer's weights, row-major with rows `stride(inputs)` long (the
