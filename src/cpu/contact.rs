@@ -119,7 +119,7 @@ pub enum Model {
         coefficients: Coefficients,
     },
     /// g from the network (thesis 2.7); ∂g/∂c and ∂g/∂v_rel from its input
-    /// Jacobian, by forward mode through the layers.
+    /// Jacobian, by reverse mode through the layers.
     FrictionNet {
         net: Arc<Mlp>,
         scale: f32,
