@@ -2,8 +2,8 @@
 //!
 //! - `network/<net>/<backend>/<contacts>`: the network and its input
 //!   Jacobian over a batch of contacts (throughput in contacts/s; the
-//!   floating-point work per contact is printed first, so GFLOP/s is
-//!   contacts/s × that). Sizes run from 1k to 1M contacts while a batch
+//!   floating-point work per contact, as each kernel does it, is printed
+//!   first, so GFLOP/s is contacts/s × that). Sizes run from 1k to 1M contacts while a batch
 //!   stays under a work budget (smaller on a software adapter).
 //! - `step64/<backend>/<model>`: one step of the thesis sphere scene at
 //!   64² from the same in-contact state, analytic models against their
@@ -20,6 +20,7 @@ use std::ops::Range;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use rayon::prelude::*;
 use wgcloth::Scene;
+use wgcloth::bench::{MODELS, PERIOD_STEPS, UNTIMED_STEPS};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
@@ -27,39 +28,29 @@ use wgcloth::gpu::GpuSim;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
 use wgcloth::nn::Mlp;
 use wgcloth::nn::domain::{Rng, uniform_sample};
-use wgcloth::nn::weights::{NetKind, WeightsFile};
+use wgcloth::nn::weights::{self, NetKind};
 
 const SIZES: [usize; 6] = [1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000];
 
-fn shipped(name: &str) -> WeightsFile {
-    WeightsFile::read(std::path::Path::new(&format!("weights/{name}"))).expect("shipped weights")
-}
-
 /// The shipped networks with their Jacobian inputs.
 fn networks() -> Vec<(&'static str, Mlp, Range<usize>, NetKind)> {
-    let mut nets = vec![
-        (
-            "friction",
-            shipped("friction_mlp.safetensors").folded(),
-            FRICTION_NET_WRT,
-            NetKind::Friction,
-        ),
-        (
-            "naive",
-            shipped("naive_mlp.safetensors").folded(),
-            NAIVE_NET_WRT,
-            NetKind::Naive,
-        ),
-    ];
-    if std::path::Path::new("weights/friction_mlp_small.safetensors").exists() {
-        nets.push((
-            "friction-small",
-            shipped("friction_mlp_small.safetensors").folded(),
-            FRICTION_NET_WRT,
-            NetKind::Friction,
-        ));
-    }
-    nets
+    weights::SHIPPED
+        .iter()
+        .map(|shipped| {
+            let file = shipped.read().expect("shipped weights");
+            let wrt = match file.kind {
+                NetKind::Friction => FRICTION_NET_WRT,
+                NetKind::Naive => NAIVE_NET_WRT,
+            };
+            let name = shipped.path.trim_start_matches("weights/");
+            (
+                name.trim_end_matches(".safetensors"),
+                file.folded(),
+                wrt,
+                file.kind,
+            )
+        })
+        .collect()
 }
 
 fn network(c: &mut Criterion) {
@@ -68,11 +59,8 @@ fn network(c: &mut Criterion) {
         .as_ref()
         .is_some_and(|(ctx, _)| ctx.adapter.device_type == wgpu::DeviceType::Cpu);
     for (name, net, wrt, kind) in networks() {
-        let rows = 1 + wrt.len();
-        let flop = 2 * net.multiply_adds() * rows;
-        eprintln!(
-            "network {name}: {flop} floating-point operations per contact (forward + Jacobian)"
-        );
+        let flop = 2 * net.jacobian_multiply_adds();
+        eprintln!("network {name}: {flop} floating-point operations per contact on the CPU");
         let mut rng = Rng::new(5);
         let inputs: Vec<f32> = (0..SIZES[SIZES.len() - 1])
             .flat_map(|_| uniform_sample(kind, &mut rng).0)
@@ -107,6 +95,13 @@ fn network(c: &mut Criterion) {
                     BatchShape::new(n),
                 )
                 .expect("fits the adapter");
+                if n == SIZES[0] {
+                    eprintln!(
+                        "network {name}: {} floating-point operations per contact on the GPU ({} kernel)",
+                        2 * on_gpu.network().multiply_adds_per_contact(),
+                        on_gpu.network().kernel().name()
+                    );
+                }
                 on_gpu.upload(&ctx.queue, batch).expect("batch fits");
                 group.bench_function(BenchmarkId::new("gpu", n), |b| {
                     b.iter(|| {
@@ -124,21 +119,10 @@ fn sphere(grid: u32, model: ModelKind) -> Scene {
     common::scene(SceneKind::Sphere, model, grid)
 }
 
-const MODELS: [ModelKind; 4] = [
-    ModelKind::Friction,
-    ModelKind::FrictionNet,
-    ModelKind::Naive,
-    ModelKind::NaiveNet,
-];
-
-/// Steps of the analytic friction model before timing, so the sphere is
-/// pushing the cloth; every model then steps from that same state.
-const WARM_STEPS: usize = 80;
-
 fn step64(c: &mut Criterion) {
     let gpu = common::gpu();
     let mut warm = CpuSim::new(sphere(64, ModelKind::Friction));
-    for _ in 0..WARM_STEPS {
+    for _ in 0..UNTIMED_STEPS {
         warm.step();
     }
     let start = warm.state.clone();
@@ -174,7 +158,6 @@ fn step64(c: &mut Criterion) {
 
 fn period(c: &mut Criterion) {
     let gpu = common::gpu();
-    let steps = 200; // one period of the default sphere motion at h = 0.01
     for backend in ["cpu", "gpu"] {
         let mut group = c.benchmark_group(format!("period/{backend}"));
         group.sample_size(10);
@@ -184,7 +167,7 @@ fn period(c: &mut Criterion) {
                 group.bench_function(model.name(), |b| {
                     b.iter(|| {
                         let mut sim = CpuSim::new(scene.clone());
-                        for _ in 0..steps {
+                        for _ in 0..PERIOD_STEPS {
                             sim.step();
                         }
                     })
@@ -194,7 +177,7 @@ fn period(c: &mut Criterion) {
                     b.iter(|| {
                         let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
                             .expect("fits the adapter");
-                        for _ in 0..steps {
+                        for _ in 0..PERIOD_STEPS {
                             sim.step();
                         }
                         ctx.finish().expect("device healthy");

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::nn::weights::{NetKind, WeightsFile};
+use crate::nn::weights::{self, NetKind, Shipped, WeightsFile};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -51,23 +51,14 @@ impl ModelKind {
 
     /// The shipped weights a network model reads unless told otherwise.
     pub fn default_weights(self) -> Option<&'static str> {
-        self.shipped_weights().map(|(path, _)| path)
+        self.shipped_weights().map(|s| s.path)
     }
 
-    /// The shipped weights file's path in the repository and its bytes,
-    /// compiled in so that the network models run from any directory.
-    pub fn shipped_weights(self) -> Option<(&'static str, &'static [u8])> {
-        macro_rules! shipped {
-            ($file:literal) => {
-                Some((
-                    concat!("weights/", $file),
-                    include_bytes!(concat!("../weights/", $file)),
-                ))
-            };
-        }
+    /// The shipped network a network model reads unless told otherwise.
+    pub fn shipped_weights(self) -> Option<Shipped> {
         match self {
-            ModelKind::FrictionNet => shipped!("friction_mlp.safetensors"),
-            ModelKind::NaiveNet => shipped!("naive_mlp.safetensors"),
+            ModelKind::FrictionNet => Some(weights::FRICTION_THESIS),
+            ModelKind::NaiveNet => Some(weights::NAIVE),
             ModelKind::Naive | ModelKind::Friction => None,
         }
     }
@@ -333,15 +324,12 @@ impl Config {
     /// the built-in copy of the shipped file. None for the analytic models;
     /// an error for a network of the other model.
     pub fn read_weights(&self) -> Result<Option<WeightsFile>> {
-        let Some((shipped, bytes)) = self.model.shipped_weights() else {
+        let Some(shipped) = self.model.shipped_weights() else {
             return Ok(None);
         };
         let (file, path) = match &self.contact.weights {
             Some(path) => (WeightsFile::read(path)?, path.as_path()),
-            None => (
-                WeightsFile::parse(bytes, Path::new(shipped))?,
-                Path::new(shipped),
-            ),
+            None => (shipped.read()?, Path::new(shipped.path)),
         };
         let wanted = match self.model {
             ModelKind::NaiveNet => NetKind::Naive,

@@ -7,6 +7,7 @@
 //! - [`cpu`]: the reference step, one module per stage.
 //! - [`run`]: running a scene and reporting on it.
 
+pub mod bench;
 pub mod bvh;
 pub mod config;
 pub mod cpu;

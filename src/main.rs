@@ -36,6 +36,19 @@ enum Command {
     Train(TrainArgs),
     /// Accuracy of a network's weights file.
     EvalNet(EvalNetArgs),
+    /// The benchmark table: every backend × model × grid, the networks'
+    /// throughput, and seconds per sphere period.
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Two grids and fewer repeats: a few minutes on lavapipe.
+    #[arg(long)]
+    quick: bool,
+    /// Write the table as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -222,6 +235,9 @@ fn progress_bar(steps: u64) -> ProgressBar {
 
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
+    if let Some(path) = &args.report {
+        writable(path)?;
+    }
     let scene = Scene::new(&config)?;
     let (chosen, notice) = choose_backend(args.backend)?;
     if let Some(n) = notice {
@@ -229,7 +245,9 @@ fn run(args: &RunArgs) -> Result<()> {
     }
     let steps = config.solver.steps;
     let bar = progress_bar(steps);
-    let report = run::run(&chosen, scene, steps, |k| bar.set_position(k))?;
+    let report = run::run(&chosen, scene, run::Steps::all(steps), |k| {
+        bar.set_position(k)
+    })?;
     bar.finish_and_clear();
     println!("{}", report.summary());
     if let Some(path) = &args.report {
@@ -238,6 +256,28 @@ fn run(args: &RunArgs) -> Result<()> {
         println!("report       {}", path.display());
     }
     check_finite(&report)
+}
+
+fn bench(args: &BenchArgs) -> Result<()> {
+    if let Some(path) = &args.report {
+        // Fail before minutes of measuring, not after.
+        writable(path)?;
+    }
+    let options = match args.quick {
+        true => wgcloth::bench::BenchOptions::quick(),
+        false => wgcloth::bench::BenchOptions::full(),
+    };
+    let spinner = ProgressBar::new_spinner();
+    spinner.enable_steady_tick(std::time::Duration::from_millis(200));
+    let report = wgcloth::bench::bench(&options, |what| spinner.set_message(what.to_string()))?;
+    spinner.finish_and_clear();
+    print!("{}", report.table());
+    if let Some(path) = &args.report {
+        let json = serde_json::to_string_pretty(&report).expect("report serialises");
+        std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))?;
+        println!("report: {}", path.display());
+    }
+    Ok(())
 }
 
 fn gen_data(args: &GenDataArgs) -> Result<()> {
@@ -272,6 +312,21 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
         args.uniform,
         args.seed
     );
+    Ok(())
+}
+
+/// Fails early when `path` cannot be written, leaving an existing file's
+/// contents alone and no new file behind.
+fn writable(path: &std::path::Path) -> Result<()> {
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    if !existed {
+        let _ = std::fs::remove_file(path);
+    }
     Ok(())
 }
 
@@ -437,6 +492,7 @@ fn main() -> ExitCode {
         Command::GenData(args) => gen_data(args).map(Ok),
         Command::Train(args) => train(args).map(Ok),
         Command::EvalNet(args) => eval_net(args).map(Ok),
+        Command::Bench(args) => bench(args).map(Ok),
     };
     match result {
         Ok(Ok(())) => ExitCode::SUCCESS,

@@ -125,32 +125,53 @@ impl Timings {
     }
 }
 
-/// Runs `steps` steps, calling `progress` after each.
-pub fn run(chosen: &Chosen, scene: Scene, steps: u64, progress: impl FnMut(u64)) -> Result<Report> {
+/// How many steps a run takes, and how many of the first are left out of
+/// the timings (pipelines warming up, the body not yet in contact).
+#[derive(Clone, Copy, Debug)]
+pub struct Steps {
+    pub total: u64,
+    pub untimed: u64,
+}
+
+impl Steps {
+    pub fn all(total: u64) -> Steps {
+        Steps { total, untimed: 0 }
+    }
+}
+
+/// Runs `steps.total` steps, calling `progress` after each.
+pub fn run(
+    chosen: &Chosen,
+    scene: Scene,
+    steps: Steps,
+    progress: impl FnMut(u64),
+) -> Result<Report> {
     match chosen {
         Chosen::Cpu => Ok(run_cpu(scene, steps, progress)),
         Chosen::Gpu(ctx) => run_gpu(ctx, scene, steps, progress),
     }
 }
 
-fn run_cpu(scene: Scene, steps: u64, mut progress: impl FnMut(u64)) -> Report {
+fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report {
     let config = scene.config.clone();
     let mut sim = CpuSim::new(scene);
     let mut timings = Timings::default();
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
     let (mut cg_residual_max, mut max_penetration) = (0.0f32, 0.0f32);
     let mut diverged_at = None;
-    for k in 0..steps {
+    for k in 0..steps.total {
         let start = Instant::now();
         let s = sim.step();
         let wall = start.elapsed().as_secs_f64() * 1e3;
-        timings.push(
-            wall,
-            STAGES
-                .iter()
-                .zip(s.stage_seconds)
-                .map(|(n, secs)| (*n, secs * 1e3)),
-        );
+        if k >= steps.untimed {
+            timings.push(
+                wall,
+                STAGES
+                    .iter()
+                    .zip(s.stage_seconds)
+                    .map(|(n, secs)| (*n, secs * 1e3)),
+            );
+        }
         cg_iters += s.pcg.iterations as u64;
         contacts += s.contacts as u64;
         breakdowns += s.pcg.breakdown as u64;
@@ -213,19 +234,22 @@ fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<Stri
 fn run_gpu(
     ctx: &GpuContext,
     scene: Scene,
-    steps: u64,
+    steps: Steps,
     mut progress: impl FnMut(u64),
 ) -> Result<Report> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
     let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene)?;
     let mut timings = Timings::default();
     let mut dispatches = 0;
-    for k in 0..steps {
+    for k in 0..steps.total {
         let start = Instant::now();
         dispatches = sim.step();
         ctx.finish()?;
         let wall = start.elapsed().as_secs_f64() * 1e3;
-        timings.push(wall, sim.read_stage_ms()?.unwrap_or_default());
+        let stages = sim.read_stage_ms()?.unwrap_or_default();
+        if k >= steps.untimed {
+            timings.push(wall, stages);
+        }
         progress(k + 1);
     }
     let state = sim.read_state()?;

@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
+use wgcloth::Scene;
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::gpu::{GpuContext, Kernels};
-use wgcloth::{Config, Scene};
 
 /// The headless adapter with its kernels, or None (with a notice) where
 /// there is none: the GPU benches are then skipped.
@@ -22,16 +22,7 @@ pub fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
     }
 }
 
-/// A benchmark scene: N×N cloth, 25 PCG iterations at tolerance 0 (the
-/// thesis's solver).
+/// A benchmark scene: `wgcloth::bench::scene`, the thesis's solver.
 pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Scene {
-    let mut c = Config {
-        scene: kind,
-        model,
-        ..Default::default()
-    };
-    c.cloth.grid = [grid, grid];
-    c.solver.cg_iters = 25;
-    c.solver.cg_tol = 0.0;
-    Scene::new(&c).expect("valid benchmark scene")
+    wgcloth::bench::scene(kind, model, grid).expect("valid benchmark scene")
 }

@@ -159,6 +159,7 @@ pub struct GpuMlp {
     entries: u32,
     chunks: u32,
     multiply_adds: usize,
+    outputs: usize,
     rows_per_contact: usize,
 }
 
@@ -371,6 +372,7 @@ impl GpuMlp {
             entries,
             chunks: chunks as u32,
             multiply_adds: net.multiply_adds(),
+            outputs: net.outputs(),
             rows_per_contact: rows,
         })
     }
@@ -386,9 +388,14 @@ impl GpuMlp {
         self.kernel
     }
 
-    /// Multiply-adds of one contact: the forward pass and its Jacobian rows.
+    /// Multiply-adds of one contact as the chosen kernel does them: one
+    /// pass per row in forward mode (tiled), one forward pass and one back
+    /// per output in reverse mode (per-contact).
     pub fn multiply_adds_per_contact(&self) -> usize {
-        self.multiply_adds * self.rows_per_contact
+        match self.kernel {
+            NetworkKernel::PerContact => self.multiply_adds * (1 + self.outputs),
+            _ => self.multiply_adds * self.rows_per_contact,
+        }
     }
 
     /// Records the batch: the dispatch sizes, then `per_contact` once or

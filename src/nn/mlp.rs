@@ -34,6 +34,12 @@ impl Mlp {
         self.layers.iter().map(|l| l.inputs * l.outputs).sum()
     }
 
+    /// Multiply-adds of `forward_jacobian` with a Jacobian: the forward
+    /// pass and one reverse pass per output.
+    pub fn jacobian_multiply_adds(&self) -> usize {
+        self.multiply_adds() * (1 + self.outputs())
+    }
+
     fn is_hidden(&self, k: usize) -> bool {
         k + 1 < self.layers.len()
     }

@@ -18,6 +18,38 @@ use crate::nn::mlp::{Layer, Mlp};
 
 pub const FORMAT: &str = "wgcloth-mlp/1";
 
+/// A network shipped in `weights/`, compiled in so that the network models
+/// and the benchmarks work from any directory.
+#[derive(Clone, Copy, Debug)]
+pub struct Shipped {
+    /// The file's path in the repository.
+    pub path: &'static str,
+    pub bytes: &'static [u8],
+}
+
+impl Shipped {
+    pub fn read(self) -> Result<WeightsFile> {
+        WeightsFile::parse(self.bytes, Path::new(self.path))
+    }
+}
+
+macro_rules! shipped {
+    ($file:literal) => {
+        Shipped {
+            path: concat!("weights/", $file),
+            bytes: include_bytes!(concat!("../../weights/", $file)),
+        }
+    };
+}
+
+/// The thesis-size friction network (thesis 2.7).
+pub const FRICTION_THESIS: Shipped = shipped!("friction_mlp.safetensors");
+/// The distilled friction network, 20× fewer multiply-adds.
+pub const FRICTION_SMALL: Shipped = shipped!("friction_mlp_small.safetensors");
+/// The naive network (thesis 2.4).
+pub const NAIVE: Shipped = shipped!("naive_mlp.safetensors");
+pub const SHIPPED: [Shipped; 3] = [FRICTION_THESIS, FRICTION_SMALL, NAIVE];
+
 /// The friction network's inputs (c = n d̃, v_rel, coefficients) and outputs (g = f / s).
 pub const FRICTION_INPUTS: [&str; 10] =
     ["cx", "cy", "cz", "vx", "vy", "vz", "kn", "kd", "kt", "mu"];

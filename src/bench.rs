@@ -1,0 +1,392 @@
+//! `wgcloth bench` (DESIGN "Command line"): one row per backend × model ×
+//! grid with the median ms/step after a warm-up, the per-stage medians,
+//! contacts and CG iterations; the networks' throughput over batches of
+//! contacts; and the thesis's headline measure, seconds per sphere period
+//! with the analytic force against each network on the same backend.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::config::{Config, ModelKind, SceneKind};
+use crate::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
+use crate::error::Result;
+use crate::gpu::mlp::{BatchShape, NetworkBatch};
+use crate::gpu::{GpuContext, Kernels, context::describe};
+use crate::nn::domain::{Rng, uniform_sample};
+use crate::nn::weights::{self, NetKind, Shipped};
+use crate::run::{self, Chosen, Report, Steps, median};
+use crate::scene::Scene;
+
+/// The models in every table, analytic before learned.
+pub const MODELS: [ModelKind; 4] = [
+    ModelKind::Naive,
+    ModelKind::Friction,
+    ModelKind::NaiveNet,
+    ModelKind::FrictionNet,
+];
+
+/// Steps before the timed ones: the sphere reaches the cloth and pushes it
+/// (about 0.8 s into the default motion).
+pub const UNTIMED_STEPS: u64 = 80;
+
+/// One sphere period of the default motion (2 s at h = 0.01 s).
+pub const PERIOD_STEPS: u64 = 200;
+
+/// What `wgcloth bench` measures.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub quick: bool,
+    pub grids: Vec<u32>,
+    /// Steps before the timed ones, and timed steps per row.
+    pub steps: Steps,
+    /// Grid of the sphere-period rows (the thesis's: 32²), and its steps.
+    pub period_grid: u32,
+    pub period_steps: u64,
+    /// Contacts per network batch.
+    pub batch_sizes: Vec<usize>,
+    /// Timed repeats of each batch and period.
+    pub repeats: usize,
+}
+
+impl BenchOptions {
+    /// Every grid from 32² to 256², batches of 1k to 1M contacts.
+    pub fn full() -> BenchOptions {
+        BenchOptions {
+            quick: false,
+            grids: vec![32, 64, 128, 256],
+            steps: Steps {
+                untimed: UNTIMED_STEPS,
+                total: UNTIMED_STEPS + 40,
+            },
+            period_grid: 32,
+            period_steps: PERIOD_STEPS,
+            batch_sizes: vec![1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000],
+            repeats: 3,
+        }
+    }
+
+    /// Two grids, fewer steps and batches: a few minutes on lavapipe.
+    pub fn quick() -> BenchOptions {
+        BenchOptions {
+            quick: true,
+            grids: vec![32, 64],
+            steps: Steps {
+                untimed: UNTIMED_STEPS,
+                total: UNTIMED_STEPS + 20,
+            },
+            batch_sizes: vec![1_000, 16_000],
+            repeats: 1,
+            ..BenchOptions::full()
+        }
+    }
+}
+
+/// A benchmark scene: N×N cloth and the thesis's solver, 25 PCG
+/// iterations at tolerance 0, so every model does the same solver work.
+pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Result<Scene> {
+    let mut c = Config {
+        scene: kind,
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    c.solver.cg_iters = 25;
+    c.solver.cg_tol = 0.0;
+    Scene::new(&c)
+}
+
+/// The network and its input Jacobian over one batch of contacts.
+#[derive(Clone, Debug, Serialize)]
+pub struct NetworkRow {
+    pub network: &'static str,
+    pub backend: String,
+    /// `reverse` on the CPU; the GPU kernel's name.
+    pub kernel: String,
+    pub contacts: usize,
+    /// Floating-point operations per contact as the kernel does them.
+    pub flop_per_contact: usize,
+    /// Median over the repeats.
+    pub ms: f64,
+    pub contacts_per_s: f64,
+    pub gflop_per_s: f64,
+}
+
+/// Wall time of one sphere period (at 32² unless told otherwise), from a
+/// fresh simulator.
+#[derive(Clone, Debug, Serialize)]
+pub struct PeriodRow {
+    pub backend: String,
+    pub model: ModelKind,
+    pub seconds: f64,
+    /// Against the analytic model the network learned (friction for
+    /// friction-net, naive for naive-net), same backend, same run.
+    pub ratio_to_analytic: Option<f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub quick: bool,
+    pub period_grid: u32,
+    pub period_steps: u64,
+    pub cpu: String,
+    /// The GPU adapter, or why there are no GPU rows.
+    pub gpu: String,
+    pub rows: Vec<Report>,
+    pub networks: Vec<NetworkRow>,
+    pub periods: Vec<PeriodRow>,
+}
+
+/// The CPU, and the GPU where an adapter exists; the adapter, or why
+/// there is none.
+fn backends() -> (Vec<Chosen>, String) {
+    match GpuContext::headless() {
+        Ok(ctx) => {
+            let note = describe(&ctx.adapter);
+            (vec![Chosen::Cpu, Chosen::Gpu(Box::new(ctx))], note)
+        }
+        Err(e) => (vec![Chosen::Cpu], format!("no GPU rows: {e}")),
+    }
+}
+
+/// Runs the whole table; `progress` hears what is being measured.
+pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<BenchReport> {
+    let (chosen, gpu_note) = backends();
+    let mut rows = Vec::new();
+    for backend in &chosen {
+        for &grid in &opts.grids {
+            for model in MODELS {
+                progress(&format!("step {} {} {grid}²", name(backend), model.name()));
+                let scene = scene(SceneKind::Sphere, model, grid)?;
+                rows.push(run::run(backend, scene, opts.steps, |_| {})?);
+            }
+        }
+    }
+    let mut periods = Vec::new();
+    for backend in &chosen {
+        let mut seconds = Vec::new();
+        for model in MODELS {
+            progress(&format!("period {} {}", name(backend), model.name()));
+            let scene = scene(SceneKind::Sphere, model, opts.period_grid)?;
+            let steps = Steps::all(opts.period_steps);
+            let mut runs = (0..opts.repeats)
+                .map(|_| {
+                    let start = Instant::now();
+                    run::run(backend, scene.clone(), steps, |_| {})?;
+                    Ok(start.elapsed().as_secs_f64())
+                })
+                .collect::<Result<Vec<f64>>>()?;
+            seconds.push((model, median(&mut runs)));
+        }
+        let of = |m: ModelKind| seconds.iter().find(|(k, _)| *k == m).map(|(_, s)| *s);
+        for &(model, s) in &seconds {
+            let analytic = match model {
+                ModelKind::FrictionNet => of(ModelKind::Friction),
+                ModelKind::NaiveNet => of(ModelKind::Naive),
+                _ => None,
+            };
+            periods.push(PeriodRow {
+                backend: name(backend).into(),
+                model,
+                seconds: s,
+                ratio_to_analytic: analytic.map(|a| s / a),
+            });
+        }
+    }
+    let gpu = chosen.iter().find_map(|c| match c {
+        Chosen::Gpu(ctx) => Some(&**ctx),
+        Chosen::Cpu => None,
+    });
+    let networks = network_rows(opts, gpu, &mut progress)?;
+    Ok(BenchReport {
+        quick: opts.quick,
+        period_grid: opts.period_grid,
+        period_steps: opts.period_steps,
+        cpu: format!(
+            "CPU reference path ({} threads)",
+            rayon::current_num_threads()
+        ),
+        gpu: gpu_note,
+        rows,
+        networks,
+        periods,
+    })
+}
+
+fn name(backend: &Chosen) -> &'static str {
+    match backend {
+        Chosen::Cpu => "cpu",
+        Chosen::Gpu(_) => "gpu",
+    }
+}
+
+/// Floating-point work per batch at most: the CPU and a software adapter
+/// get a few seconds' worth, a real GPU far more.
+const CPU_BUDGET: f64 = 4e9;
+const GPU_BUDGET: f64 = 2e12;
+
+fn network_rows(
+    opts: &BenchOptions,
+    gpu: Option<&GpuContext>,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<NetworkRow>> {
+    let kernels = match gpu {
+        Some(ctx) => Some(Arc::new(Kernels::new(&ctx.device)?)),
+        None => None,
+    };
+    let mut rows = Vec::new();
+    let largest = opts.batch_sizes.iter().copied().max().unwrap_or(0);
+    for shipped in weights::SHIPPED {
+        let file = shipped.read()?;
+        let (net, kind) = (file.folded(), file.kind);
+        let wrt = match kind {
+            NetKind::Friction => FRICTION_NET_WRT,
+            NetKind::Naive => NAIVE_NET_WRT,
+        };
+        let mut rng = Rng::new(5);
+        let inputs: Vec<f32> = (0..largest)
+            .flat_map(|_| uniform_sample(kind, &mut rng).0)
+            .collect();
+        let width = net.inputs();
+        for &n in &opts.batch_sizes {
+            let batch = &inputs[..n * width];
+            let flop = 2 * net.jacobian_multiply_adds();
+            if (n * flop) as f64 <= CPU_BUDGET {
+                progress(&format!("network {} cpu {n}", shipped.path));
+                let ms = timed(opts.repeats, || {
+                    batch
+                        .par_chunks(width)
+                        .map(|x| net.forward_jacobian(x, wrt.clone()).0[0])
+                        .sum::<f32>();
+                    Ok(())
+                })?;
+                rows.push(network_row(shipped, "cpu", "reverse", n, flop, ms));
+            }
+            let (Some(ctx), Some(kernels)) = (gpu, &kernels) else {
+                continue;
+            };
+            let software = ctx.adapter.device_type == wgpu::DeviceType::Cpu;
+            let budget = if software { CPU_BUDGET } else { GPU_BUDGET };
+            let on_gpu = NetworkBatch::new(
+                kernels.clone(),
+                &ctx.device,
+                &net,
+                wrt.clone(),
+                BatchShape::new(n),
+            )?;
+            let flop = 2 * on_gpu.network().multiply_adds_per_contact();
+            if (n * flop) as f64 > budget {
+                continue;
+            }
+            progress(&format!("network {} gpu {n}", shipped.path));
+            on_gpu.upload(&ctx.queue, batch)?;
+            let ms = timed(opts.repeats, || {
+                on_gpu.run(&ctx.device, &ctx.queue);
+                ctx.finish()
+            })?;
+            let kernel = on_gpu.network().kernel().name();
+            rows.push(network_row(shipped, "gpu", kernel, n, flop, ms));
+        }
+    }
+    Ok(rows)
+}
+
+fn network_row(
+    shipped: Shipped,
+    backend: &str,
+    kernel: &str,
+    contacts: usize,
+    flop_per_contact: usize,
+    ms: f64,
+) -> NetworkRow {
+    let contacts_per_s = contacts as f64 / (ms * 1e-3);
+    NetworkRow {
+        network: shipped.path,
+        backend: backend.into(),
+        kernel: kernel.into(),
+        contacts,
+        flop_per_contact,
+        ms,
+        contacts_per_s,
+        gflop_per_s: contacts_per_s * flop_per_contact as f64 * 1e-9,
+    }
+}
+
+/// Median wall time of `repeats` calls after one untimed call, ms.
+fn timed(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
+    let mut ms = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = Instant::now();
+        f()?;
+        ms.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(&mut ms))
+}
+
+impl BenchReport {
+    /// The terminal tables.
+    pub fn table(&self) -> String {
+        let mut out = format!("cpu: {}\ngpu: {}\n\n", self.cpu, self.gpu);
+        let stages: Vec<&String> = {
+            let mut s: Vec<&String> = self.rows.iter().flat_map(|r| r.stage_ms.keys()).collect();
+            s.sort();
+            s.dedup();
+            s
+        };
+        out += &format!(
+            "{:<8}{:<14}{:>6}{:>11}{:>10}{:>6}",
+            "backend", "model", "grid", "ms/step", "contacts", "cg"
+        );
+        for s in &stages {
+            out += &format!("{:>11}", s);
+        }
+        out += "\n";
+        for r in &self.rows {
+            out += &format!(
+                "{:<8}{:<14}{:>6}{:>11.3}{:>10.1}{:>6.1}",
+                r.backend,
+                r.model.name(),
+                r.grid[0],
+                r.ms_per_step,
+                r.contacts_mean,
+                r.cg_iterations_mean
+            );
+            for s in &stages {
+                match r.stage_ms.get(*s) {
+                    Some(ms) => out += &format!("{ms:>11.3}"),
+                    None => out += &format!("{:>11}", "-"),
+                }
+            }
+            out += "\n";
+        }
+        out += &format!(
+            "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<14}{:>10}{:>22}\n",
+            self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
+        );
+        for p in &self.periods {
+            out += &format!(
+                "{:<8}{:<14}{:>10.3}{:>22}\n",
+                p.backend,
+                p.model.name(),
+                p.seconds,
+                p.ratio_to_analytic
+                    .map(|r| format!("{r:.2}"))
+                    .unwrap_or_default()
+            );
+        }
+        out += &format!(
+            "\nnetwork and input Jacobian over a batch\n{:<34}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
+            "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
+        );
+        for n in &self.networks {
+            out += &format!(
+                "{:<34}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
+                n.network, n.backend, n.kernel, n.contacts, n.ms, n.contacts_per_s, n.gflop_per_s
+            );
+        }
+        out
+    }
+}
