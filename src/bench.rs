@@ -378,12 +378,12 @@ impl BenchReport {
             );
         }
         out += &format!(
-            "\nnetwork and input Jacobian over a batch\n{:<34}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
+            "\nnetwork and input Jacobian over a batch\n{:<40}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
             "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
         );
         for n in &self.networks {
             out += &format!(
-                "{:<34}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
+                "{:<40}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
                 n.network, n.backend, n.kernel, n.contacts, n.ms, n.contacts_per_s, n.gflop_per_s
             );
         }

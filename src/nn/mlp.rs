@@ -56,38 +56,45 @@ impl Mlp {
     /// one forward pass plus one per output (4 for the friction network)
     /// where forward mode costs one plus one per input (7).
     pub fn forward_jacobian(&self, x: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
-        let mut slopes: Vec<Vec<f32>> = Vec::with_capacity(self.layers.len());
-        let mut a = x.to_vec();
+        // σ'(z) of every unit, layer after layer (1 on the linear output).
+        let mut slopes = Vec::with_capacity(self.layers.iter().map(|l| l.outputs).sum());
+        let (mut a, mut z) = (x.to_vec(), Vec::new());
         for (k, layer) in self.layers.iter().enumerate() {
-            let mut z: Vec<f32> = layer
-                .weight
-                .chunks_exact(layer.inputs)
-                .zip(&layer.bias)
-                .map(|(w, b)| b + dot(w, &a))
-                .collect();
-            let mut slope = vec![1.0f32; layer.outputs];
-            if self.is_hidden(k) {
-                for (zo, so) in z.iter_mut().zip(&mut slope) {
-                    if *zo < 0.0 {
-                        *so = self.negative_slope;
-                        *zo *= self.negative_slope;
-                    }
-                }
+            z.clear();
+            z.extend(
+                layer
+                    .weight
+                    .chunks_exact(layer.inputs)
+                    .zip(&layer.bias)
+                    .map(|(w, b)| b + dot(w, &a)),
+            );
+            let hidden = self.is_hidden(k);
+            for zo in &mut z {
+                let slope = if hidden && *zo < 0.0 {
+                    self.negative_slope
+                } else {
+                    1.0
+                };
+                *zo *= slope;
+                slopes.push(slope);
             }
-            slopes.push(slope);
-            a = z;
+            std::mem::swap(&mut a, &mut z);
         }
         if wrt.is_empty() {
             return (a, Vec::new());
         }
         // Δ = ∂y/∂a_k, one row per output, starting from the identity.
         let outputs = a.len();
-        let mut delta = vec![0.0f32; outputs * outputs];
+        let (mut delta, mut next) = (vec![0.0f32; outputs * outputs], Vec::new());
         for o in 0..outputs {
             delta[o * outputs + o] = 1.0;
         }
-        for (layer, slope) in self.layers.iter().zip(&slopes).rev() {
-            let mut next = vec![0.0f32; outputs * layer.inputs];
+        let mut end = slopes.len();
+        for layer in self.layers.iter().rev() {
+            let slope = &slopes[end - layer.outputs..end];
+            end -= layer.outputs;
+            next.clear();
+            next.resize(outputs * layer.inputs, 0.0);
             // Row by row of W, so each weight row is read once for all
             // outputs; the updates are vectorised axpys.
             for (o, w) in layer.weight.chunks_exact(layer.inputs).enumerate() {
@@ -99,11 +106,15 @@ impl Mlp {
                     }
                 }
             }
-            delta = next;
+            std::mem::swap(&mut delta, &mut next);
         }
         let width = x.len();
         let jacobian = (0..outputs)
-            .flat_map(|r| delta[r * width + wrt.start..r * width + wrt.end].to_vec())
+            .flat_map(|r| {
+                delta[r * width + wrt.start..r * width + wrt.end]
+                    .iter()
+                    .copied()
+            })
             .collect();
         (a, jacobian)
     }
