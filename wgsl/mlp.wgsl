@@ -43,6 +43,9 @@ struct LayerParams {
 @group(0) @binding(4) var<storage, read> count: array<u32>;
 // Per layer: inputs, outputs, weight offset, bias offset (`per_contact`).
 @group(0) @binding(5) var<storage, read> layer_table: array<vec4<u32>>;
+// The same weights as whole vec4s (`per_contact`, whose rows are padded
+// to them): one load per four weights.
+@group(0) @binding(6) var<storage, read> weight_quads: array<vec4<f32>>;
 
 // Element m of a tile row is component m % 4 of vec4 m / 4: each thread
 // reads its 4 rows and its 4 outputs with one load each.
@@ -169,11 +172,9 @@ fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
         let quads = (info.x + 3u) / 4u;
         for (var o = 0u; o < info.y; o++) {
             var sum = weights[info.w + o];
-            let row = info.z + 4u * quads * o;
+            let row = info.z / 4u + quads * o;
             for (var q = 0u; q < quads; q++) {
-                let i = row + 4u * q;
-                let w = vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]);
-                sum += dot(w, a[q]);
+                sum += dot(weight_quads[row + q], a[q]);
             }
             z[o] = sum;
         }
@@ -211,10 +212,9 @@ fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
                 let hidden = l < n_layers;
                 let negative_here = hidden && (negative[bit / 32u] & (1u << (bit % 32u))) != 0u;
                 let d = select(z[o], z[o] * layer_params.negative_slope, negative_here);
-                let row = info.z + 4u * quads * o;
+                let row = info.z / 4u + quads * o;
                 for (var q = 0u; q < quads; q++) {
-                    let i = row + 4u * q;
-                    a[q] = fma(vec4<f32>(d), vec4<f32>(weights[i], weights[i + 1u], weights[i + 2u], weights[i + 3u]), a[q]);
+                    a[q] = fma(vec4<f32>(d), weight_quads[row + q], a[q]);
                 }
             }
             for (var k = 0u; k < info.x; k++) {

@@ -75,20 +75,26 @@ fn per_contact_iterations(net: &Mlp, rows: usize) -> usize {
     (1 + net.outputs()) * (net.inputs() + net.outputs() + per_pass) + rows
 }
 
-/// Every layer's weights, row-major with rows `stride(inputs)` long (the
-/// padding zero), then its biases; and per layer (inputs, outputs,
-/// weight offset, bias offset).
-fn pack(net: &Mlp, stride: impl Fn(usize) -> usize) -> (Vec<f32>, Vec<u32>) {
+/// Every layer's weights, row-major with rows `align`-padded (the padding
+/// zero), then its biases, padded so the next layer starts aligned; and
+/// per layer (inputs, outputs, weight offset, bias offset).
+fn pack(net: &Mlp, align: usize) -> (Vec<f32>, Vec<u32>) {
     let (mut weights, mut table) = (Vec::new(), Vec::new());
     for l in &net.layers {
         let offset = weights.len();
         for row in l.weight.chunks_exact(l.inputs) {
             weights.extend(row);
-            weights.resize(weights.len() + stride(l.inputs) - l.inputs, 0.0);
+            weights.resize(
+                weights.len() + l.inputs.next_multiple_of(align) - l.inputs,
+                0.0,
+            );
         }
         table.extend([l.inputs, l.outputs, offset, weights.len()].map(|v| v as u32));
         weights.extend(&l.bias);
+        weights.resize(weights.len().next_multiple_of(align), 0.0);
     }
+    // Whole vec4s, as `weight_quads` binds the buffer too.
+    weights.resize(weights.len().next_multiple_of(4), 0.0);
     (weights, table)
 }
 
@@ -204,8 +210,9 @@ impl GpuMlp {
             chosen => chosen,
         };
         let (weights, table) = match kernel {
-            NetworkKernel::PerContact => pack(net, |n| n.div_ceil(4) * 4),
-            _ => pack(net, |n| n),
+            // `per_contact` reads whole vec4s of a row.
+            NetworkKernel::PerContact => pack(net, 4),
+            _ => pack(net, 1),
         };
         let weight_bytes = 4 * weights.len() as u64;
         if weight_bytes > bindable {
@@ -313,6 +320,7 @@ impl GpuMlp {
                 &[
                     ("layer_params", params),
                     ("weights", &buffers[0]),
+                    ("weight_quads", &buffers[0]),
                     ("z_in", z_in),
                     ("z_out", z_out),
                     ("count", io.count),
