@@ -19,8 +19,7 @@ use std::ops::Range;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use rayon::prelude::*;
-use wgcloth::Scene;
-use wgcloth::bench::{MODELS, PERIOD_STEPS, UNTIMED_STEPS};
+use wgcloth::bench::{PERIOD_STEPS, UNTIMED_STEPS, VARIANTS};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
@@ -115,13 +114,9 @@ fn network(c: &mut Criterion) {
     }
 }
 
-fn sphere(grid: u32, model: ModelKind) -> Scene {
-    common::scene(SceneKind::Sphere, model, grid)
-}
-
 fn step64(c: &mut Criterion) {
     let gpu = common::gpu();
-    let mut warm = CpuSim::new(sphere(64, ModelKind::Friction));
+    let mut warm = CpuSim::new(common::scene(SceneKind::Sphere, ModelKind::Friction, 64));
     for _ in 0..UNTIMED_STEPS {
         warm.step();
     }
@@ -129,11 +124,11 @@ fn step64(c: &mut Criterion) {
     for backend in ["cpu", "gpu"] {
         let mut group = c.benchmark_group(format!("step64/{backend}"));
         group.sample_size(10);
-        for model in MODELS {
-            let scene = sphere(64, model);
+        for v in VARIANTS {
+            let scene = v.scene(64).expect("valid benchmark scene");
             if backend == "cpu" {
                 let mut sim = CpuSim::new(scene);
-                group.bench_function(model.name(), |b| {
+                group.bench_function(v.label(), |b| {
                     b.iter(|| {
                         sim.state.clone_from(&start);
                         sim.step()
@@ -143,7 +138,7 @@ fn step64(c: &mut Criterion) {
                 let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
                     .expect("fits the adapter");
                 let time = start.time as f32;
-                group.bench_function(model.name(), |b| {
+                group.bench_function(v.label(), |b| {
                     b.iter(|| {
                         sim.upload_state(&start.x, &start.v, time);
                         sim.step();
@@ -161,10 +156,10 @@ fn period(c: &mut Criterion) {
     for backend in ["cpu", "gpu"] {
         let mut group = c.benchmark_group(format!("period/{backend}"));
         group.sample_size(10);
-        for model in MODELS {
-            let scene = sphere(32, model);
+        for v in VARIANTS {
+            let scene = v.scene(32).expect("valid benchmark scene");
             if backend == "cpu" {
-                group.bench_function(model.name(), |b| {
+                group.bench_function(v.label(), |b| {
                     b.iter(|| {
                         let mut sim = CpuSim::new(scene.clone());
                         for _ in 0..PERIOD_STEPS {
@@ -173,7 +168,7 @@ fn period(c: &mut Criterion) {
                     })
                 });
             } else if let Some((ctx, kernels)) = &gpu {
-                group.bench_function(model.name(), |b| {
+                group.bench_function(v.label(), |b| {
                     b.iter(|| {
                         let sim = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene)
                             .expect("fits the adapter");

@@ -70,7 +70,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .get(2)
         .cloned()
         .unwrap_or_else(|| "docs/thesis_scene.png".into());
-    let mut config = Config::default();
+    let mut config = Config {
+        model: wgcloth::config::ModelKind::Friction,
+        ..Config::default()
+    };
     config.cloth.grid = [48, 48];
     let mut sim = CpuSim::new(Scene::new(&config)?);
     for _ in 0..steps {

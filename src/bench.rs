@@ -20,12 +20,60 @@ use crate::nn::weights::{self, NetKind, Shipped};
 use crate::run::{self, Chosen, Report, Steps, median};
 use crate::scene::Scene;
 
-/// The models in every table, analytic before learned.
-pub const MODELS: [ModelKind; 4] = [
-    ModelKind::Naive,
-    ModelKind::Friction,
-    ModelKind::NaiveNet,
-    ModelKind::FrictionNet,
+/// A model and, for a network model, the shipped network it runs instead
+/// of its default one.
+#[derive(Clone, Copy, Debug)]
+pub struct Variant {
+    pub model: ModelKind,
+    pub network: Option<Shipped>,
+}
+
+impl Variant {
+    const fn of(model: ModelKind) -> Variant {
+        Variant {
+            model,
+            network: None,
+        }
+    }
+
+    /// The model's name, and the network's file stem when not the default.
+    pub fn label(&self) -> String {
+        match self.network {
+            None => self.model.name().into(),
+            Some(net) => {
+                let stem = net.path.trim_start_matches("weights/");
+                format!(
+                    "{} ({})",
+                    self.model.name(),
+                    stem.trim_end_matches(".safetensors")
+                )
+            }
+        }
+    }
+
+    /// The sphere scene at N×N with this variant's network.
+    pub fn scene(&self, grid: u32) -> Result<Scene> {
+        let mut scene = scene(SceneKind::Sphere, self.model, grid)?;
+        if let Some(net) = self.network {
+            scene.network = Some(Arc::new(net.read()?.folded()));
+            // Names the network in the report.
+            scene.config.contact.weights = Some(net.path.into());
+        }
+        Ok(scene)
+    }
+}
+
+/// Every model with its default network, and the friction model with the
+/// thesis-size network too.
+pub const VARIANTS: [Variant; 5] = [
+    Variant::of(ModelKind::Naive),
+    Variant::of(ModelKind::Friction),
+    Variant::of(ModelKind::NaiveNet),
+    Variant::of(ModelKind::FrictionNet),
+    Variant {
+        model: ModelKind::FrictionNet,
+        network: Some(weights::FRICTION_THESIS),
+    },
 ];
 
 /// Steps before the timed ones: the sphere reaches the cloth and pushes it
@@ -114,11 +162,20 @@ pub struct NetworkRow {
     pub gflop_per_s: f64,
 }
 
+/// One step row: the run's report under the variant's label.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepRow {
+    pub label: String,
+    #[serde(flatten)]
+    pub report: Report,
+}
+
 /// Wall time of one sphere period (at 32² unless told otherwise), from a
 /// fresh simulator.
 #[derive(Clone, Debug, Serialize)]
 pub struct PeriodRow {
     pub backend: String,
+    pub label: String,
     pub model: ModelKind,
     pub seconds: f64,
     /// Against the analytic model the network learned (friction for
@@ -134,7 +191,7 @@ pub struct BenchReport {
     pub cpu: String,
     /// The GPU adapter, or why there are no GPU rows.
     pub gpu: String,
-    pub rows: Vec<Report>,
+    pub rows: Vec<StepRow>,
     pub networks: Vec<NetworkRow>,
     pub periods: Vec<PeriodRow>,
 }
@@ -157,19 +214,20 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     let mut rows = Vec::new();
     for backend in &chosen {
         for &grid in &opts.grids {
-            for model in MODELS {
-                progress(&format!("step {} {} {grid}²", name(backend), model.name()));
-                let scene = scene(SceneKind::Sphere, model, grid)?;
-                rows.push(run::run(backend, scene, opts.steps, |_| {})?);
+            for v in VARIANTS {
+                let label = v.label();
+                progress(&format!("step {} {label} {grid}²", name(backend)));
+                let report = run::run(backend, v.scene(grid)?, opts.steps, |_| {})?;
+                rows.push(StepRow { label, report });
             }
         }
     }
     let mut periods = Vec::new();
     for backend in &chosen {
         let mut seconds = Vec::new();
-        for model in MODELS {
-            progress(&format!("period {} {}", name(backend), model.name()));
-            let scene = scene(SceneKind::Sphere, model, opts.period_grid)?;
+        for v in VARIANTS {
+            progress(&format!("period {} {}", name(backend), v.label()));
+            let scene = v.scene(opts.period_grid)?;
             let steps = Steps::all(opts.period_steps);
             let mut runs = (0..opts.repeats)
                 .map(|_| {
@@ -178,18 +236,19 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                     Ok(start.elapsed().as_secs_f64())
                 })
                 .collect::<Result<Vec<f64>>>()?;
-            seconds.push((model, median(&mut runs)));
+            seconds.push((v, median(&mut runs)));
         }
-        let of = |m: ModelKind| seconds.iter().find(|(k, _)| *k == m).map(|(_, s)| *s);
-        for &(model, s) in &seconds {
-            let analytic = match model {
+        let of = |m: ModelKind| seconds.iter().find(|(v, _)| v.model == m).map(|(_, s)| *s);
+        for &(v, s) in &seconds {
+            let analytic = match v.model {
                 ModelKind::FrictionNet => of(ModelKind::Friction),
                 ModelKind::NaiveNet => of(ModelKind::Naive),
                 _ => None,
             };
             periods.push(PeriodRow {
                 backend: name(backend).into(),
-                model,
+                label: v.label(),
+                model: v.model,
                 seconds: s,
                 ratio_to_analytic: analytic.map(|a| s / a),
             });
@@ -331,28 +390,27 @@ impl BenchReport {
     pub fn table(&self) -> String {
         let mut out = format!("cpu: {}\ngpu: {}\n\n", self.cpu, self.gpu);
         let stages: Vec<&String> = {
-            let mut s: Vec<&String> = self.rows.iter().flat_map(|r| r.stage_ms.keys()).collect();
+            let mut s: Vec<&String> = self
+                .rows
+                .iter()
+                .flat_map(|r| r.report.stage_ms.keys())
+                .collect();
             s.sort();
             s.dedup();
             s
         };
         out += &format!(
-            "{:<8}{:<14}{:>6}{:>11}{:>10}{:>6}",
+            "{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}",
             "backend", "model", "grid", "ms/step", "contacts", "cg"
         );
         for s in &stages {
             out += &format!("{:>11}", s);
         }
         out += "\n";
-        for r in &self.rows {
+        for StepRow { label, report: r } in &self.rows {
             out += &format!(
-                "{:<8}{:<14}{:>6}{:>11.3}{:>10.1}{:>6.1}",
-                r.backend,
-                r.model.name(),
-                r.grid[0],
-                r.ms_per_step,
-                r.contacts_mean,
-                r.cg_iterations_mean
+                "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}",
+                r.backend, label, r.grid[0], r.ms_per_step, r.contacts_mean, r.cg_iterations_mean
             );
             for s in &stages {
                 match r.stage_ms.get(*s) {
@@ -363,14 +421,14 @@ impl BenchReport {
             out += "\n";
         }
         out += &format!(
-            "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<14}{:>10}{:>22}\n",
+            "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",
             self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
         );
         for p in &self.periods {
             out += &format!(
-                "{:<8}{:<14}{:>10.3}{:>22}\n",
+                "{:<8}{:<32}{:>10.3}{:>14}\n",
                 p.backend,
-                p.model.name(),
+                p.label,
                 p.seconds,
                 p.ratio_to_analytic
                     .map(|r| format!("{r:.2}"))

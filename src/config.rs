@@ -57,7 +57,7 @@ impl ModelKind {
     /// The shipped network a network model reads unless told otherwise.
     pub fn shipped_weights(self) -> Option<Shipped> {
         match self {
-            ModelKind::FrictionNet => Some(weights::FRICTION_THESIS),
+            ModelKind::FrictionNet => Some(weights::FRICTION_SMALL),
             ModelKind::NaiveNet => Some(weights::NAIVE),
             ModelKind::Naive | ModelKind::Friction => None,
         }
@@ -298,7 +298,7 @@ impl Default for Config {
     fn default() -> Self {
         Config {
             scene: SceneKind::Sphere,
-            model: ModelKind::Friction,
+            model: ModelKind::FrictionNet,
             cloth: ClothConfig::default(),
             rigid: RigidConfig::default(),
             contact: ContactConfig::default(),

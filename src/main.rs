@@ -152,7 +152,7 @@ struct SceneArgs {
     /// sphere: a rigid body moving through the hanging cloth; hang: cloth alone.
     #[arg(long)]
     scene: Option<SceneKind>,
-    /// Collision model.
+    /// Collision model [default: friction-net, the shipped distilled network].
     #[arg(long)]
     model: Option<ModelKind>,
     /// N×N particles.
@@ -176,7 +176,7 @@ struct SceneArgs {
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
     /// Weights of the network model [default: the built-in copy of
-    /// weights/friction_mlp.safetensors for friction-net,
+    /// weights/friction_mlp_small.safetensors for friction-net,
     /// weights/naive_mlp.safetensors for naive-net].
     #[arg(long, value_name = "FILE.safetensors")]
     weights: Option<PathBuf>,

@@ -3,7 +3,7 @@
 //! rows, and the network throughput is consistent with the work each
 //! kernel does. Speed itself is never asserted.
 
-use wgcloth::bench::{BenchOptions, MODELS, bench};
+use wgcloth::bench::{BenchOptions, VARIANTS, bench};
 use wgcloth::config::ModelKind;
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::run::Steps;
@@ -33,13 +33,15 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
     }
     let backends: &[&str] = if gpu { &["cpu", "gpu"] } else { &["cpu"] };
 
-    assert_eq!(report.rows.len(), backends.len() * MODELS.len());
-    for (row, (backend, model)) in report.rows.iter().zip(
+    assert_eq!(report.rows.len(), backends.len() * VARIANTS.len());
+    for (step, (backend, v)) in report.rows.iter().zip(
         backends
             .iter()
-            .flat_map(|b| MODELS.iter().map(move |m| (*b, *m))),
+            .flat_map(|b| VARIANTS.iter().map(move |v| (*b, *v))),
     ) {
-        let what = format!("{backend} {}", model.name());
+        let (row, model) = (&step.report, v.model);
+        let what = format!("{backend} {}", v.label());
+        assert_eq!(step.label, v.label());
         assert_eq!(
             (row.backend.as_str(), row.model),
             (backend, model),
@@ -63,7 +65,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
         }
     }
 
-    assert_eq!(report.periods.len(), backends.len() * MODELS.len());
+    assert_eq!(report.periods.len(), backends.len() * VARIANTS.len());
     for p in &report.periods {
         assert!(p.seconds > 0.0, "{p:?}");
         let analytic = match p.model {
@@ -110,7 +112,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
     }
 
     let table = report.table();
-    for model in MODELS {
-        assert!(table.contains(model.name()), "{table}");
+    for v in VARIANTS {
+        assert!(table.contains(&v.label()), "{table}");
     }
 }

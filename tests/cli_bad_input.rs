@@ -548,13 +548,10 @@ fn friction_net_with_a_corrupt_weights_file_names_it() {
 #[test]
 fn network_models_run_from_any_directory_on_their_built_in_weights() {
     let dir = TempDir::new("built_in_weights");
-    for (model, file) in [
-        (
-            "friction-net",
-            "weights/friction_mlp.safetensors (built in)",
-        ),
-        ("naive-net", "weights/naive_mlp.safetensors (built in)"),
-    ] {
+    use wgcloth::config::ModelKind;
+    for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
+        let file = format!("{} (built in)", model.default_weights().unwrap());
+        let model = model.name();
         let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
             .args(["run", "--backend", "cpu", "--model", model])
             .args(TINY)
@@ -564,7 +561,7 @@ fn network_models_run_from_any_directory_on_their_built_in_weights() {
             .expect("failed to start the wgcloth binary");
         assert!(out.status.success(), "{}", describe(model, &out));
         let text = String::from_utf8_lossy(&out.stdout);
-        assert!(text.contains(file), "{model}: {text}");
+        assert!(text.contains(&file), "{model}: {text}");
     }
 }
 

@@ -191,14 +191,21 @@ fn the_shipped_networks_keep_the_thesis_scene_stable_and_out_of_the_sphere() {
     use wgcloth::config::ModelKind;
     use wgcloth::cpu::CpuSim;
     use wgcloth::cpu::contact::naive;
+    use wgcloth::nn::weights::FRICTION_THESIS;
     use wgcloth::{Config, Scene};
-    for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
+    let thesis = Path::new(env!("CARGO_MANIFEST_DIR")).join(FRICTION_THESIS.path);
+    // No `contact.weights`: the built-in copy of the model's shipped file.
+    for (model, weights) in [
+        (ModelKind::FrictionNet, None),
+        (ModelKind::FrictionNet, Some(thesis)),
+        (ModelKind::NaiveNet, None),
+    ] {
         let mut c = Config {
             model,
             ..Default::default()
         };
         c.cloth.grid = [16, 16];
-        // No `contact.weights`: the built-in copy of the shipped file.
+        c.contact.weights = weights;
         let mut sim = CpuSim::new(Scene::new(&c).expect("the shipped weights load"));
         let (mut deepest, mut contacts, mut worst) = (0.0f32, 0, 0.0f32);
         for _ in 0..200 {
