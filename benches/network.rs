@@ -18,7 +18,6 @@ mod common;
 use std::ops::Range;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use rayon::prelude::*;
 use wgcloth::bench::{PERIOD_STEPS, UNTIMED_STEPS, VARIANTS};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
@@ -77,12 +76,7 @@ fn network(c: &mut Criterion) {
             let batch = &inputs[..n * width];
             if work <= cpu_budget {
                 group.bench_function(BenchmarkId::new("cpu", n), |b| {
-                    b.iter(|| {
-                        batch
-                            .par_chunks(width)
-                            .map(|x| net.forward_jacobian(x, wrt.clone()).0[0])
-                            .sum::<f32>()
-                    })
+                    b.iter(|| net.forward_jacobian_parallel(batch, wrt.clone()))
                 });
             }
             if let Some((ctx, kernels)) = gpu.as_ref().filter(|_| work <= gpu_budget) {

@@ -7,7 +7,6 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::config::{Config, ModelKind, SceneKind};
@@ -315,10 +314,7 @@ fn network_rows(
             if (n * flop) as f64 <= CPU_BUDGET {
                 progress(&format!("network {} cpu {n}", shipped.path));
                 let ms = timed(opts.repeats, || {
-                    batch
-                        .par_chunks(width)
-                        .map(|x| net.forward_jacobian(x, wrt.clone()).0[0])
-                        .sum::<f32>();
+                    net.forward_jacobian_parallel(batch, wrt.clone());
                     Ok(())
                 })?;
                 rows.push(network_row(shipped, "cpu", "reverse", n, flop, ms));

@@ -16,6 +16,7 @@ use crate::config::{ContactConfig, ModelKind};
 use crate::cpu::collide::{Contact, Geometry};
 use crate::math::{outer, project_nsd, symmetric_part};
 use crate::nn::Mlp;
+use crate::nn::mlp::LANES;
 use std::ops::Range;
 use std::sync::Arc;
 
@@ -171,6 +172,12 @@ pub fn naive_net(net: &Mlp, g: &Geometry) -> ForceJacobian {
         return ForceJacobian::ZERO;
     };
     let (f, j) = net.forward_jacobian(&frame.inputs, NAIVE_NET_WRT);
+    naive_net_output(&frame, &f, &j)
+}
+
+/// The naive network's output f and Jacobian j in `frame`, back in the
+/// world.
+fn naive_net_output(frame: &LocalFrame, f: &[f32], j: &[f32]) -> ForceJacobian {
     let back = frame.rotation.transpose();
     // j is row-major [3 outputs × 3 tangents (px, py, pz)].
     let d_p = Mat3::from_cols(
@@ -202,8 +209,15 @@ pub fn network_wrt(kind: ModelKind) -> Option<Range<usize>> {
 /// g and its Jacobians from a friction network with inputs
 /// (c, v_rel, k_n, k_d, k_t, μ).
 pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
-    let x = [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu];
-    let (g, j) = net.forward_jacobian(&x, FRICTION_NET_WRT);
+    let (g, j) = net.forward_jacobian(&friction_net_inputs(c, v, k), FRICTION_NET_WRT);
+    friction_net_output(&g, &j)
+}
+
+fn friction_net_inputs(c: Vec3, v: Vec3, k: &Coefficients) -> [f32; 10] {
+    [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu]
+}
+
+fn friction_net_output(g: &[f32], j: &[f32]) -> ForceJacobian {
     // j is row-major [3 outputs × 6 tangents]: columns 0–2 are ∂/∂c, 3–5 ∂/∂v.
     let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
     ForceJacobian {
@@ -270,6 +284,59 @@ impl Model {
             Model::NaiveNet { net, stiffness } => naive_net(net, &geometry()).scaled(*stiffness),
         }
     }
+
+    /// `evaluate` for a block of contacts with their relative velocities;
+    /// a network model runs its network over the whole block at once.
+    fn evaluate_block(
+        &self,
+        contacts: &[Contact],
+        v_rel: &[Vec3],
+        geometry: impl Fn(&Contact) -> Geometry,
+    ) -> Vec<ForceJacobian> {
+        match self {
+            Model::FrictionNet {
+                net,
+                scale,
+                coefficients,
+            } => {
+                let inputs: Vec<f32> = contacts
+                    .iter()
+                    .zip(v_rel)
+                    .flat_map(|(c, v)| friction_net_inputs(c.collision_vector(), *v, coefficients))
+                    .collect();
+                let (g, j) = net.forward_jacobian_batch(&inputs, FRICTION_NET_WRT);
+                let t = 3 * FRICTION_NET_WRT.len();
+                (0..contacts.len())
+                    .map(|i| friction_net_output(&g[3 * i..], &j[t * i..]).scaled(*scale))
+                    .collect()
+            }
+            Model::NaiveNet { net, stiffness } => {
+                // A degenerate triangle has no frame and gets no force.
+                let frames: Vec<Option<LocalFrame>> =
+                    contacts.iter().map(|c| local_frame(&geometry(c))).collect();
+                let inputs: Vec<f32> = frames.iter().flatten().flat_map(|f| f.inputs).collect();
+                let (f, j) = net.forward_jacobian_batch(&inputs, NAIVE_NET_WRT);
+                let t = 3 * NAIVE_NET_WRT.len();
+                let mut next = 0;
+                frames
+                    .iter()
+                    .map(|frame| match frame {
+                        None => ForceJacobian::ZERO,
+                        Some(frame) => {
+                            let i = next;
+                            next += 1;
+                            naive_net_output(frame, &f[3 * i..], &j[t * i..]).scaled(*stiffness)
+                        }
+                    })
+                    .collect()
+            }
+            _ => contacts
+                .iter()
+                .zip(v_rel)
+                .map(|(c, v)| self.evaluate(c.collision_vector(), *v, || geometry(c)))
+                .collect(),
+        }
+    }
 }
 
 /// What one contact adds to the implicit system.
@@ -322,8 +389,9 @@ pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
     }
 }
 
-/// Evaluates the model for every contact at velocities `v`; `geometry`
-/// gives a contact's triangle and point.
+/// Evaluates the model for every contact at velocities `v`, in blocks of
+/// the network's batch width (`nn::mlp::LANES`); `geometry` gives a
+/// contact's triangle and point.
 pub fn respond(
     model: &Model,
     contacts: &[Contact],
@@ -331,12 +399,15 @@ pub fn respond(
     geometry: impl Fn(&Contact) -> Geometry + Sync,
     out: &mut Vec<Response>,
 ) {
-    contacts
-        .par_iter()
-        .map(|c| {
-            let v_rel = c.relative_velocity(v);
-            let fj = model.evaluate(c.collision_vector(), v_rel, || geometry(c));
-            response(&fj, c.normal, v_rel)
-        })
-        .collect_into_vec(out);
+    out.clear();
+    out.resize(contacts.len(), Response::default());
+    out.par_chunks_mut(LANES)
+        .zip(contacts.par_chunks(LANES))
+        .for_each(|(out, contacts)| {
+            let v_rel: Vec<Vec3> = contacts.iter().map(|c| c.relative_velocity(v)).collect();
+            let forces = model.evaluate_block(contacts, &v_rel, &geometry);
+            for (((r, c), fj), v_rel) in out.iter_mut().zip(contacts).zip(&forces).zip(&v_rel) {
+                *r = response(fj, c.normal, *v_rel);
+            }
+        });
 }

@@ -3,6 +3,8 @@
 //! std), on held-out data and on fresh uniform samples of the declared
 //! domain, and the error of its position Jacobian against the analytic one.
 
+use std::ops::Range;
+
 use glam::{Mat3, Vec3};
 
 use crate::cpu::contact::{Coefficients, friction};
@@ -24,10 +26,11 @@ pub struct Evaluation {
 }
 
 pub fn standardised_mse(net: &Mlp, std: &[f32], data: &Dataset) -> f64 {
-    let sum: f64 = (0..data.len())
-        .map(|i| {
-            let p = net.forward(data.input(i));
-            let y = data.targets[i];
+    let (predicted, _) = net.forward_jacobian_parallel(&data.inputs, 0..0);
+    let sum: f64 = predicted
+        .chunks_exact(3)
+        .zip(&data.targets)
+        .map(|(p, y)| {
             (0..3)
                 .map(|o| (((p[o] - y[o]) / std[o]) as f64).powi(2))
                 .sum::<f64>()
@@ -36,20 +39,24 @@ pub fn standardised_mse(net: &Mlp, std: &[f32], data: &Dataset) -> f64 {
     sum / (3 * data.len()) as f64
 }
 
-/// The network's Jacobian with respect to the three inputs from `first`.
-pub fn network_jacobian(net: &Mlp, x: &[f32], first: usize) -> Mat3 {
-    let (_, j) = net.forward_jacobian(x, first..first + 3);
-    // j is row-major [3 outputs × 3 tangents]; Mat3 wants columns.
-    Mat3::from_cols(
-        Vec3::new(j[0], j[3], j[6]),
-        Vec3::new(j[1], j[4], j[7]),
-        Vec3::new(j[2], j[5], j[8]),
-    )
+/// The inputs along which `eval-net` checks the Jacobian: c for the
+/// friction network, p for the naive one.
+fn jacobian_inputs(kind: NetKind) -> Range<usize> {
+    match kind {
+        NetKind::Friction => 0..3,
+        NetKind::Naive => 4..7,
+    }
 }
 
 /// (network, analytic) position Jacobian along the contact normal at
-/// inputs x; None out of contact.
-fn normal_jacobians(kind: NetKind, net: &Mlp, x: &[f32]) -> Option<(Vec3, Vec3)> {
+/// inputs x, the network's Jacobian j along `jacobian_inputs` (row-major
+/// [3 outputs × 3]); None out of contact.
+fn normal_jacobians(kind: NetKind, x: &[f32], j: &[f32]) -> Option<(Vec3, Vec3)> {
+    let network = Mat3::from_cols(
+        Vec3::new(j[0], j[3], j[6]),
+        Vec3::new(j[1], j[4], j[7]),
+        Vec3::new(j[2], j[5], j[8]),
+    );
     match kind {
         NetKind::Friction => {
             let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
@@ -61,10 +68,10 @@ fn normal_jacobians(kind: NetKind, net: &Mlp, x: &[f32]) -> Option<(Vec3, Vec3)>
             };
             let exact = friction(c, v, &k);
             let n = -c.normalize_or_zero();
-            (exact.force != Vec3::ZERO).then(|| (network_jacobian(net, x, 0) * n, exact.d_c * n))
+            (exact.force != Vec3::ZERO).then(|| (network * n, exact.d_c * n))
         }
         // f = −pz e_z: ∂f/∂p e_z = −e_z.
-        NetKind::Naive => Some((network_jacobian(net, x, 4) * Vec3::Z, -Vec3::Z)),
+        NetKind::Naive => Some((network * Vec3::Z, -Vec3::Z)),
     }
 }
 
@@ -77,14 +84,14 @@ pub fn evaluate(
     let net = file.folded();
     let mut rng = Rng::new(seed);
     let mut uniform = Dataset::new(file.kind);
-    let mut errors = Vec::new();
     for _ in 0..samples {
-        let s = uniform_sample(file.kind, &mut rng);
-        if let Some((got, want)) = normal_jacobians(file.kind, &net, &s.0) {
-            errors.push(((got - want).length() / want.length().max(1e-12)) as f64);
-        }
-        uniform.push(s);
+        uniform.push(uniform_sample(file.kind, &mut rng));
     }
+    let (_, jacobians) = net.forward_jacobian_parallel(&uniform.inputs, jacobian_inputs(file.kind));
+    let mut errors: Vec<f64> = (0..uniform.len())
+        .filter_map(|i| normal_jacobians(file.kind, uniform.input(i), &jacobians[9 * i..]))
+        .map(|(got, want)| ((got - want).length() / want.length().max(1e-12)) as f64)
+        .collect();
     errors.sort_by(f64::total_cmp);
     Evaluation {
         held_out_mse: held_out.map(|d| standardised_mse(&net, &file.output_std, d)),

@@ -5,6 +5,8 @@
 
 use std::ops::Range;
 
+use rayon::prelude::*;
+
 /// One dense layer: y = W x + b, W row-major [outputs × inputs].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Layer {
@@ -49,95 +51,146 @@ impl Mlp {
         self.forward_jacobian(x, 0..0).0
     }
 
-    /// The output and its Jacobian with respect to the inputs `wrt`,
-    /// row-major [outputs × wrt.len()]. Reverse mode: one forward pass
-    /// keeps each hidden unit's slope σ'(z), then the rows of ∂y/∂a are
-    /// carried back through the layers, Δ ← (Δ diag(σ'(z))) W. That costs
-    /// one forward pass plus one per output (4 for the friction network)
-    /// where forward mode costs one plus one per input (7).
+    /// The output at `x` and its Jacobian with respect to the inputs
+    /// `wrt`, row-major [outputs × wrt.len()].
     pub fn forward_jacobian(&self, x: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
+        self.forward_jacobian_batch(x, wrt)
+    }
+
+    /// `forward_jacobian` for a batch of inputs, row-major [n × inputs]:
+    /// the outputs [n × outputs] and the Jacobians [n × outputs × |wrt|].
+    ///
+    /// Reverse mode: one forward pass keeps each hidden unit's slope σ'(z),
+    /// then the rows of ∂y/∂a are carried back through the layers,
+    /// Δ ← (Δ diag(σ'(z))) W. That costs one forward pass plus one per
+    /// output (4 for the friction network) where forward mode costs one
+    /// plus one per input (7). The batch runs in blocks of `LANES` inputs
+    /// side by side, so each weight is read once per block and every
+    /// multiply-add is vectorised across the block.
+    pub fn forward_jacobian_batch(&self, xs: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
+        let (n_in, outs, t) = (self.inputs(), self.outputs(), wrt.len());
+        let n = xs.len() / n_in;
+        let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * outs * t]);
+        for (b, block) in xs.chunks(LANES * n_in).enumerate() {
+            let lanes = block.len() / n_in;
+            let y = &mut values[b * LANES * outs..(b * LANES + lanes) * outs];
+            let j = &mut jacobians[b * LANES * outs * t..(b * LANES + lanes) * outs * t];
+            self.block(block, wrt.clone(), y, j);
+        }
+        (values, jacobians)
+    }
+
+    /// `forward_jacobian_batch` with the blocks spread over the rayon
+    /// threads, for large batches.
+    pub fn forward_jacobian_parallel(&self, xs: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
+        let (n_in, outs, t) = (self.inputs(), self.outputs(), wrt.len());
+        let n = xs.len() / n_in;
+        // One float per output when there is no Jacobian keeps the chunks
+        // nonempty; it is dropped below.
+        let per_jacobian = outs * t.max(1);
+        let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * per_jacobian]);
+        xs[..n * n_in]
+            .par_chunks(LANES * n_in)
+            .zip(values.par_chunks_mut(LANES * outs))
+            .zip(jacobians.par_chunks_mut(LANES * per_jacobian))
+            .for_each(|((x, y), j)| self.block(x, wrt.clone(), y, j));
+        jacobians.truncate(n * outs * t);
+        (values, jacobians)
+    }
+
+    /// One block of at most `LANES` inputs; activations are stored
+    /// lane-minor (unit k of every input side by side).
+    fn block(&self, xs: &[f32], wrt: Range<usize>, values: &mut [f32], jacobians: &mut [f32]) {
+        let n_in = self.inputs();
+        let lanes = xs.len() / n_in;
+        let mut a: Vec<Lanes> = (0..n_in)
+            .map(|k| std::array::from_fn(|l| if l < lanes { xs[l * n_in + k] } else { 0.0 }))
+            .collect();
         // σ'(z) of every unit, layer after layer (1 on the linear output).
-        let mut slopes = Vec::with_capacity(self.layers.iter().map(|l| l.outputs).sum());
-        let (mut a, mut z) = (x.to_vec(), Vec::new());
+        let mut slopes: Vec<Lanes> =
+            Vec::with_capacity(self.layers.iter().map(|l| l.outputs).sum());
+        let mut z: Vec<Lanes> = Vec::new();
         for (k, layer) in self.layers.iter().enumerate() {
             z.clear();
-            z.extend(
-                layer
-                    .weight
-                    .chunks_exact(layer.inputs)
-                    .zip(&layer.bias)
-                    .map(|(w, b)| b + dot(w, &a)),
-            );
             let hidden = self.is_hidden(k);
-            for zo in &mut z {
-                let slope = if hidden && *zo < 0.0 {
-                    self.negative_slope
-                } else {
-                    1.0
-                };
-                *zo *= slope;
+            for (w, b) in layer.weight.chunks_exact(layer.inputs).zip(&layer.bias) {
+                let mut acc = [*b; LANES];
+                for (wk, ak) in w.iter().zip(&a) {
+                    for l in 0..LANES {
+                        acc[l] += wk * ak[l];
+                    }
+                }
+                let mut slope = [1.0; LANES];
+                if hidden {
+                    for l in 0..LANES {
+                        if acc[l] < 0.0 {
+                            slope[l] = self.negative_slope;
+                            acc[l] *= self.negative_slope;
+                        }
+                    }
+                }
+                z.push(acc);
                 slopes.push(slope);
             }
             std::mem::swap(&mut a, &mut z);
         }
+        let outs = a.len();
+        for l in 0..lanes {
+            for o in 0..outs {
+                values[l * outs + o] = a[o][l];
+            }
+        }
         if wrt.is_empty() {
-            return (a, Vec::new());
+            return;
         }
-        // Δ = ∂y/∂a_k, one row per output, starting from the identity.
-        let outputs = a.len();
-        let (mut delta, mut next) = (vec![0.0f32; outputs * outputs], Vec::new());
-        for o in 0..outputs {
-            delta[o * outputs + o] = 1.0;
-        }
+        // Δ[u · outs + r] = ∂y_r/∂a_u, starting from the identity.
+        let mut delta: Vec<Lanes> = (0..outs * outs)
+            .map(|e| [if e / outs == e % outs { 1.0 } else { 0.0 }; LANES])
+            .collect();
+        let mut next: Vec<Lanes> = Vec::new();
         let mut end = slopes.len();
         for layer in self.layers.iter().rev() {
             let slope = &slopes[end - layer.outputs..end];
             end -= layer.outputs;
-            next.clear();
-            next.resize(outputs * layer.inputs, 0.0);
-            // Row by row of W, so each weight row is read once for all
-            // outputs; the updates are vectorised axpys.
-            for (o, w) in layer.weight.chunks_exact(layer.inputs).enumerate() {
-                for r in 0..outputs {
-                    let d = delta[r * layer.outputs + o] * slope[o];
-                    let row = &mut next[r * layer.inputs..(r + 1) * layer.inputs];
-                    for (n, wi) in row.iter_mut().zip(w) {
-                        *n += d * wi;
+            for (o, s) in slope.iter().enumerate() {
+                for d in &mut delta[o * outs..(o + 1) * outs] {
+                    for l in 0..LANES {
+                        d[l] *= s[l];
                     }
+                }
+            }
+            next.clear();
+            for i in 0..layer.inputs {
+                for r in 0..outs {
+                    let mut acc = [0.0; LANES];
+                    for o in 0..layer.outputs {
+                        let w = layer.weight[o * layer.inputs + i];
+                        let d = &delta[o * outs + r];
+                        for l in 0..LANES {
+                            acc[l] += w * d[l];
+                        }
+                    }
+                    next.push(acc);
                 }
             }
             std::mem::swap(&mut delta, &mut next);
         }
-        let width = x.len();
-        let jacobian = (0..outputs)
-            .flat_map(|r| {
-                delta[r * width + wrt.start..r * width + wrt.end]
-                    .iter()
-                    .copied()
-            })
-            .collect();
-        (a, jacobian)
+        let t = wrt.len();
+        for l in 0..lanes {
+            for r in 0..outs {
+                for (j, i) in wrt.clone().enumerate() {
+                    jacobians[(l * outs + r) * t + j] = delta[i * outs + r][l];
+                }
+            }
+        }
     }
 }
 
-/// a · b in eight independent partial sums, which the compiler keeps in
-/// vector registers.
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    let mut acc = [0.0f32; 8];
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    acc.iter().sum::<f32>() + tail
-}
+/// Inputs evaluated side by side in `Mlp::forward_jacobian_batch`.
+pub const LANES: usize = 16;
+
+/// One value per lane.
+type Lanes = [f32; LANES];
 
 #[cfg(test)]
 mod tests {
@@ -177,6 +230,19 @@ mod tests {
         let (_, tail) = net.forward_jacobian(&x, 4..7);
         for o in 0..3 {
             assert_eq!(&full[o * 7 + 4..o * 7 + 7], &tail[o * 3..o * 3 + 3]);
+        }
+    }
+
+    #[test]
+    fn a_batch_is_each_input_on_its_own() {
+        // 37 inputs: two full blocks and a partial one.
+        let net = random(&[10, 24, 17, 3], 3);
+        let xs: Vec<f32> = (0..37 * 10).map(|i| (i as f32 * 0.37).sin()).collect();
+        let (y, j) = net.forward_jacobian_batch(&xs, 0..6);
+        for (i, x) in xs.chunks(10).enumerate() {
+            let (yi, ji) = net.forward_jacobian(x, 0..6);
+            assert_eq!(&y[3 * i..3 * i + 3], &yi[..], "output {i}");
+            assert_eq!(&j[18 * i..18 * i + 18], &ji[..], "Jacobian {i}");
         }
     }
 
