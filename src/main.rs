@@ -251,8 +251,7 @@ fn run(args: &RunArgs) -> Result<()> {
     bar.finish_and_clear();
     println!("{}", report.summary());
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&report).expect("report serialises");
-        std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))?;
+        write_json(path, &report)?;
         println!("report       {}", path.display());
     }
     check_finite(&report)
@@ -273,8 +272,7 @@ fn bench(args: &BenchArgs) -> Result<()> {
     spinner.finish_and_clear();
     print!("{}", report.table());
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&report).expect("report serialises");
-        std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))?;
+        write_json(path, &report)?;
         println!("report: {}", path.display());
     }
     Ok(())
@@ -313,6 +311,11 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
         args.seed
     );
     Ok(())
+}
+
+fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<()> {
+    let json = serde_json::to_string_pretty(value).expect("reports serialise");
+    std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))
 }
 
 /// Fails early when `path` cannot be written, leaving an existing file's

@@ -546,6 +546,19 @@ fn friction_net_with_a_corrupt_weights_file_names_it() {
 }
 
 #[test]
+fn bench_with_an_unwritable_report_fails_before_measuring() {
+    let dir = TempDir::new("bench_report");
+    let report = dir.path("missing/bench.json");
+    let out = wgcloth(&["bench", "--quick", "--report", s(&report)]);
+    expect_error(
+        "bench --report in a missing folder",
+        &out,
+        &[s(&report)],
+        &[],
+    );
+}
+
+#[test]
 fn network_models_run_from_any_directory_on_their_built_in_weights() {
     let dir = TempDir::new("built_in_weights");
     use wgcloth::config::ModelKind;
