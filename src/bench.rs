@@ -324,6 +324,11 @@ fn network_rows(
             };
             let software = ctx.adapter.device_type == wgpu::DeviceType::Cpu;
             let budget = if software { CPU_BUDGET } else { GPU_BUDGET };
+            // Every kernel does at least the reverse-mode work: skip a batch
+            // over budget before allocating it.
+            if (n * 2 * net.jacobian_multiply_adds()) as f64 > budget {
+                continue;
+            }
             let on_gpu = NetworkBatch::new(
                 kernels.clone(),
                 &ctx.device,
