@@ -15,37 +15,26 @@
 
 mod common;
 
-use std::ops::Range;
-
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use wgcloth::bench::{PERIOD_STEPS, UNTIMED_STEPS, VARIANTS};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
-use wgcloth::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
 use wgcloth::gpu::GpuSim;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
-use wgcloth::nn::Mlp;
-use wgcloth::nn::domain::{Rng, uniform_sample};
-use wgcloth::nn::weights::{self, NetKind};
+use wgcloth::nn::domain::{Rng, uniform_inputs};
+use wgcloth::nn::weights::{self, Network};
 
 const SIZES: [usize; 6] = [1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000];
 
-/// The shipped networks with their Jacobian inputs.
-fn networks() -> Vec<(&'static str, Mlp, Range<usize>, NetKind)> {
+/// The shipped networks by file stem.
+fn networks() -> Vec<(&'static str, Network)> {
     weights::SHIPPED
         .iter()
         .map(|shipped| {
-            let file = shipped.read().expect("shipped weights");
-            let wrt = match file.kind {
-                NetKind::Friction => FRICTION_NET_WRT,
-                NetKind::Naive => NAIVE_NET_WRT,
-            };
             let name = shipped.path.trim_start_matches("weights/");
             (
                 name.trim_end_matches(".safetensors"),
-                file.folded(),
-                wrt,
-                file.kind,
+                shipped.read().expect("shipped weights").network(),
             )
         })
         .collect()
@@ -56,14 +45,17 @@ fn network(c: &mut Criterion) {
     let software = gpu
         .as_ref()
         .is_some_and(|(ctx, _)| ctx.adapter.device_type == wgpu::DeviceType::Cpu);
-    for (name, net, wrt, kind) in networks() {
-        let flop = 2 * net.jacobian_multiply_adds();
+    for (name, network) in networks() {
+        let (net, wrt) = (&network.mlp, network.kind.wrt());
+        // A contact is one row of the network, or two for the contact frame's.
+        let evaluations = network.kind.evaluations();
+        let flop = 2 * network.jacobian_multiply_adds();
         eprintln!("network {name}: {flop} floating-point operations per contact on the CPU");
         let mut rng = Rng::new(5);
         let inputs: Vec<f32> = (0..SIZES[SIZES.len() - 1])
-            .flat_map(|_| uniform_sample(kind, &mut rng).0)
+            .flat_map(|_| uniform_inputs(network.kind, &mut rng))
             .collect();
-        let width = net.inputs();
+        let width = net.inputs() * evaluations;
         let mut group = c.benchmark_group(format!("network/{name}"));
         group.sample_size(10);
         // Work per batch: 4 GFLOP on the CPU or a software adapter, 2 TFLOP
@@ -83,15 +75,15 @@ fn network(c: &mut Criterion) {
                 let on_gpu = NetworkBatch::new(
                     kernels.clone(),
                     &ctx.device,
-                    &net,
+                    net,
                     wrt.clone(),
-                    BatchShape::new(n),
+                    BatchShape::new(n * evaluations),
                 )
                 .expect("fits the adapter");
                 if n == SIZES[0] {
                     eprintln!(
                         "network {name}: {} floating-point operations per contact on the GPU ({} kernel)",
-                        2 * on_gpu.network().multiply_adds_per_contact(),
+                        2 * on_gpu.network().multiply_adds_per_contact() * evaluations,
                         on_gpu.network().kernel().name()
                     );
                 }

@@ -10,12 +10,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::config::{Config, ModelKind, SceneKind};
-use crate::cpu::contact::{FRICTION_NET_WRT, NAIVE_NET_WRT};
 use crate::error::Result;
 use crate::gpu::mlp::{BatchShape, NetworkBatch};
 use crate::gpu::{GpuContext, Kernels, context::describe};
-use crate::nn::domain::{Rng, uniform_sample};
-use crate::nn::weights::{self, NetKind, Shipped};
+use crate::nn::domain::{Rng, uniform_inputs};
+use crate::nn::weights::{self, Shipped};
 use crate::run::{self, Chosen, Report, Steps, median};
 use crate::scene::Scene;
 
@@ -54,7 +53,7 @@ impl Variant {
     pub fn scene(&self, grid: u32) -> Result<Scene> {
         let mut scene = scene(SceneKind::Sphere, self.model, grid)?;
         if let Some(net) = self.network {
-            scene.network = Some(Arc::new(net.read()?.folded()));
+            scene.network = Some(Arc::new(net.read()?.network()));
             // Names the network in the report.
             scene.config.contact.weights = Some(net.path.into());
         }
@@ -297,20 +296,18 @@ fn network_rows(
     let mut rows = Vec::new();
     let largest = opts.batch_sizes.iter().copied().max().unwrap_or(0);
     for shipped in weights::SHIPPED {
-        let file = shipped.read()?;
-        let (net, kind) = (file.folded(), file.kind);
-        let wrt = match kind {
-            NetKind::Friction => FRICTION_NET_WRT,
-            NetKind::Naive => NAIVE_NET_WRT,
-        };
+        let network = shipped.read()?.network();
+        let (net, kind, wrt) = (&network.mlp, network.kind, network.kind.wrt());
         let mut rng = Rng::new(5);
         let inputs: Vec<f32> = (0..largest)
-            .flat_map(|_| uniform_sample(kind, &mut rng).0)
+            .flat_map(|_| uniform_inputs(kind, &mut rng))
             .collect();
-        let width = net.inputs();
+        // A contact is one row of the network, or two for the contact frame's.
+        let evaluations = kind.evaluations();
         for &n in &opts.batch_sizes {
-            let batch = &inputs[..n * width];
-            let flop = 2 * net.jacobian_multiply_adds();
+            let rows_n = n * evaluations;
+            let batch = &inputs[..rows_n * net.inputs()];
+            let flop = 2 * network.jacobian_multiply_adds();
             if (n * flop) as f64 <= CPU_BUDGET {
                 progress(&format!("network {} cpu {n}", shipped.path));
                 let ms = timed(opts.repeats, || {
@@ -326,17 +323,17 @@ fn network_rows(
             let budget = if software { CPU_BUDGET } else { GPU_BUDGET };
             // Every kernel does at least the reverse-mode work: skip a batch
             // over budget before allocating it.
-            if (n * 2 * net.jacobian_multiply_adds()) as f64 > budget {
+            if (n * flop) as f64 > budget {
                 continue;
             }
             let on_gpu = NetworkBatch::new(
                 kernels.clone(),
                 &ctx.device,
-                &net,
+                net,
                 wrt.clone(),
-                BatchShape::new(n),
+                BatchShape::new(rows_n),
             )?;
-            let flop = 2 * on_gpu.network().multiply_adds_per_contact();
+            let flop = 2 * on_gpu.network().multiply_adds_per_contact() * evaluations;
             if (n * flop) as f64 > budget {
                 continue;
             }

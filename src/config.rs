@@ -335,7 +335,7 @@ impl Config {
             ModelKind::NaiveNet => NetKind::Naive,
             _ => NetKind::Friction,
         };
-        if file.kind != wanted {
+        if file.kind.data() != wanted {
             return Err(Error::file(
                 path,
                 format!(

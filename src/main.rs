@@ -101,6 +101,10 @@ struct TrainArgs {
     /// Continue from these weights (same architecture).
     #[arg(long, value_name = "FILE.safetensors")]
     init: Option<PathBuf>,
+    /// Train the friction network in the contact frame (model
+    /// `friction-contact`, the shipped small network's kind).
+    #[arg(long)]
+    contact_frame: bool,
     /// Replace an existing weights file.
     #[arg(long)]
     force: bool,
@@ -366,6 +370,7 @@ fn train(args: &TrainArgs) -> Result<()> {
             .as_deref()
             .map(wgcloth::nn::weights::WeightsFile::read)
             .transpose()?,
+        contact_frame: args.contact_frame,
         ..Default::default()
     };
     let bar = progress_bar(opts.epochs as u64).with_style(
@@ -402,7 +407,7 @@ fn eval_net(args: &EvalNetArgs) -> Result<()> {
         .map(wgcloth::nn::dataset::Dataset::read)
         .transpose()?;
     if let (Some(d), Some(path)) = (&held_out, &args.data)
-        && d.kind != file.kind
+        && d.kind != file.kind.data()
     {
         return Err(Error::file(
             path,
@@ -415,11 +420,12 @@ fn eval_net(args: &EvalNetArgs) -> Result<()> {
         ));
     }
     let e = wgcloth::nn::eval::evaluate(&file, held_out.as_ref(), args.samples, args.seed);
-    let net = file.folded();
+    let net = file.network();
     println!(
-        "eval-net: {} ({} layers, {} multiply-adds)",
+        "eval-net: {} ({}, {} layers, {} multiply-adds per contact)",
         args.file.display(),
-        net.layers.len(),
+        file.kind.name(),
+        net.mlp.layers.len(),
         net.multiply_adds()
     );
     if let Some(m) = e.held_out_mse {

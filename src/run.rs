@@ -211,21 +211,23 @@ fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report 
     }
 }
 
-/// "FILE: 10-256-…-3, N multiply-adds[, KERNEL kernel]" for a network model.
+/// "FILE: KIND 10-256-…-3, N multiply-adds per contact[, KERNEL kernel]"
+/// for a network model.
 fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<String> {
     let (net, path) = (scene.network.as_ref()?, scene.config.weights_path()?);
     let built_in = match scene.config.contact.weights {
         None => " (built in)",
         Some(_) => "",
     };
-    let mut widths = vec![net.inputs().to_string()];
-    widths.extend(net.layers.iter().map(|l| l.outputs.to_string()));
+    let mut widths = vec![net.mlp.inputs().to_string()];
+    widths.extend(net.mlp.layers.iter().map(|l| l.outputs.to_string()));
     let kernel = kernel
         .map(|k| format!(", {} kernel", k.name()))
         .unwrap_or_default();
     Some(format!(
-        "{}{built_in}: {}, {} multiply-adds{kernel}",
+        "{}{built_in}: {} {}, {} multiply-adds per contact{kernel}",
         path.display(),
+        net.kind.name(),
         widths.join("-"),
         net.multiply_adds()
     ))

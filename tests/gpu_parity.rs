@@ -143,14 +143,24 @@ const IN_CONTACT: usize = 70;
 #[test]
 fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
     let Some((ctx, kernels)) = gpu() else { return };
+    // friction-net twice: its default network works in the contact frame,
+    // the thesis-size one in the world frame.
     let models = [
-        ModelKind::Friction,
-        ModelKind::Naive,
-        ModelKind::FrictionNet,
-        ModelKind::NaiveNet,
+        (ModelKind::Friction, None),
+        (ModelKind::Naive, None),
+        (ModelKind::FrictionNet, None),
+        (
+            ModelKind::FrictionNet,
+            Some("weights/friction_mlp.safetensors"),
+        ),
+        (ModelKind::NaiveNet, None),
     ];
-    for model in models {
-        let scene = sphere(20, model);
+    for (model, weights) in models {
+        let mut scene = sphere(20, model);
+        if let Some(path) = weights {
+            scene.config.contact.weights = Some(path.into());
+            scene = Scene::new(&scene.config).unwrap();
+        }
         let mut cpu = cpu_after(&scene, IN_CONTACT);
         let gpu = GpuSim::new(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
         gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
@@ -464,7 +474,7 @@ fn random_mlp(sizes: &[usize], seed: u64) -> wgcloth::nn::Mlp {
 }
 
 /// Runs `net` on the GPU over `inputs` (one row per contact) and returns
-/// the outputs, [contact × (1 + |wrt|) × 3].
+/// the outputs, [contact × (1 + |wrt|) × outputs].
 fn gpu_batch(
     ctx: &GpuContext,
     kernels: &Arc<Kernels>,
@@ -486,10 +496,13 @@ fn network_kernels_match_the_cpu_network_and_its_jacobian() {
     let Some((ctx, kernels)) = gpu() else { return };
     // Layer sizes that do and do not divide the tiles; batches smaller and
     // larger than a tile, in one chunk and in several.
-    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 7] = [
+    // Three outputs (the world-frame networks) and two (the contact frame's).
+    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 9] = [
         (&[10, 256, 256, 128, 128, 3], 0..6, 300, usize::MAX),
         (&[10, 128, 128, 64, 3], 0..6, 300, usize::MAX),
         (&[10, 64, 64, 48, 3], 0..6, 300, usize::MAX),
+        (&[7, 48, 48, 2], 0..3, 300, usize::MAX),
+        (&[7, 33, 2], 0..3, 70, 20),
         (&[7, 16, 16, 16, 16, 16, 3], 4..7, 130, usize::MAX),
         (&[10, 37, 70, 5, 3], 0..6, 1, usize::MAX),
         (&[10, 65, 3], 0..6, 200, 47),
@@ -540,15 +553,20 @@ fn check_batch(
     got: &[f32],
     what: &str,
 ) {
-    let rows = 1 + wrt.len();
+    let (rows, outputs) = (1 + wrt.len(), net.outputs());
+    assert_eq!(
+        got.len(),
+        inputs.len() * rows * outputs,
+        "{what}: output size"
+    );
     let (mut worst, mut scale) = (0.0f32, 0.0f32);
     for (c, x) in inputs.iter().enumerate() {
         let (y, j) = net.forward_jacobian(x, wrt.clone());
-        for o in 0..3 {
-            worst = worst.max((got[3 * c * rows + o] - y[o]).abs());
+        for o in 0..outputs {
+            worst = worst.max((got[outputs * c * rows + o] - y[o]).abs());
             scale = scale.max(y[o].abs());
             for t in 0..wrt.len() {
-                let gpu_d = got[3 * (c * rows + 1 + t) + o];
+                let gpu_d = got[outputs * (c * rows + 1 + t) + o];
                 worst = worst.max((gpu_d - j[o * wrt.len() + t]).abs());
                 scale = scale.max(j[o * wrt.len() + t].abs());
             }

@@ -5,12 +5,13 @@ mod common;
 
 use std::path::Path;
 
-use common::Rng;
-use glam::Vec3;
-use wgcloth::cpu::contact::{Coefficients, friction_net};
+use common::{Rng, assert_close};
+use glam::{Mat3, Quat, Vec3};
+use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_contact_net, friction_net};
 use wgcloth::nn::dataset::{Dataset, generate};
+use wgcloth::nn::eval::evaluate;
 use wgcloth::nn::train::{TrainOptions, train};
-use wgcloth::nn::weights::NetKind;
+use wgcloth::nn::weights::{NetKind, WeightsFile};
 use wgcloth::nn::{Layer, Mlp};
 
 fn random_net(sizes: &[usize], seed: u64) -> Mlp {
@@ -31,48 +32,117 @@ fn random_net(sizes: &[usize], seed: u64) -> Mlp {
     }
 }
 
-#[test]
-fn network_force_jacobians_match_finite_differences() {
-    // First-layer weights divided by each input's range, as folding the
-    // min-max scaler does: c spans 0.1, v 4, the coefficients up to 1000.
-    let mut net = random_net(&[10, 24, 24, 3], 8);
-    let ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
-    for o in 0..24 {
+/// A random network whose first-layer weights are divided by each input's
+/// range, as folding the min-max scaler does.
+fn scaled_random_net(sizes: &[usize], ranges: &[f32], seed: u64) -> Mlp {
+    let mut net = random_net(sizes, seed);
+    let first = &mut net.layers[0];
+    for o in 0..first.outputs {
         for (i, r) in ranges.iter().enumerate() {
-            net.layers[0].weight[o * 10 + i] /= r;
+            first.weight[o * first.inputs + i] /= r;
         }
     }
-    let k = Coefficients {
-        kn: 500.0,
-        kd: 3.0,
-        kt: 200.0,
-        mu: 0.4,
-    };
+    net
+}
+
+const K: Coefficients = Coefficients {
+    kn: 500.0,
+    kd: 3.0,
+    kt: 200.0,
+    mu: 0.4,
+};
+
+/// A network force's Jacobians at (c, v) against finite differences. The
+/// force is piecewise smooth: near a LeakyReLU kink the central difference
+/// mixes two pieces, but one one-sided difference is right.
+fn assert_jacobians_match_differences(
+    force: impl Fn(Vec3, Vec3) -> ForceJacobian,
+    c: Vec3,
+    v: Vec3,
+) {
+    let fj = force(c, v);
+    for (m, x, h, what) in [(fj.d_c, c, 1e-4, "∂g/∂c"), (fj.d_v, v, 1e-3, "∂g/∂v")] {
+        let g = |y: Vec3| if what == "∂g/∂c" { force(y, v) } else { force(c, y) }.force;
+        for col in 0..3 {
+            let mut e = Vec3::ZERO;
+            e[col] = h;
+            let (f0, fp, fm) = (g(x), g(x + e), g(x - e));
+            let candidates = [(fp - fm) / (2.0 * h), (fp - f0) / h, (f0 - fm) / h];
+            let got = m.col(col);
+            let best = candidates
+                .iter()
+                .map(|d| (*d - got).length())
+                .fold(f32::INFINITY, f32::min);
+            assert!(
+                best <= 1e-2 * got.length().max(0.1),
+                "{what} column {col} at c {c}, v {v}: {got} vs {candidates:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn network_force_jacobians_match_finite_differences() {
+    // c spans 0.1, v 4, the coefficients up to 1000.
+    let ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    let net = scaled_random_net(&[10, 24, 24, 3], &ranges, 8);
     let mut rng = Rng(4);
     for _ in 0..20 {
-        let c = rng.vec3(-0.05, 0.05);
-        let v = rng.vec3(-1.0, 1.0);
-        let fj = friction_net(&net, c, v, &k);
-        // Piecewise linear: near a LeakyReLU kink the central difference
-        // mixes two pieces, but one one-sided difference is exact.
-        for (m, x, h, what) in [(fj.d_c, c, 1e-4, "∂g/∂c"), (fj.d_v, v, 1e-3, "∂g/∂v")] {
-            let g = |y: Vec3| if what == "∂g/∂c" { friction_net(&net, y, v, &k) } else { friction_net(&net, c, y, &k) }.force;
-            for col in 0..3 {
-                let mut e = Vec3::ZERO;
-                e[col] = h;
-                let (f0, fp, fm) = (g(x), g(x + e), g(x - e));
-                let candidates = [(fp - fm) / (2.0 * h), (fp - f0) / h, (f0 - fm) / h];
-                let got = m.col(col);
-                let best = candidates
-                    .iter()
-                    .map(|d| (*d - got).length())
-                    .fold(f32::INFINITY, f32::min);
-                assert!(
-                    best <= 1e-2 * got.length().max(0.1),
-                    "{what} column {col}: {got} vs {candidates:?}"
-                );
-            }
-        }
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        assert_jacobians_match_differences(|c, v| friction_net(&net, c, v, &K), c, v);
+    }
+}
+
+/// The contact-frame network: its chain rule back to the world (the
+/// frame turning with c and v) against finite differences.
+#[test]
+fn contact_frame_network_jacobians_match_finite_differences() {
+    let ranges = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    let net = scaled_random_net(&[7, 24, 24, 2], &ranges, 9);
+    let mut rng = Rng(5);
+    for _ in 0..40 {
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        assert_jacobians_match_differences(|c, v| friction_contact_net(&net, c, v, &K), c, v);
+    }
+}
+
+/// What the contact frame guarantees for any weights: the force turns with
+/// the contact (g(Rc, Rv) = R g(c, v)), friction vanishes as the sliding
+/// stops, and the Jacobians stay finite there and approach their limit.
+#[test]
+fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
+    let ranges = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    let net = scaled_random_net(&[7, 24, 24, 2], &ranges, 10);
+    let g = |c: Vec3, v: Vec3| friction_contact_net(&net, c, v, &K);
+    let mut rng = Rng(6);
+    for _ in 0..20 {
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        let r = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
+        let (a, b) = (g(c, v), g(r * c, r * v));
+        assert!(
+            (r * a.force - b.force).length() <= 1e-4 * a.force.length().max(1e-3),
+            "{} vs {}",
+            r * a.force,
+            b.force
+        );
+        let rotated = Mat3::from_quat(r);
+        assert_close(
+            rotated * a.d_v * rotated.transpose(),
+            b.d_v,
+            1e-3,
+            1e-3,
+            "rotated ∂g/∂v",
+        );
+
+        // v along c: no sliding, no friction, finite Jacobians; and sliding
+        // at 1 µm/s is within rounding of it.
+        let n = c.normalize();
+        let rest = g(c, 0.3 * n);
+        assert!(rest.force.cross(n).length() <= 1e-6 * rest.force.length().max(1.0));
+        assert!(rest.d_c.is_finite() && rest.d_v.is_finite());
+        let creeping = g(c, 0.3 * n + 2e-6 * n.any_orthonormal_vector());
+        assert!(creeping.force.cross(n).length() <= 1e-3 * rest.force.length().max(1.0));
+        assert_close(creeping.d_v, rest.d_v, 1e-2, 1e-2, "∂g/∂v as sliding stops");
     }
 }
 
@@ -138,6 +208,44 @@ fn a_tiny_training_run_lowers_the_loss_tenfold() {
     );
     assert_eq!(trained.weights.kind, NetKind::Naive);
     assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+}
+
+/// The contact-frame network trains on friction data and is scored on g in
+/// the world frame, where its error matches its validation figure.
+#[test]
+fn a_contact_frame_network_learns_and_scores_in_the_world_frame() {
+    let data = generate(NetKind::Friction, 0, 12000, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![32, 32],
+        epochs: 20,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 20,
+        contact_frame: true,
+        ..Default::default()
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "contact frame: validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert_eq!(trained.weights.kind, NetKind::FrictionContact);
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+    let bytes = trained.weights.to_bytes();
+    let file = WeightsFile::parse(&bytes, Path::new("trained")).unwrap();
+    assert_eq!(file, trained.weights);
+    let e = evaluate(&file, None, 20_000, 9);
+    let ratio = e.uniform_mse / trained.best_validation;
+    assert!(
+        (0.5..2.0).contains(&ratio),
+        "uniform {} vs validation {}",
+        e.uniform_mse,
+        trained.best_validation
+    );
+    // Naive data has no contact frame.
+    let naive = generate(NetKind::Naive, 0, 100, 3, |_, _| {}).unwrap();
+    let err = train(&naive, &opts, |_, _, _| {}).unwrap_err().to_string();
+    assert!(err.contains("--contact-frame"), "{err}");
 }
 
 #[test]

@@ -16,7 +16,7 @@ struct Params {
     rigid_rotation: vec4<f32>,
     motion_vector: vec3<f32>, cells_x: u32,
     cells_y: u32, tiles_x: u32, tiles_y: u32, supertiles_x: u32,
-    supertiles_y: u32, net_width: u32, net_rows: u32, pad0: u32,
+    supertiles_y: u32, net_width: u32, net_rows: u32, net_outputs: u32,
 }
 
 // `Params::model` (mirrors `gpu::sim::params_for`).
@@ -24,6 +24,8 @@ const MODEL_NAIVE: u32 = 0u;
 const MODEL_FRICTION: u32 = 1u;
 const MODEL_FRICTION_NET: u32 = 2u;
 const MODEL_NAIVE_NET: u32 = 3u;
+// friction-net with a contact-frame network (`NetKind::FrictionContact`).
+const MODEL_FRICTION_CONTACT_NET: u32 = 4u;
 
 // Time and run statistics, on the GPU so a step needs no host writes.
 // Mirrors `gpu::layout::StepState`.

@@ -18,8 +18,9 @@
 @group(0) @binding(9) var<storage, read> body_triangles: array<u32>;
 // The batch: its size, each entry's contact slot (vertex–face slots first,
 // then face–vertex), the network inputs [entry × width] and outputs
-// [entry × R × 3]: row 0 the output, row 1 + t its derivative along input
-// wrt_start + t.
+// [entry × R × net_outputs]: row 0 the output, row 1 + t its derivative
+// along input wrt_start + t. The contact-frame network has two entries per
+// contact, at +slide and −slide.
 @group(0) @binding(10) var<storage, read_write> net_count: array<atomic<u32>>;
 @group(0) @binding(11) var<storage, read_write> net_list: array<u32>;
 @group(0) @binding(12) var<storage, read_write> net_inputs: array<f32>;
@@ -254,6 +255,46 @@ fn local_frame(s: u32, k: Contact) -> LocalFrame {
     return f;
 }
 
+// Below this slide speed ṫ has no direction (cpu::contact::SLIDE_AT_REST).
+const SLIDE_AT_REST: f32 = 1e-6;
+
+// A contact in its own frame (mirrors cpu::contact::ContactFrame); depth 0
+// has no frame.
+struct ContactFrame {
+    c_hat: vec3<f32>,
+    t_hat: vec3<f32>,
+    t_dot: vec3<f32>,
+    depth: f32,
+    approach: f32,
+    slide: f32,
+}
+
+fn contact_frame(c: vec3<f32>, v: vec3<f32>) -> ContactFrame {
+    var f: ContactFrame;
+    f.depth = length(c);
+    if f.depth == 0.0 {
+        return f;
+    }
+    f.c_hat = c / f.depth;
+    f.approach = dot(v, f.c_hat);
+    f.t_dot = v - f.approach * f.c_hat;
+    f.slide = length(f.t_dot);
+    if f.slide > SLIDE_AT_REST {
+        f.t_hat = f.t_dot / f.slide;
+    }
+    return f;
+}
+
+// Gradients wrt c and v of a function of (depth, approach, slide) with
+// partial derivatives d.
+fn frame_grad_c(f: ContactFrame, d: vec3<f32>) -> vec3<f32> {
+    return d.x * f.c_hat + (d.y / f.depth) * f.t_dot - (d.z * f.approach / f.depth) * f.t_hat;
+}
+
+fn frame_grad_v(f: ContactFrame, d: vec3<f32>) -> vec3<f32> {
+    return d.y * f.c_hat + d.z * f.t_hat;
+}
+
 @compute @workgroup_size(1)
 fn reset_batch() {
     atomicStore(&net_count[0], 0u);
@@ -268,6 +309,18 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let k = slot_contact(s);
     if k.valid == 0u {
+        return;
+    }
+    if params.model == MODEL_FRICTION_CONTACT_NET {
+        let entry = atomicAdd(&net_count[0], 2u);
+        net_list[entry] = s;
+        net_list[entry + 1u] = s;
+        let f = contact_frame(k.normal * k.depth, relative_velocity(k));
+        let row = array<f32, 7>(f.depth, f.approach, f.slide, params.kn, params.kd, params.kt, params.mu);
+        for (var i = 0u; i < 7u; i++) {
+            net_inputs[entry * 7u + i] = row[i];
+            net_inputs[entry * 7u + 7u + i] = select(row[i], -row[i], i == 2u);
+        }
         return;
     }
     let entry = atomicAdd(&net_count[0], 1u);
@@ -290,10 +343,53 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// Row `row` of a batch entry's outputs.
+// Row `row` of a batch entry's outputs (three of them).
 fn output_row(entry: u32, row: u32) -> vec3<f32> {
-    let o = 3u * (entry * params.net_rows + row);
+    let o = params.net_outputs * (entry * params.net_rows + row);
     return vec3<f32>(net_outputs[o], net_outputs[o + 1u], net_outputs[o + 2u]);
+}
+
+// Row `row` of a contact-frame entry's outputs (g_n, g_t).
+fn output_pair(entry: u32, row: u32) -> vec2<f32> {
+    let o = params.net_outputs * (entry * params.net_rows + row);
+    return vec2<f32>(net_outputs[o], net_outputs[o + 1u]);
+}
+
+// g and its Jacobians from the contact-frame network's entries `entry`
+// (+slide) and `entry + 1` (−slide): mirrors ContactFrame::force.
+fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
+    let f = contact_frame(c, v);
+    if f.depth == 0.0 {
+        return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    }
+    let y0 = output_pair(entry, 0u);
+    let y1 = output_pair(entry + 1u, 0u);
+    // Even part for g_n, odd for g_t; the mirror's slide derivative flips.
+    let g_n = 0.5 * (y0.x + y1.x);
+    let g_t = 0.5 * (y0.y - y1.y);
+    var d_gn: vec3<f32>;
+    var d_gt: vec3<f32>;
+    for (var t = 0u; t < 3u; t++) {
+        let a = output_pair(entry, 1u + t);
+        let b = select(1.0, -1.0, t == 2u) * output_pair(entry + 1u, 1u + t);
+        d_gn[t] = 0.5 * (a.x + b.x);
+        d_gt[t] = 0.5 * (a.y - b.y);
+    }
+    let p = IDENTITY - outer(f.c_hat, f.c_hat);
+    let n = -f.c_hat;
+    var ratio = d_gt.z;
+    if f.slide > SLIDE_AT_REST {
+        ratio = g_t / f.slide;
+    }
+    let turn = ratio * (IDENTITY - outer(f.t_hat, f.t_hat));
+    let dt_dc = (-1.0 / f.depth) * (f.approach * p + outer(f.c_hat, f.t_dot));
+    let sc = params.force_scale;
+    return ForceJacobian(
+        sc * (g_n * n + g_t * f.t_hat),
+        sc * (outer(n, frame_grad_c(f, d_gn)) - (g_n / f.depth) * p
+              + outer(f.t_hat, frame_grad_c(f, d_gt)) + turn * dt_dc),
+        sc * (outer(n, frame_grad_v(f, d_gn)) + outer(f.t_hat, frame_grad_v(f, d_gt)) + turn * p),
+    );
 }
 
 // The Jacobian whose column j is output row first + j.
@@ -304,7 +400,10 @@ fn output_jacobian(entry: u32, first: u32) -> mat3x3<f32> {
 
 // The network's force and Jacobians for batch entry `entry` (mirrors
 // cpu::contact::friction_net and naive_net, scaled to force units).
-fn network_force(entry: u32, s: u32, k: Contact) -> ForceJacobian {
+fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacobian {
+    if params.model == MODEL_FRICTION_CONTACT_NET {
+        return contact_net_force(entry, k.normal * k.depth, v_rel);
+    }
     let g = output_row(entry, 0u);
     if params.model == MODEL_FRICTION_NET {
         let sc = params.force_scale;
@@ -322,13 +421,15 @@ fn network_force(entry: u32, s: u32, k: Contact) -> ForceJacobian {
 @compute @workgroup_size(WORKGROUP)
 fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     let entry = id.x;
-    if entry >= atomicLoad(&net_count[0]) {
+    // A contact-frame contact's second entry is read with its first.
+    let second = params.model == MODEL_FRICTION_CONTACT_NET && entry % 2u == 1u;
+    if entry >= atomicLoad(&net_count[0]) || second {
         return;
     }
     let s = net_list[entry];
     let k = slot_contact(s);
     let v_rel = relative_velocity(k);
-    let r = response(network_force(entry, s, k), k.normal, v_rel);
+    let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel);
     if s < params.n_vertices {
         vf_responses[s] = r;
     } else {

@@ -17,7 +17,7 @@ use crate::cpu::collide::{Contact, Geometry};
 use crate::math::{outer, project_nsd, symmetric_part};
 use crate::nn::Mlp;
 use crate::nn::mlp::LANES;
-use std::ops::Range;
+use crate::nn::weights::{NetKind, Network};
 use std::sync::Arc;
 
 /// A force and its Jacobians with respect to c and v_rel.
@@ -119,17 +119,18 @@ pub enum Model {
         scale: f32,
         coefficients: Coefficients,
     },
-    /// g from the network (thesis 2.7); ∂g/∂c and ∂g/∂v_rel from its input
+    /// g from the network (thesis 2.7), in the world frame or in the
+    /// contact's (`ContactFrame`); ∂g/∂c and ∂g/∂v_rel from its input
     /// Jacobian, by reverse mode through the layers.
     FrictionNet {
-        net: Arc<Mlp>,
+        net: Arc<Network>,
         scale: f32,
         coefficients: Coefficients,
     },
     /// f / c from the small network of thesis 2.4 in the contact's local
     /// frame, ∂/∂p from its input Jacobian.
     NaiveNet {
-        net: Arc<Mlp>,
+        net: Arc<Network>,
         stiffness: f32,
     },
 }
@@ -171,7 +172,7 @@ pub fn naive_net(net: &Mlp, g: &Geometry) -> ForceJacobian {
     let Some(frame) = local_frame(g) else {
         return ForceJacobian::ZERO;
     };
-    let (f, j) = net.forward_jacobian(&frame.inputs, NAIVE_NET_WRT);
+    let (f, j) = net.forward_jacobian(&frame.inputs, NetKind::Naive.wrt());
     naive_net_output(&frame, &f, &j)
 }
 
@@ -192,24 +193,10 @@ fn naive_net_output(frame: &LocalFrame, f: &[f32], j: &[f32]) -> ForceJacobian {
     }
 }
 
-/// The inputs each network's Jacobian is taken along: c and v_rel for the
-/// friction network, the point p for the naive one.
-pub const FRICTION_NET_WRT: Range<usize> = 0..6;
-pub const NAIVE_NET_WRT: Range<usize> = 4..7;
-
-/// The Jacobian inputs of a network model; None for the analytic ones.
-pub fn network_wrt(kind: ModelKind) -> Option<Range<usize>> {
-    match kind {
-        ModelKind::FrictionNet => Some(FRICTION_NET_WRT),
-        ModelKind::NaiveNet => Some(NAIVE_NET_WRT),
-        ModelKind::Naive | ModelKind::Friction => None,
-    }
-}
-
 /// g and its Jacobians from a friction network with inputs
-/// (c, v_rel, k_n, k_d, k_t, μ).
+/// (c, v_rel, k_n, k_d, k_t, μ) in the world frame.
 pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
-    let (g, j) = net.forward_jacobian(&friction_net_inputs(c, v, k), FRICTION_NET_WRT);
+    let (g, j) = net.forward_jacobian(&friction_net_inputs(c, v, k), NetKind::Friction.wrt());
     friction_net_output(&g, &j)
 }
 
@@ -227,9 +214,116 @@ fn friction_net_output(g: &[f32], j: &[f32]) -> ForceJacobian {
     }
 }
 
+/// Below this slide speed (m/s) ṫ has no direction: friction is taken as
+/// zero and g_t / s as its limit ∂g_t/∂s.
+const SLIDE_AT_REST: f32 = 1e-6;
+
+/// A contact in its own frame, for the contact-frame friction network
+/// (`NetKind::FrictionContact`). Eqs. 8–9 give g = g_n n + g_t t̂ with
+/// n = −ĉ and t̂ = ṫ/|ṫ|, where g_n and g_t depend only on the depth
+/// r = |c|, the approach speed a = v_rel·ĉ (ḋ), the slide speed s = |ṫ|
+/// and the coefficients; the network learns these two scalars, and the
+/// directions are exact. Its output y is made even in s for g_n and odd
+/// for g_t,
+///   g_n = (y_n(s) + y_n(−s)) / 2,   g_t = (y_t(s) − y_t(−s)) / 2,
+/// so friction vanishes with ṫ as it must and g_t / s stays finite: the
+/// Jacobian's (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactFrame {
+    c_hat: Vec3,
+    /// t̂; zero below `SLIDE_AT_REST`.
+    t_hat: Vec3,
+    t_dot: Vec3,
+    depth: f32,
+    approach: f32,
+    slide: f32,
+}
+
+impl ContactFrame {
+    /// The frame at collision vector c and relative velocity v; None at
+    /// c = 0, which has no normal (and no force).
+    pub fn new(c: Vec3, v: Vec3) -> Option<ContactFrame> {
+        let depth = c.length();
+        if depth == 0.0 {
+            return None;
+        }
+        let c_hat = c / depth;
+        let approach = v.dot(c_hat);
+        let t_dot = v - approach * c_hat;
+        let slide = t_dot.length();
+        Some(ContactFrame {
+            c_hat,
+            t_hat: if slide > SLIDE_AT_REST {
+                t_dot / slide
+            } else {
+                Vec3::ZERO
+            },
+            t_dot,
+            depth,
+            approach,
+            slide,
+        })
+    }
+
+    /// The network's two input rows, at +slide and at −slide.
+    pub fn inputs(&self, k: &Coefficients) -> [f32; 14] {
+        let (r, a, s) = (self.depth, self.approach, self.slide);
+        [
+            r, a, s, k.kn, k.kd, k.kt, k.mu, r, a, -s, k.kn, k.kd, k.kt, k.mu,
+        ]
+    }
+
+    /// (g_n, g_t) of a force g: what the network learns.
+    pub fn targets(&self, g: Vec3) -> [f32; 2] {
+        [-g.dot(self.c_hat), g.dot(self.t_hat)]
+    }
+
+    /// g and its Jacobians from the network's outputs y and Jacobians j
+    /// (row-major [2 outputs × (depth, approach, slide)]) at the two rows.
+    pub fn force(&self, y: [&[f32]; 2], j: [&[f32]; 2]) -> ForceJacobian {
+        let (y0, y1, j0, j1) = (y[0], y[1], j[0], j[1]);
+        // Even part for g_n, odd part for g_t; the mirror row's slide is −s,
+        // so its slide derivatives enter with the other sign.
+        let g_n = 0.5 * (y0[0] + y1[0]);
+        let g_t = 0.5 * (y0[1] - y1[1]);
+        let d_gn = 0.5 * Vec3::new(j0[0] + j1[0], j0[1] + j1[1], j0[2] - j1[2]);
+        let d_gt = 0.5 * Vec3::new(j0[3] - j1[3], j0[4] - j1[4], j0[5] + j1[5]);
+        let (c_hat, t_hat, r, a) = (self.c_hat, self.t_hat, self.depth, self.approach);
+        let p = Mat3::IDENTITY - outer(c_hat, c_hat);
+        // Gradients of a function of (r, a, s): ∂r/∂c = ĉ; ∂a/∂c = ṫ/r,
+        // ∂a/∂v = ĉ; ∂s/∂c = −a t̂/r, ∂s/∂v = t̂.
+        let grad_c = |d: Vec3| d.x * c_hat + (d.y / r) * self.t_dot - (d.z * a / r) * t_hat;
+        let grad_v = |d: Vec3| d.y * c_hat + d.z * t_hat;
+        let n = -c_hat;
+        // g_t ∂t̂ = (g_t / s)(I − t̂t̂ᵀ) ∂ṫ, with ∂ṫ/∂v = P and
+        // ∂ṫ/∂c = −(a P + ĉ ṫᵀ) / r.
+        let ratio = if t_hat == Vec3::ZERO {
+            d_gt.z
+        } else {
+            g_t / self.slide
+        };
+        let turn = ratio * (Mat3::IDENTITY - outer(t_hat, t_hat));
+        let dt_dc = -(a * p + outer(c_hat, self.t_dot)) / r;
+        ForceJacobian {
+            force: g_n * n + g_t * t_hat,
+            d_c: outer(n, grad_c(d_gn)) - (g_n / r) * p + outer(t_hat, grad_c(d_gt)) + turn * dt_dc,
+            d_v: outer(n, grad_v(d_gn)) + outer(t_hat, grad_v(d_gt)) + turn * p,
+        }
+    }
+}
+
+/// g and its Jacobians from a contact-frame friction network.
+pub fn friction_contact_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
+    let Some(frame) = ContactFrame::new(c, v) else {
+        return ForceJacobian::ZERO;
+    };
+    let (y, j) = net.forward_jacobian(&frame.inputs(k), NetKind::FrictionContact.wrt());
+    frame.force([&y[..2], &y[2..]], [&j[..6], &j[6..]])
+}
+
 impl Model {
     /// The model of a run; `network` is the scene's (network models only).
-    pub fn new(kind: ModelKind, c: &ContactConfig, network: Option<&Arc<Mlp>>) -> Model {
+    pub fn new(kind: ModelKind, c: &ContactConfig, network: Option<&Arc<Network>>) -> Model {
         let coefficients = Coefficients {
             kn: c.kn,
             kd: c.kd,
@@ -264,79 +358,96 @@ impl Model {
     /// Force on the penetrating point and its Jacobians, in force units, at
     /// collision vector c and relative velocity v_rel; `geometry` is asked
     /// for only by the models that read the triangle and point.
-    pub fn evaluate(
+    pub fn evaluate(&self, c: Vec3, v_rel: Vec3, geometry: impl Fn() -> Geometry) -> ForceJacobian {
+        self.evaluate_block(&[(c, v_rel)], |_| geometry())[0]
+    }
+
+    /// `evaluate` for a block of contacts, each as (c, v_rel); a network
+    /// model runs its network over the whole block at once. `geometry`
+    /// gives the triangle and point of the block's i-th contact.
+    fn evaluate_block(
         &self,
-        c: Vec3,
-        v_rel: Vec3,
-        geometry: impl FnOnce() -> Geometry,
-    ) -> ForceJacobian {
+        contacts: &[(Vec3, Vec3)],
+        geometry: impl Fn(usize) -> Geometry,
+    ) -> Vec<ForceJacobian> {
         match self {
-            Model::Naive { stiffness } => naive(c, *stiffness),
+            Model::Naive { stiffness } => contacts
+                .iter()
+                .map(|(c, _)| naive(*c, *stiffness))
+                .collect(),
             Model::Friction {
                 scale,
                 coefficients,
-            } => friction(c, v_rel, coefficients).scaled(*scale),
-            Model::FrictionNet {
-                net,
-                scale,
-                coefficients,
-            } => friction_net(net, c, v_rel, coefficients).scaled(*scale),
-            Model::NaiveNet { net, stiffness } => naive_net(net, &geometry()).scaled(*stiffness),
-        }
-    }
-
-    /// `evaluate` for a block of contacts with their relative velocities;
-    /// a network model runs its network over the whole block at once.
-    fn evaluate_block(
-        &self,
-        contacts: &[Contact],
-        v_rel: &[Vec3],
-        geometry: impl Fn(&Contact) -> Geometry,
-    ) -> Vec<ForceJacobian> {
-        match self {
+            } => contacts
+                .iter()
+                .map(|(c, v)| friction(*c, *v, coefficients).scaled(*scale))
+                .collect(),
             Model::FrictionNet {
                 net,
                 scale,
                 coefficients,
             } => {
-                let inputs: Vec<f32> = contacts
-                    .iter()
-                    .zip(v_rel)
-                    .flat_map(|(c, v)| friction_net_inputs(c.collision_vector(), *v, coefficients))
-                    .collect();
-                let (g, j) = net.forward_jacobian_batch(&inputs, FRICTION_NET_WRT);
-                let t = 3 * FRICTION_NET_WRT.len();
-                (0..contacts.len())
-                    .map(|i| friction_net_output(&g[3 * i..], &j[t * i..]).scaled(*scale))
-                    .collect()
+                let forces = match net.kind {
+                    NetKind::FrictionContact => {
+                        let frames: Vec<Option<ContactFrame>> = contacts
+                            .iter()
+                            .map(|(c, v)| ContactFrame::new(*c, *v))
+                            .collect();
+                        let inputs: Vec<f32> = frames
+                            .iter()
+                            .flatten()
+                            .flat_map(|f| f.inputs(coefficients))
+                            .collect();
+                        let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
+                        each_framed(&frames, |f, i| {
+                            let (y, j) = (&y[4 * i..], &j[12 * i..]);
+                            f.force([&y[..2], &y[2..4]], [&j[..6], &j[6..12]])
+                        })
+                    }
+                    _ => {
+                        let inputs: Vec<f32> = contacts
+                            .iter()
+                            .flat_map(|(c, v)| friction_net_inputs(*c, *v, coefficients))
+                            .collect();
+                        let (g, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
+                        (0..contacts.len())
+                            .map(|i| friction_net_output(&g[3 * i..], &j[18 * i..]))
+                            .collect()
+                    }
+                };
+                forces.into_iter().map(|f| f.scaled(*scale)).collect()
             }
             Model::NaiveNet { net, stiffness } => {
-                // A degenerate triangle has no frame and gets no force.
-                let frames: Vec<Option<LocalFrame>> =
-                    contacts.iter().map(|c| local_frame(&geometry(c))).collect();
+                let frames: Vec<Option<LocalFrame>> = (0..contacts.len())
+                    .map(|i| local_frame(&geometry(i)))
+                    .collect();
                 let inputs: Vec<f32> = frames.iter().flatten().flat_map(|f| f.inputs).collect();
-                let (f, j) = net.forward_jacobian_batch(&inputs, NAIVE_NET_WRT);
-                let t = 3 * NAIVE_NET_WRT.len();
-                let mut next = 0;
-                frames
-                    .iter()
-                    .map(|frame| match frame {
-                        None => ForceJacobian::ZERO,
-                        Some(frame) => {
-                            let i = next;
-                            next += 1;
-                            naive_net_output(frame, &f[3 * i..], &j[t * i..]).scaled(*stiffness)
-                        }
-                    })
-                    .collect()
+                let (f, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
+                each_framed(&frames, |frame, i| {
+                    naive_net_output(frame, &f[3 * i..], &j[9 * i..]).scaled(*stiffness)
+                })
             }
-            _ => contacts
-                .iter()
-                .zip(v_rel)
-                .map(|(c, v)| self.evaluate(c.collision_vector(), *v, || geometry(c)))
-                .collect(),
         }
     }
+}
+
+/// `force(frame, i)` for each contact with a frame, i counting only those
+/// (the network's rows); no force for a contact without one.
+fn each_framed<F>(
+    frames: &[Option<F>],
+    force: impl Fn(&F, usize) -> ForceJacobian,
+) -> Vec<ForceJacobian> {
+    let mut next = 0;
+    frames
+        .iter()
+        .map(|frame| match frame {
+            None => ForceJacobian::ZERO,
+            Some(frame) => {
+                next += 1;
+                force(frame, next - 1)
+            }
+        })
+        .collect()
 }
 
 /// What one contact adds to the implicit system.
@@ -404,9 +515,13 @@ pub fn respond(
     out.par_chunks_mut(LANES)
         .zip(contacts.par_chunks(LANES))
         .for_each(|(out, contacts)| {
-            let v_rel: Vec<Vec3> = contacts.iter().map(|c| c.relative_velocity(v)).collect();
-            let forces = model.evaluate_block(contacts, &v_rel, &geometry);
-            for (((r, c), fj), v_rel) in out.iter_mut().zip(contacts).zip(&forces).zip(&v_rel) {
+            let block: Vec<(Vec3, Vec3)> = contacts
+                .iter()
+                .map(|c| (c.collision_vector(), c.relative_velocity(v)))
+                .collect();
+            let forces = model.evaluate_block(&block, |i| geometry(&contacts[i]));
+            for (((r, c), fj), (_, v_rel)) in out.iter_mut().zip(contacts).zip(&forces).zip(&block)
+            {
                 *r = response(fj, c.normal, *v_rel);
             }
         });

@@ -42,10 +42,11 @@ pub struct Params {
     pub tiles_y: u32,
     pub supertiles_x: u32,
     pub supertiles_y: u32,
-    /// Network inputs per contact, and rows per contact (1 + Jacobian columns).
+    /// Network inputs per row, rows per batch entry (1 + Jacobian
+    /// columns) and outputs per row.
     pub net_width: u32,
     pub net_rows: u32,
-    pub pad: u32,
+    pub net_outputs: u32,
 }
 
 /// Clock and run statistics kept on the GPU.

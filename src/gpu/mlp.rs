@@ -141,16 +141,16 @@ impl BatchShape {
 pub const CONTACT_GROUP: u32 = 256;
 
 /// The caller's buffers: inputs [capacity × inputs] f32, the batch size
-/// (one u32), outputs [capacity × (1 + |wrt|) × 3] f32.
+/// (one u32), outputs [capacity × (1 + |wrt|) × outputs] f32.
 pub struct BatchBuffers<'a> {
     pub inputs: &'a wgpu::Buffer,
     pub count: &'a wgpu::Buffer,
     pub outputs: &'a wgpu::Buffer,
 }
 
-/// Bytes of the outputs buffer for `capacity` contacts.
-pub fn output_bytes(capacity: usize, wrt: &Range<usize>) -> u64 {
-    (capacity * (1 + wrt.len()) * 3 * 4) as u64
+/// Bytes of the outputs buffer of `net` for `capacity` contacts.
+pub fn output_bytes(net: &Mlp, capacity: usize, wrt: &Range<usize>) -> u64 {
+    (capacity * (1 + wrt.len()) * net.outputs() * 4) as u64
 }
 
 pub struct GpuMlp {
@@ -221,12 +221,12 @@ impl GpuMlp {
                 weights.len()
             )));
         }
-        if output_bytes(capacity.max(1), &wrt) > bindable
-            || io.outputs.size() < output_bytes(capacity, &wrt)
+        if output_bytes(net, capacity.max(1), &wrt) > bindable
+            || io.outputs.size() < output_bytes(net, capacity, &wrt)
         {
             return Err(Error::Gpu(format!(
                 "a batch of {capacity} contacts needs {} bytes of network outputs, more than this adapter binds ({bindable} bytes)",
-                output_bytes(capacity, &wrt)
+                output_bytes(net, capacity, &wrt)
             )));
         }
         // Contacts per chunk: the activations of the widest layer must bind,
@@ -468,7 +468,7 @@ impl NetworkBatch {
         let width = net.inputs();
         let inputs = storage("batch inputs", (capacity * width * 4) as u64);
         let count = storage("batch size", 4);
-        let outputs = storage("batch outputs", output_bytes(capacity, &wrt));
+        let outputs = storage("batch outputs", output_bytes(net, capacity, &wrt));
         let io = BatchBuffers {
             inputs: &inputs,
             count: &count,

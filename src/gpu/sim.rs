@@ -10,7 +10,6 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use crate::config::ModelKind;
-use crate::cpu::contact::network_wrt;
 use crate::error::{Error, Result};
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
@@ -18,6 +17,7 @@ use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, StepState, Sym3,
 };
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
+use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
@@ -139,11 +139,18 @@ fn params_for(scene: &Scene) -> Params {
         model: match cfg.model {
             ModelKind::Naive => 0,
             ModelKind::Friction => 1,
-            ModelKind::FrictionNet => 2,
+            ModelKind::FrictionNet => match scene.network.as_ref().map(|n| n.kind) {
+                Some(NetKind::FrictionContact) => 4,
+                _ => 2,
+            },
             ModelKind::NaiveNet => 3,
         },
-        net_width: scene.network.as_ref().map_or(0, |n| n.inputs() as u32),
-        net_rows: network_wrt(cfg.model).map_or(0, |w| 1 + w.len() as u32),
+        net_width: scene.network.as_ref().map_or(0, |n| n.mlp.inputs() as u32),
+        net_rows: scene
+            .network
+            .as_ref()
+            .map_or(0, |n| 1 + n.kind.wrt().len() as u32),
+        net_outputs: scene.network.as_ref().map_or(0, |n| n.mlp.outputs() as u32),
         cg_max_iters: cfg.solver.cg_iters,
         dt: cfg.solver.dt,
         vertex_mass: cloth.vertex_mass,
@@ -282,7 +289,10 @@ impl Buffers {
         });
         let bvh_order = body.map_or(vec![], |b| b.bvh.order.clone());
         // A network batch holds every contact slot, at most.
-        let batch = if params.net_rows > 0 { n + r } else { 0 };
+        let batch = scene
+            .network
+            .as_ref()
+            .map_or(0, |net| (n + r) * net.kind.evaluations());
         Buffers {
             params: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("params"),
@@ -364,7 +374,10 @@ impl Buffers {
             net_count: zeroed("network batch size", 4),
             net_list: zeroed("network batch contacts", batch * 4),
             net_inputs: zeroed("network inputs", batch * params.net_width as usize * 4),
-            net_outputs: zeroed("network outputs", batch * params.net_rows as usize * 3 * 4),
+            net_outputs: zeroed(
+                "network outputs",
+                batch * (params.net_rows * params.net_outputs) as usize * 4,
+            ),
         }
     }
 }
@@ -546,14 +559,15 @@ impl GpuSim {
         let params = params_for(scene);
         let buffers = Buffers::new(device, scene, &params);
         let groups = BindGroups::new(&kernels, device, &buffers);
-        let network = match (&scene.network, network_wrt(scene.config.model)) {
-            (Some(net), Some(wrt)) if params.has_rigid != 0 => {
-                let capacity = (params.n_vertices + params.n_rigid_vertices) as usize;
-                debug_assert!(buffers.net_outputs.size() >= output_bytes(capacity, &wrt));
+        let network = match &scene.network {
+            Some(net) if params.has_rigid != 0 => {
+                let slots = (params.n_vertices + params.n_rigid_vertices) as usize;
+                let (capacity, wrt) = (slots * net.kind.evaluations(), net.kind.wrt());
+                debug_assert!(buffers.net_outputs.size() >= output_bytes(&net.mlp, capacity, &wrt));
                 Some(GpuMlp::new(
                     kernels.clone(),
                     device,
-                    net,
+                    &net.mlp,
                     wrt,
                     BatchShape::new(capacity),
                     BatchBuffers {

@@ -51,7 +51,7 @@ fn recorded_inputs(kind: NetKind, sim: &CpuSim) -> Vec<Vec<f32>> {
     sim.contacts()
         .iter()
         .filter_map(|c| match kind {
-            NetKind::Friction => {
+            NetKind::Friction | NetKind::FrictionContact => {
                 let (cv, vr) = (c.collision_vector(), c.relative_velocity(v));
                 (cv.length() <= MAX_DEPTH && vr.length() <= MAX_SPEED)
                     .then(|| [cv.to_array(), vr.to_array()].concat())
@@ -76,7 +76,7 @@ pub fn record_contacts(
     for _ in 0..runs {
         let mut config = Config {
             model: match kind {
-                NetKind::Friction => ModelKind::Friction,
+                NetKind::Friction | NetKind::FrictionContact => ModelKind::Friction,
                 NetKind::Naive => ModelKind::Naive,
             },
             ..Default::default()
@@ -269,7 +269,7 @@ pub fn generate(
         contacts.swap(k, j);
         let x = &contacts[k];
         data.push(match kind {
-            NetKind::Friction => {
+            NetKind::Friction | NetKind::FrictionContact => {
                 let (c, v) = (
                     glam::Vec3::from_slice(&x[..3]),
                     glam::Vec3::from_slice(&x[3..]),

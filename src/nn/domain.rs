@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 
-use crate::cpu::contact::{Coefficients, friction, naive};
+use crate::cpu::contact::{Coefficients, ContactFrame, friction, naive};
 use crate::nn::weights::NetKind;
 
 /// Friction network: |c| ≤ 0.05 m, |v_rel| ≤ 2 m/s, coefficient ranges.
@@ -31,6 +31,11 @@ pub fn bounds(kind: NetKind) -> (Vec<f32>, Vec<f32>) {
                 vec![c, c, c, v, v, v, KN.1, KD.1, KT.1, MU.1],
             )
         }
+        // depth, approach, slide (either sign: the network also runs at −s).
+        NetKind::FrictionContact => (
+            vec![0.0, -MAX_SPEED, -MAX_SPEED, KN.0, KD.0, KT.0, MU.0],
+            vec![MAX_DEPTH, MAX_SPEED, MAX_SPEED, KN.1, KD.1, KT.1, MU.1],
+        ),
         NetKind::Naive => {
             let r = NAIVE_REACH;
             (
@@ -106,7 +111,29 @@ pub fn random_coefficients(rng: &mut Rng) -> Coefficients {
     }
 }
 
-/// A uniform sample of a network's declared domain.
+/// The rows a network of `kind` evaluates for one uniform sample: the
+/// sample's inputs, or for the contact-frame network its two rows.
+pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
+    let (x, _) = uniform_sample(kind, rng);
+    if kind != NetKind::FrictionContact {
+        return x;
+    }
+    let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
+    let k = Coefficients {
+        kn: x[6],
+        kd: x[7],
+        kt: x[8],
+        mu: x[9],
+    };
+    // c = 0 has no frame; any depth-zero row stands in for it.
+    ContactFrame::new(c, v).map_or_else(
+        || [&[0.0; 3], &x[6..]].concat().repeat(2),
+        |f| f.inputs(&k).to_vec(),
+    )
+}
+
+/// A uniform sample of a network's declared domain (in the world frame for
+/// both friction networks).
 /// Friction: c in the ball of radius 0.05 (c = n d̃ takes any direction, so
 /// d̃ ≤ 0 is automatic), v_rel in the ball of radius 2, coefficients
 /// uniform. Naive: b on +x, c in the upper half of the xy-plane, the point
@@ -114,7 +141,7 @@ pub fn random_coefficients(rng: &mut Rng) -> Coefficients {
 /// edges as detection allows) and up to 0.05 m below its plane.
 pub fn uniform_sample(kind: NetKind, rng: &mut Rng) -> Sample {
     match kind {
-        NetKind::Friction => {
+        NetKind::Friction | NetKind::FrictionContact => {
             let c = rng.in_ball(MAX_DEPTH);
             let v = rng.in_ball(MAX_SPEED);
             friction_sample(c, v, &random_coefficients(rng))

@@ -10,7 +10,9 @@ use std::time::Instant;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Linear, Module, Optimizer, VarBuilder, VarMap};
+use glam::Vec3;
 
+use crate::cpu::contact::{Coefficients, ContactFrame};
 use crate::error::{Error, Result};
 use crate::nn::dataset::Dataset;
 use crate::nn::domain::{Rng, bounds};
@@ -25,7 +27,7 @@ pub const THESIS_NAIVE_HIDDEN: [usize; 5] = [16; 5];
 /// The thesis's architecture for a network kind.
 pub fn thesis_hidden(kind: NetKind) -> Vec<usize> {
     match kind {
-        NetKind::Friction => THESIS_HIDDEN.to_vec(),
+        NetKind::Friction | NetKind::FrictionContact => THESIS_HIDDEN.to_vec(),
         NetKind::Naive => THESIS_NAIVE_HIDDEN.to_vec(),
     }
 }
@@ -45,6 +47,9 @@ pub struct TrainOptions {
     pub checkpoint: Option<PathBuf>,
     /// Start from these weights (same architecture; their scalers are kept).
     pub init: Option<WeightsFile>,
+    /// Train the contact-frame friction network (`NetKind::FrictionContact`)
+    /// on friction data.
+    pub contact_frame: bool,
 }
 
 impl Default for TrainOptions {
@@ -59,6 +64,7 @@ impl Default for TrainOptions {
             seed: 1,
             checkpoint: None,
             init: None,
+            contact_frame: false,
         }
     }
 }
@@ -80,10 +86,23 @@ fn candle(e: candle_core::Error) -> Error {
 
 struct Net {
     layers: Vec<Linear>,
+    /// The contact-frame network's symmetry (`ContactFrame`): scaled
+    /// inputs at −slide are x ⊙ flip + shift, and the output is
+    /// (y(x) + sign ⊙ y(x̄)) / 2, even in the slide for g_n, odd for g_t.
+    mirror: Option<[Tensor; 3]>,
 }
 
 impl Net {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        let y = self.layers(x)?;
+        let Some([flip, shift, sign]) = &self.mirror else {
+            return Ok(y);
+        };
+        let mirrored = self.layers(&x.broadcast_mul(flip)?.broadcast_add(shift)?)?;
+        (y + mirrored.broadcast_mul(sign)?)? * 0.5
+    }
+
+    fn layers(&self, x: &Tensor) -> candle_core::Result<Tensor> {
         let mut a = x.clone();
         for (k, l) in self.layers.iter().enumerate() {
             a = l.forward(&a)?;
@@ -99,7 +118,8 @@ fn rows(t: &Tensor, idx: &[u32]) -> candle_core::Result<Tensor> {
     t.index_select(&Tensor::new(idx, t.device())?, 0)
 }
 
-/// Standardised MSE of `net` on (x, y), in batches.
+/// Standardised MSE of `net` on (x, y), in batches, per world component:
+/// the contact-frame network's two outputs carry the error of three.
 fn evaluate(net: &Net, x: &Tensor, y: &Tensor, batch: usize) -> candle_core::Result<f64> {
     let n = x.dim(0)?;
     let mut sum = 0.0;
@@ -108,7 +128,7 @@ fn evaluate(net: &Net, x: &Tensor, y: &Tensor, batch: usize) -> candle_core::Res
         let d = (net.forward(&x.narrow(0, start, len)?)? - y.narrow(0, start, len)?)?;
         sum += d.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
     }
-    Ok(sum / (n * y.dim(1)?) as f64)
+    Ok(sum / (n * 3) as f64)
 }
 
 fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>> {
@@ -129,6 +149,65 @@ fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>>
             })
         })
         .collect()
+}
+
+/// Training rows for a network of `kind` from `data`: inputs [n × inputs]
+/// and targets [n × outputs]. The contact-frame network learns (g_n, g_t)
+/// at +slide of each friction sample (a sample at c = 0 has no frame).
+fn rows_for(kind: NetKind, data: &Dataset) -> (Vec<f32>, Vec<f32>) {
+    if kind != NetKind::FrictionContact {
+        return (data.inputs.clone(), data.targets.concat());
+    }
+    let (mut inputs, mut targets) = (Vec::new(), Vec::new());
+    for (i, g) in data.targets.iter().enumerate() {
+        let x = data.input(i);
+        let k = Coefficients {
+            kn: x[6],
+            kd: x[7],
+            kt: x[8],
+            mu: x[9],
+        };
+        if let Some(frame) =
+            ContactFrame::new(Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]))
+        {
+            inputs.extend(&frame.inputs(&k)[..7]);
+            targets.extend(frame.targets(Vec3::from_array(*g)));
+        }
+    }
+    (inputs, targets)
+}
+
+/// The output scaler (mean, std) from training targets [n × outputs]. The
+/// contact-frame network's outputs share the world components' std,
+/// √(E|g|²/3), so its loss is the world frame's standardised error, and
+/// g_t's mean is 0, as an odd output cannot carry one.
+fn output_scaler(kind: NetKind, targets: &[f32], outputs: usize) -> (Vec<f32>, Vec<f32>) {
+    let n = (targets.len() / outputs) as f64;
+    let mut mean = vec![0.0f64; outputs];
+    let mut var = vec![0.0f64; outputs];
+    for y in targets.chunks_exact(outputs) {
+        for o in 0..outputs {
+            mean[o] += y[o] as f64 / n;
+        }
+    }
+    if kind == NetKind::FrictionContact {
+        let power: f64 = targets.iter().map(|y| (*y as f64).powi(2)).sum::<f64>() / n;
+        let std = ((power / 3.0).sqrt().max(1e-6)) as f32;
+        return (vec![mean[0] as f32, 0.0], vec![std; 2]);
+    }
+    for y in targets.chunks_exact(outputs) {
+        for o in 0..outputs {
+            var[o] += (y[o] as f64 - mean[o]).powi(2) / n;
+        }
+    }
+    // An output that never varies (the naive frame's fx, fy) is scaled by
+    // the largest std instead of being blown up by its own.
+    let widest = var.iter().fold(0.0f64, |a, v| a.max(v.sqrt())).max(1e-6);
+    let std = var
+        .iter()
+        .map(|v| v.sqrt().max(1e-3 * widest) as f32)
+        .collect();
+    (mean.iter().map(|m| *m as f32).collect(), std)
 }
 
 /// The initial layers, uniform in ±1/√inputs (PyTorch's and candle's
@@ -168,49 +247,40 @@ pub fn train(
             "epochs, batch and every hidden width must be ≥ 1",
         ));
     }
+    let kind = match (opts.contact_frame, data.kind) {
+        (false, kind) => kind,
+        (true, NetKind::Friction) => NetKind::FrictionContact,
+        (true, kind) => {
+            return Err(Error::config(
+                "--contact-frame",
+                format!("is for friction data; the data is {}", kind.name()),
+            ));
+        }
+    };
     let start = Instant::now();
     let dev = Device::Cpu;
-    let (lo, hi) = bounds(data.kind);
-    let width = data.width();
-    let n_val = ((data.len() as f32 * opts.validation_fraction) as usize).max(1);
-    let n_train = data.len() - n_val;
+    let (lo, hi) = bounds(kind);
+    let (width, outputs) = (kind.inputs().len(), kind.outputs().len());
+    let (inputs, targets) = rows_for(kind, data);
+    let len = targets.len() / outputs;
+    let n_val = ((len as f32 * opts.validation_fraction) as usize).max(1);
+    let n_train = len - n_val;
     // Output scaler from the training part.
-    let mut mean = [0.0f64; 3];
-    let mut var = [0.0f64; 3];
-    for y in &data.targets[..n_train] {
-        for o in 0..3 {
-            mean[o] += y[o] as f64 / n_train as f64;
-        }
-    }
-    for y in &data.targets[..n_train] {
-        for o in 0..3 {
-            var[o] += (y[o] as f64 - mean[o]).powi(2) / n_train as f64;
-        }
-    }
-    // An output that never varies (the naive frame's fx, fy) is scaled by
-    // the largest std instead of being blown up by its own.
-    let widest = var.iter().fold(0.0f64, |a, v| a.max(v.sqrt())).max(1e-6);
-    let mut std: Vec<f32> = var
-        .iter()
-        .map(|v| v.sqrt().max(1e-3 * widest) as f32)
-        .collect();
-    let mut mean: Vec<f32> = mean.iter().map(|m| *m as f32).collect();
+    let (mut mean, mut std) = output_scaler(kind, &targets[..n_train * outputs], outputs);
     if let Some(init) = &opts.init {
         // A warm start keeps the scaling its weights were trained with.
         (mean, std) = (init.output_mean.clone(), init.output_std.clone());
     }
-    let scaled_x: Vec<f32> = data
-        .inputs
+    let scaled_x: Vec<f32> = inputs
         .chunks_exact(width)
         .flat_map(|x| (0..width).map(|k| (x[k] - lo[k]) / (hi[k] - lo[k])))
         .collect();
-    let scaled_y: Vec<f32> = data
-        .targets
-        .iter()
-        .flat_map(|y| (0..3).map(|o| (y[o] - mean[o]) / std[o]))
+    let scaled_y: Vec<f32> = targets
+        .chunks_exact(outputs)
+        .flat_map(|y| (0..outputs).map(|o| (y[o] - mean[o]) / std[o]))
         .collect();
-    let x_all = Tensor::from_vec(scaled_x, (data.len(), width), &dev).map_err(candle)?;
-    let y_all = Tensor::from_vec(scaled_y, (data.len(), 3), &dev).map_err(candle)?;
+    let x_all = Tensor::from_vec(scaled_x, (len, width), &dev).map_err(candle)?;
+    let y_all = Tensor::from_vec(scaled_y, (len, outputs), &dev).map_err(candle)?;
     let (x_train, y_train) = (
         x_all.narrow(0, 0, n_train).map_err(candle)?,
         y_all.narrow(0, 0, n_train).map_err(candle)?,
@@ -224,8 +294,23 @@ pub fn train(
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
     let mut sizes = vec![width];
     sizes.extend(&opts.hidden);
-    sizes.push(3);
+    sizes.push(outputs);
+    let mirror = (kind == NetKind::FrictionContact)
+        .then(|| {
+            let mut flip = [1.0f32; 7];
+            let mut shift = [0.0f32; 7];
+            // slide is scaled over [−max, max]: −s is 1 − u.
+            (flip[2], shift[2]) = (-1.0, 1.0);
+            Ok::<_, candle_core::Error>([
+                Tensor::new(&flip, &dev)?,
+                Tensor::new(&shift, &dev)?,
+                Tensor::new(&[1.0f32, -1.0], &dev)?,
+            ])
+        })
+        .transpose()
+        .map_err(candle)?;
     let net = Net {
+        mirror,
         layers: sizes
             .windows(2)
             .enumerate()
@@ -235,13 +320,13 @@ pub fn train(
     };
     let initial = match &opts.init {
         Some(init) => {
-            if init.kind != data.kind {
+            if init.kind != kind {
                 return Err(Error::config(
                     "--init",
                     format!(
                         "is a {} network; the data is for a {} one",
                         init.kind.name(),
-                        data.kind.name()
+                        kind.name()
                     ),
                 ));
             }
@@ -286,7 +371,7 @@ pub fn train(
     let mut best = (f64::INFINITY, Vec::new());
     let mut since_best = 0;
     let file = |layers: Vec<Layer>, notes: BTreeMap<String, String>| WeightsFile {
-        kind: data.kind,
+        kind,
         layers,
         negative_slope: NEGATIVE_SLOPE,
         input_min: lo.clone(),
@@ -325,7 +410,8 @@ pub fn train(
             opt.backward_step(&loss).map_err(candle)?;
             train_sum += loss.to_scalar::<f32>().map_err(candle)? as f64 * chunk.len() as f64;
         }
-        let train_mse = train_sum / n_train as f64;
+        // Per world component, as `evaluate` reports.
+        let train_mse = train_sum / n_train as f64 * outputs as f64 / 3.0;
         let val_mse = evaluate(&net, &x_val, &y_val, 4096).map_err(candle)?;
         curve.push((train_mse, val_mse));
         progress(epoch + 1, train_mse, val_mse);

@@ -9,6 +9,7 @@
 //! first and last layers.
 
 use std::collections::{BTreeMap, HashMap};
+use std::ops::Range;
 use std::path::Path;
 
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
@@ -55,6 +56,12 @@ pub const FRICTION_INPUTS: [&str; 10] =
     ["cx", "cy", "cz", "vx", "vy", "vz", "kn", "kd", "kt", "mu"];
 pub const FRICTION_OUTPUTS: [&str; 3] = ["gx", "gy", "gz"];
 /// The naive network's local frame (thesis 2.4): a at the origin, b on +x.
+/// The friction network in the contact frame: depth |c|, approach speed
+/// v_rel·ĉ, signed sliding speed ±|ṫ|, coefficients; outputs g along n and
+/// along ṫ/|ṫ| (see `cpu::contact::friction_contact_net`).
+pub const FRICTION_CONTACT_INPUTS: [&str; 7] =
+    ["depth", "approach", "slide", "kn", "kd", "kt", "mu"];
+pub const FRICTION_CONTACT_OUTPUTS: [&str; 2] = ["gn", "gt"];
 pub const NAIVE_INPUTS: [&str; 7] = ["bx", "cx", "cy", "cz", "px", "py", "pz"];
 pub const NAIVE_OUTPUTS: [&str; 3] = ["fx", "fy", "fz"];
 
@@ -62,6 +69,11 @@ pub const NAIVE_OUTPUTS: [&str; 3] = ["fx", "fy", "fz"];
 pub enum NetKind {
     Friction,
     Naive,
+    /// The friction model in the contact frame (model `friction-contact`):
+    /// rotation invariant by construction, so a small network learns only
+    /// the scalar law of eqs. 8–9. Trained on friction data.
+    #[value(skip)]
+    FrictionContact,
 }
 
 impl NetKind {
@@ -69,6 +81,35 @@ impl NetKind {
         match self {
             NetKind::Friction => "friction",
             NetKind::Naive => "naive",
+            NetKind::FrictionContact => "friction-contact",
+        }
+    }
+
+    /// The inputs the simulator takes the network's Jacobian along: c and
+    /// v_rel (friction), depth, approach and slide (friction-contact), the
+    /// point p (naive).
+    pub fn wrt(self) -> Range<usize> {
+        match self {
+            NetKind::Friction => 0..6,
+            NetKind::Naive => 4..7,
+            NetKind::FrictionContact => 0..3,
+        }
+    }
+
+    /// Network evaluations per contact: the contact-frame network runs at
+    /// +slide and −slide, the symmetry that makes its friction odd in ṫ.
+    pub fn evaluations(self) -> usize {
+        match self {
+            NetKind::FrictionContact => 2,
+            _ => 1,
+        }
+    }
+
+    /// The kind of data (and of `gen-data`) a network of this kind learns from.
+    pub fn data(self) -> NetKind {
+        match self {
+            NetKind::FrictionContact => NetKind::Friction,
+            kind => kind,
         }
     }
 
@@ -76,6 +117,7 @@ impl NetKind {
         match self {
             NetKind::Friction => &FRICTION_INPUTS,
             NetKind::Naive => &NAIVE_INPUTS,
+            NetKind::FrictionContact => &FRICTION_CONTACT_INPUTS,
         }
     }
 
@@ -83,7 +125,27 @@ impl NetKind {
         match self {
             NetKind::Friction => &FRICTION_OUTPUTS,
             NetKind::Naive => &NAIVE_OUTPUTS,
+            NetKind::FrictionContact => &FRICTION_CONTACT_OUTPUTS,
         }
+    }
+}
+
+/// A network ready to run: its kind and its layers in physical units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Network {
+    pub kind: NetKind,
+    pub mlp: Mlp,
+}
+
+impl Network {
+    /// Multiply-adds of one contact's forward evaluation(s).
+    pub fn multiply_adds(&self) -> usize {
+        self.mlp.multiply_adds() * self.kind.evaluations()
+    }
+
+    /// Multiply-adds of one contact's forces and Jacobians in reverse mode.
+    pub fn jacobian_multiply_adds(&self) -> usize {
+        self.mlp.jacobian_multiply_adds() * self.kind.evaluations()
     }
 }
 
@@ -163,10 +225,13 @@ impl WeightsFile {
         let kind = match field("model")? {
             "friction" => NetKind::Friction,
             "naive" => NetKind::Naive,
+            "friction-contact" => NetKind::FrictionContact,
             other => {
                 return Err(Error::file(
                     path,
-                    format!("model {other:?} is neither \"friction\" nor \"naive\""),
+                    format!(
+                        "model {other:?} is not \"friction\", \"friction-contact\" or \"naive\""
+                    ),
                 ));
             }
         };
@@ -366,6 +431,14 @@ impl WeightsFile {
             ));
         }
         std::fs::write(path, self.to_bytes()).map_err(|e| Error::io(path, e))
+    }
+
+    /// The network with its kind, in physical units (`folded`).
+    pub fn network(&self) -> Network {
+        Network {
+            kind: self.kind,
+            mlp: self.folded(),
+        }
     }
 
     /// The network in physical units: u = (x − min) / (max − min) folded

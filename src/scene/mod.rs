@@ -10,7 +10,7 @@ use glam::{Quat, Vec3};
 
 use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
 use crate::error::{Error, Result};
-use crate::nn::Mlp;
+use crate::nn::weights::Network;
 pub use cloth::Cloth;
 pub use mesh::TriMesh;
 pub use rigid::{Motion, RigidBody};
@@ -22,7 +22,7 @@ pub struct Scene {
     pub cloth: Cloth,
     pub rigid: Option<RigidBody>,
     /// The collision network, folded to physical units, for network models.
-    pub network: Option<Arc<Mlp>>,
+    pub network: Option<Arc<Network>>,
 }
 
 fn quat(r: &Rotation) -> Quat {
@@ -80,7 +80,7 @@ impl Scene {
                 ))
             }
         };
-        let network = config.read_weights()?.map(|file| Arc::new(file.folded()));
+        let network = config.read_weights()?.map(|file| Arc::new(file.network()));
         Ok(Scene {
             config: config.clone(),
             cloth,
