@@ -93,12 +93,15 @@ fn network_force_jacobians_match_finite_differences() {
     }
 }
 
+/// The contact-frame network's input ranges: depth, approach, slide, the
+/// coefficients.
+const CONTACT_RANGES: [f32; 7] = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+
 /// The contact-frame network: its chain rule back to the world (the
 /// frame turning with c and v) against finite differences.
 #[test]
 fn contact_frame_network_jacobians_match_finite_differences() {
-    let ranges = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
-    let net = scaled_random_net(&[7, 24, 24, 2], &ranges, 9);
+    let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 9);
     let mut rng = Rng(5);
     for _ in 0..40 {
         let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
@@ -111,8 +114,7 @@ fn contact_frame_network_jacobians_match_finite_differences() {
 /// stops, and the Jacobians stay finite there and approach their limit.
 #[test]
 fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
-    let ranges = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
-    let net = scaled_random_net(&[7, 24, 24, 2], &ranges, 10);
+    let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
     let g = |c: Vec3, v: Vec3| friction_contact_net(&net, c, v, &K);
     let mut rng = Rng(6);
     for _ in 0..20 {
