@@ -215,7 +215,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             for v in VARIANTS {
                 let label = v.label();
                 progress(&format!("step {} {label} {grid}²", name(backend)));
-                let report = run::run(backend, v.scene(grid)?, opts.steps, |_| {})?;
+                let report = run::run(backend, v.scene(grid)?, opts.steps, |_| {}, None)?;
                 rows.push(StepRow { label, report });
             }
         }
@@ -230,7 +230,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             let mut runs = (0..opts.repeats)
                 .map(|_| {
                     let start = Instant::now();
-                    run::run(backend, scene.clone(), steps, |_| {})?;
+                    run::run(backend, scene.clone(), steps, |_| {}, None)?;
                     Ok(start.elapsed().as_secs_f64())
                 })
                 .collect::<Result<Vec<f64>>>()?;

@@ -15,6 +15,7 @@ pub mod error;
 pub mod gpu;
 pub mod math;
 pub mod nn;
+pub mod render;
 pub mod run;
 pub mod scene;
 

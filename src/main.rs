@@ -10,7 +10,7 @@ use wgcloth::config::{ModelKind, SceneKind, Shape};
 use wgcloth::gpu::GpuContext;
 use wgcloth::nn::train::thesis_hidden;
 use wgcloth::nn::weights::NetKind;
-use wgcloth::run::{self, Backend, check_finite, choose_backend};
+use wgcloth::run::{self, Backend, Chosen, check_finite, choose_backend};
 use wgcloth::{Config, Error, Result, Scene};
 
 #[derive(Parser)]
@@ -133,6 +133,24 @@ struct RunArgs {
     /// Write the run report as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
+    /// Render frames into DIR: frame_NNNN.png and animation.gif.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// With --out: a frame every K steps (and one of the start).
+    #[arg(long, value_name = "K", default_value_t = 4)]
+    every: u64,
+    /// With --out: frames of N×N pixels.
+    #[arg(long, value_name = "N", default_value_t = wgcloth::render::DEFAULT_SIZE)]
+    size: u32,
+    /// With --out: draw the cloth's triangle edges.
+    #[arg(long)]
+    wireframe: bool,
+    /// With --out: leave out the green contact-force segments.
+    #[arg(long)]
+    no_forces: bool,
+    /// With --out: replace frames already in DIR.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
@@ -248,12 +266,62 @@ fn run(args: &RunArgs) -> Result<()> {
         eprintln!("{n}");
     }
     let steps = config.solver.steps;
+    // Frames need a GPU even for a CPU run: the CPU path uploads its state.
+    // Without any adapter the run goes on without frames, as the main job
+    // goes on without a GPU.
+    let own_context;
+    let render_context = match (&args.out, &chosen) {
+        (None, _) => None,
+        (Some(_), Chosen::Gpu(ctx)) => Some(&**ctx),
+        (Some(_), Chosen::Cpu) => match GpuContext::headless() {
+            Ok(ctx) => {
+                own_context = ctx;
+                Some(&own_context)
+            }
+            Err(e) => {
+                eprintln!(
+                    "notice: no GPU adapter to render frames ({e}); lavapipe renders them on the CPU (Debian: mesa-vulkan-drivers). Running without frames."
+                );
+                None
+            }
+        },
+    };
+    let mut recording = match (&args.out, render_context) {
+        (Some(dir), Some(ctx)) => {
+            let options = wgcloth::render::RecordOptions {
+                dir: dir.clone(),
+                size: args.size,
+                every: args.every,
+                style: wgcloth::render::Style {
+                    wireframe: args.wireframe,
+                    forces: !args.no_forces,
+                },
+                force: args.force,
+            };
+            Some(wgcloth::render::Recording::new(
+                ctx, &scene, steps, &options,
+            )?)
+        }
+        _ => None,
+    };
     let bar = progress_bar(steps);
-    let report = run::run(&chosen, scene, run::Steps::all(steps), |k| {
-        bar.set_position(k)
-    })?;
+    let report = run::run(
+        &chosen,
+        scene,
+        run::Steps::all(steps),
+        |k| bar.set_position(k),
+        recording.as_mut(),
+    )?;
     bar.finish_and_clear();
     println!("{}", report.summary());
+    if let Some(recording) = recording {
+        let (frames, gif) = recording.finish();
+        println!(
+            "frames       {frames} in {}",
+            gif.parent().unwrap_or(&gif).display()
+        );
+        println!("animation    {}", gif.display());
+    }
     if let Some(path) = &args.report {
         write_json(path, &report)?;
         println!("report       {}", path.display());

@@ -12,6 +12,7 @@ use crate::cpu::{self, CpuSim, STAGES};
 use crate::error::{Error, Result};
 use crate::gpu::mlp::NetworkKernel;
 use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
+use crate::render::Recording;
 use crate::scene::Scene;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -140,21 +141,32 @@ impl Steps {
 }
 
 /// Runs `steps.total` steps, calling `progress` after each.
+/// Runs `scene`, rendering frames into `recording` when given (of the
+/// initial state and after every `--every` steps).
 pub fn run(
     chosen: &Chosen,
     scene: Scene,
     steps: Steps,
     progress: impl FnMut(u64),
+    recording: Option<&mut Recording>,
 ) -> Result<Report> {
     match chosen {
-        Chosen::Cpu => Ok(run_cpu(scene, steps, progress)),
-        Chosen::Gpu(ctx) => run_gpu(ctx, scene, steps, progress),
+        Chosen::Cpu => run_cpu(scene, steps, progress, recording),
+        Chosen::Gpu(ctx) => run_gpu(ctx, scene, steps, progress, recording),
     }
 }
 
-fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report {
+fn run_cpu(
+    scene: Scene,
+    steps: Steps,
+    mut progress: impl FnMut(u64),
+    mut recording: Option<&mut Recording>,
+) -> Result<Report> {
     let config = scene.config.clone();
     let mut sim = CpuSim::new(scene);
+    if let Some(r) = recording.as_deref_mut() {
+        r.cpu(0, &sim)?;
+    }
     let mut timings = Timings::default();
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
     let (mut cg_residual_max, mut max_penetration) = (0.0f32, 0.0f32);
@@ -177,6 +189,9 @@ fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report 
         breakdowns += s.pcg.breakdown as u64;
         cg_residual_max = cg_residual_max.max(s.pcg.relative_residual);
         max_penetration = max_penetration.max(s.max_penetration);
+        if let Some(r) = recording.as_deref_mut() {
+            r.cpu(k + 1, &sim)?;
+        }
         progress(k + 1);
         if !sim.is_finite() {
             diverged_at = Some(k + 1);
@@ -185,7 +200,7 @@ fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report 
     }
     let done = sim.state.step.max(1) as f64;
     let (ms_per_step, stage_ms) = timings.medians();
-    Report {
+    Ok(Report {
         backend: "cpu".into(),
         adapter: format!(
             "CPU reference path ({} threads)",
@@ -208,7 +223,7 @@ fn run_cpu(scene: Scene, steps: Steps, mut progress: impl FnMut(u64)) -> Report 
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
-    }
+    })
 }
 
 /// "FILE: KIND 10-256-…-3, N multiply-adds per contact[, KERNEL kernel]"
@@ -238,9 +253,13 @@ fn run_gpu(
     scene: Scene,
     steps: Steps,
     mut progress: impl FnMut(u64),
+    mut recording: Option<&mut Recording>,
 ) -> Result<Report> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
     let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene)?;
+    if let Some(r) = recording.as_deref_mut() {
+        r.gpu(0, &sim, &scene)?;
+    }
     let mut timings = Timings::default();
     let mut dispatches = 0;
     for k in 0..steps.total {
@@ -251,6 +270,9 @@ fn run_gpu(
         let stages = sim.read_stage_ms()?.unwrap_or_default();
         if k >= steps.untimed {
             timings.push(wall, stages);
+        }
+        if let Some(r) = recording.as_deref_mut() {
+            r.gpu(k + 1, &sim, &scene)?;
         }
         progress(k + 1);
     }

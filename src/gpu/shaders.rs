@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use wgpu::naga;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 10] = [
+pub const STAGES: [(&str, &str); 11] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
@@ -19,6 +19,7 @@ pub const STAGES: [(&str, &str); 10] = [
     ("measure", include_str!("../../wgsl/measure.wgsl")),
     ("batch", include_str!("../../wgsl/batch.wgsl")),
     ("mlp", include_str!("../../wgsl/mlp.wgsl")),
+    ("lines", include_str!("../../wgsl/lines.wgsl")),
 ];
 
 /// The network layer's threads per tile edge as written in wgsl/mlp.wgsl;

@@ -84,6 +84,9 @@ struct Buffers {
     net_list: wgpu::Buffer,
     net_inputs: wgpu::Buffer,
     net_outputs: wgpu::Buffer,
+    /// The renderer's force segments (stage "lines") and their scale.
+    lines: wgpu::Buffer,
+    line_scale: wgpu::Buffer,
 }
 
 struct BindGroups {
@@ -96,6 +99,7 @@ struct BindGroups {
     /// [0]: scalars in = 0, out = 1; [1]: the reverse.
     pcg: [wgpu::BindGroup; 2],
     integrate: wgpu::BindGroup,
+    lines: wgpu::BindGroup,
 }
 
 /// Timestamp queries around each pass, where the adapter has them.
@@ -378,6 +382,12 @@ impl Buffers {
                 "network outputs",
                 batch * (params.net_rows * params.net_outputs) as usize * 4,
             ),
+            lines: zeroed("force lines", 2 * (n + r) * vec4),
+            line_scale: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("force line scale"),
+                contents: bytemuck::cast_slice(&[DEFAULT_LINE_SCALE, 0.0, 0.0, 0.0]),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            }),
         }
     }
 }
@@ -536,9 +546,27 @@ impl BindGroups {
                     ("state", &bf.state),
                 ],
             ),
+            lines: kernels.bind(
+                device,
+                "lines",
+                &[
+                    ("params", &bf.params),
+                    ("x", &bf.x),
+                    ("rigid_vertices", &bf.rigid_vertices),
+                    ("vf_contacts", &bf.vf_contacts),
+                    ("fv_contacts", &bf.fv_contacts),
+                    ("vf_responses", &bf.vf_responses),
+                    ("fv_responses", &bf.fv_responses),
+                    ("line_scale", &bf.line_scale),
+                    ("lines", &bf.lines),
+                ],
+            ),
         }
     }
 }
+
+/// Metres of force segment per unit of force, until `set_line_scale`.
+pub const DEFAULT_LINE_SCALE: f32 = 0.05;
 
 impl GpuSim {
     /// Uploads `scene` onto the app's device. Fails with a clear error when
@@ -609,6 +637,46 @@ impl GpuSim {
     }
 
     /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
+    /// Records stage "lines": the last step's contact forces as segments
+    /// in [`GpuSim::force_lines`].
+    pub fn record_force_lines(&self, encoder: &mut wgpu::CommandEncoder) {
+        let p = &self.params;
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("lines"),
+            timestamp_writes: None,
+        });
+        let mut count = 0;
+        let slots = p.n_vertices + p.n_rigid_vertices;
+        self.dispatch(
+            &mut pass,
+            ("lines", "force_lines"),
+            &self.groups.lines,
+            slots,
+            &mut count,
+        );
+    }
+
+    /// Segment length per unit of force for `record_force_lines`, metres.
+    pub fn set_line_scale(&self, queue: &wgpu::Queue, metres_per_force: f32) {
+        queue.write_buffer(
+            &self.buffers.line_scale,
+            0,
+            bytemuck::cast_slice(&[metres_per_force, 0.0, 0.0, 0.0]),
+        );
+    }
+
+    /// Force segments, two vec4s per contact slot (w = 0: no contact):
+    /// vertex–face slots, then face–vertex ones.
+    pub fn force_lines(&self) -> &wgpu::Buffer {
+        &self.buffers.lines
+    }
+
+    /// The rigid body's vertices placed at the current time (vec4 each) and
+    /// its triangles (three u32 each).
+    pub fn body(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.buffers.rigid_vertices, &self.buffers.body_triangles)
+    }
+
     pub fn positions(&self) -> &wgpu::Buffer {
         &self.buffers.x
     }

@@ -1,0 +1,94 @@
+// Render pipeline (thesis Figures 1–2): the cloth and the rigid body with
+// two-sided Phong shading, an optional cloth wireframe, and each contact's
+// force as a green segment. Vertices are pulled from the simulator's own
+// storage buffers by index, so nothing is copied to draw a frame. Not a
+// compute stage: src/render owns its pipelines.
+
+struct Camera {
+    view_proj: mat4x4<f32>,
+    eye: vec4<f32>,
+    // Direction towards the light.
+    light: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+// Cloth positions (xyz, w unused) and triangles (three indices each).
+@group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> triangles: array<u32>;
+// The placed rigid body.
+@group(0) @binding(3) var<storage, read> body_vertices: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> body_triangles: array<u32>;
+// Segment endpoints in pairs; w = 0 marks an unused pair (wgsl/lines.wgsl).
+@group(0) @binding(5) var<storage, read> lines: array<vec4<f32>>;
+
+struct Surface {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+}
+
+fn surface_at(p: vec3<f32>) -> Surface {
+    return Surface(camera.view_proj * vec4<f32>(p, 1.0), p);
+}
+
+@vertex
+fn vs_cloth(@builtin(vertex_index) i: u32) -> Surface {
+    return surface_at(positions[triangles[i]].xyz);
+}
+
+@vertex
+fn vs_body(@builtin(vertex_index) i: u32) -> Surface {
+    return surface_at(body_vertices[body_triangles[i]].xyz);
+}
+
+// Edge k of triangle t as two vertices: corners (0,1), (1,2), (2,0).
+@vertex
+fn vs_wire(@builtin(vertex_index) i: u32) -> Surface {
+    let t = i / 6u;
+    let corner = array<u32, 6>(0u, 1u, 1u, 2u, 2u, 0u)[i % 6u];
+    return surface_at(positions[triangles[3u * t + corner]].xyz);
+}
+
+@vertex
+fn vs_line(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let pair = i / 2u;
+    if lines[2u * pair].w == 0.0 {
+        // Outside the clip volume: the segment is dropped.
+        return vec4<f32>(0.0, 0.0, 2.0, 1.0);
+    }
+    return camera.view_proj * vec4<f32>(lines[i].xyz, 1.0);
+}
+
+// Phong with the face normal turned towards the viewer, so both sides of
+// the cloth are lit; the face normal comes from the screen-space
+// derivatives of the position, as the cloth has no normal buffer.
+fn phong(world: vec3<f32>, base: vec3<f32>) -> vec4<f32> {
+    var n = normalize(cross(dpdx(world), dpdy(world)));
+    let to_eye = normalize(camera.eye.xyz - world);
+    if dot(n, to_eye) < 0.0 {
+        n = -n;
+    }
+    let l = normalize(camera.light.xyz);
+    let diffuse = max(dot(n, l), 0.0);
+    let specular = pow(max(dot(reflect(-l, n), to_eye), 0.0), 32.0);
+    return vec4<f32>(base * (0.3 + 0.65 * diffuse) + vec3<f32>(0.15 * specular), 1.0);
+}
+
+@fragment
+fn fs_cloth(s: Surface) -> @location(0) vec4<f32> {
+    return phong(s.world, vec3<f32>(0.85, 0.35, 0.25));
+}
+
+@fragment
+fn fs_body(s: Surface) -> @location(0) vec4<f32> {
+    return phong(s.world, vec3<f32>(0.35, 0.45, 0.85));
+}
+
+@fragment
+fn fs_wire() -> @location(0) vec4<f32> {
+    return vec4<f32>(0.1, 0.1, 0.1, 1.0);
+}
+
+@fragment
+fn fs_force() -> @location(0) vec4<f32> {
+    return vec4<f32>(0.0, 1.0, 0.0, 1.0);
+}
