@@ -148,9 +148,19 @@ struct RunArgs {
     /// With --out: leave out the green contact-force segments.
     #[arg(long)]
     no_forces: bool,
+    /// With --out: also write each frame's geometry (`obj`: frame_NNNN.obj,
+    /// objects `cloth` and `body`, for Blender).
+    #[arg(long, value_name = "FORMAT")]
+    export: Option<Export>,
     /// With --out: replace frames already in DIR.
     #[arg(long)]
     force: bool,
+}
+
+/// Geometry formats `run --export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Export {
+    Obj,
 }
 
 #[derive(Args)]
@@ -296,6 +306,7 @@ fn run(args: &RunArgs) -> Result<()> {
                     wireframe: args.wireframe,
                     forces: !args.no_forces,
                 },
+                obj: args.export == Some(Export::Obj),
                 force: args.force,
             };
             Some(wgcloth::render::Recording::new(

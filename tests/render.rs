@@ -8,8 +8,9 @@ use glam::{Mat4, Vec3};
 use wgcloth::config::SceneKind;
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::render::obj::write_obj;
 use wgcloth::render::output::{FrameWriter, frame_name};
-use wgcloth::render::{Camera, Frame, HostScene, METRES_PER_FORCE, Renderer, Source, Style, lines};
+use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines, metres_per_force};
 use wgcloth::{Config, Scene};
 
 const SIZE: u32 = 256;
@@ -70,7 +71,7 @@ fn is_white(p: [u8; 4]) -> bool {
 
 fn render_cpu(ctx: &GpuContext, sim: &CpuSim, camera: &Camera, style: Style) -> Frame {
     let host = HostScene::new(&ctx.device, &sim.scene);
-    host.upload_sim(&ctx.queue, sim, METRES_PER_FORCE);
+    host.upload_sim(&ctx.queue, sim, metres_per_force(&sim.scene));
     let renderer = Renderer::new(&ctx.device, SIZE, SIZE).unwrap();
     renderer
         .render(&ctx.device, &ctx.queue, &host.source(), camera, style)
@@ -159,7 +160,7 @@ fn force_segments_are_green_where_contacts_are() {
             })
         })
     };
-    let segments = lines::force_lines(&sim, METRES_PER_FORCE);
+    let segments = lines::force_lines(&sim, metres_per_force(&sim.scene));
     let starts: Vec<Vec3> = segments
         .chunks_exact(2)
         .filter(|pair| pair[0][3] != 0.0)
@@ -250,7 +251,7 @@ fn the_frame_directory_is_checked_before_writing() {
     std::fs::create_dir_all(&root).unwrap();
     let file = root.join("a-file");
     std::fs::write(&file, "keep me").unwrap();
-    let err = FrameWriter::create(&file, 3, 40, false)
+    let err = FrameWriter::create(&file, 3, (40, false), false)
         .err()
         .unwrap()
         .to_string();
@@ -258,7 +259,7 @@ fn the_frame_directory_is_checked_before_writing() {
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "keep me");
 
     let dir = root.join("new/frames");
-    let mut writer = FrameWriter::create(&dir, 3, 40, false).unwrap();
+    let mut writer = FrameWriter::create(&dir, 3, (40, true), false).unwrap();
     let frame = Frame {
         width: 2,
         height: 2,
@@ -267,7 +268,7 @@ fn the_frame_directory_is_checked_before_writing() {
     writer.write(&frame).unwrap();
     writer.finish();
     assert!(dir.join(frame_name(0)).is_file());
-    let err = FrameWriter::create(&dir, 3, 40, false)
+    let err = FrameWriter::create(&dir, 3, (40, true), false)
         .err()
         .unwrap()
         .to_string();
@@ -275,6 +276,62 @@ fn the_frame_directory_is_checked_before_writing() {
         err.contains("frame_0000.png") && err.contains("--force"),
         "{err}"
     );
-    FrameWriter::create(&dir, 3, 40, true).unwrap();
+    FrameWriter::create(&dir, 3, (40, true), true).unwrap();
     std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// `--export obj`: a frame's file loads back (with tobj, as Blender's
+/// importer reads it) as the simulated cloth and the placed body.
+#[test]
+fn obj_frames_load_back_as_the_simulated_geometry() {
+    let scene = scene(SceneKind::Sphere);
+    let mut sim = CpuSim::new(scene);
+    for _ in 0..30 {
+        sim.step();
+    }
+    let time = sim.state.time as f32;
+    let path = std::env::temp_dir().join(format!("wgcloth-obj-{}.obj", std::process::id()));
+    write_obj(&path, &sim.scene, &sim.state.x, time).unwrap();
+    let (models, _) = tobj::load_obj(&path, &tobj::LoadOptions::default()).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    let names: Vec<&str> = models.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["cloth", "body"]);
+    let points = |m: &tobj::Model| -> Vec<Vec3> {
+        m.mesh
+            .positions
+            .chunks_exact(3)
+            .map(Vec3::from_slice)
+            .collect()
+    };
+    // tobj numbers each object's vertices in the order its faces use them,
+    // so compare corner by corner.
+    let corners = |m: &tobj::Model| -> Vec<Vec3> {
+        let p = points(m);
+        m.mesh.indices.iter().map(|&i| p[i as usize]).collect()
+    };
+    let cloth: Vec<Vec3> = sim
+        .scene
+        .cloth
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| sim.state.x[i as usize])
+        .collect();
+    assert_eq!(corners(&models[0]), cloth);
+    let frame = sim.rigid_frame().unwrap();
+    let body = sim.scene.rigid.as_ref().unwrap();
+    let placed: Vec<Vec3> = body
+        .mesh
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| frame.vertices[i as usize])
+        .collect();
+    let worst = corners(&models[1])
+        .iter()
+        .zip(&placed)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0f32, f32::max);
+    assert_eq!(corners(&models[1]).len(), placed.len());
+    assert!(worst < 1e-5, "body vertices {worst} m from the simulator's");
 }

@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod lines;
+pub mod obj;
 pub mod output;
 
 use glam::{Mat4, Vec3};
@@ -484,11 +485,17 @@ pub struct RecordOptions {
     /// A frame every this many steps (and one of the initial state).
     pub every: u64,
     pub style: Style,
+    /// Also each frame's geometry as OBJ (`--export obj`).
+    pub obj: bool,
     pub force: bool,
 }
 
-/// Metres of force segment per newton-equivalent unit of force.
-pub const METRES_PER_FORCE: f32 = 0.05;
+/// Metres of force segment per unit of force: 5 cm on a 32×32 cloth, and
+/// in proportion to the vertex count, as each vertex's share of the
+/// contact force falls with it.
+pub fn metres_per_force(scene: &Scene) -> f32 {
+    0.05 * scene.cloth.vertex_count() as f32 / 1024.0
+}
 
 /// The frames of a run, rendered on `ctx` (for a CPU run too: the CPU
 /// path uploads its state) and written as they come.
@@ -523,7 +530,12 @@ impl<'a> Recording<'a> {
             camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
             style: options.style,
             every: options.every,
-            writer: output::FrameWriter::create(&options.dir, frames, delay_ms, options.force)?,
+            writer: output::FrameWriter::create(
+                &options.dir,
+                frames,
+                (delay_ms, options.obj),
+                options.force,
+            )?,
             host: HostScene::new(&ctx.device, scene),
         })
     }
@@ -550,7 +562,10 @@ impl<'a> Recording<'a> {
         if !self.due(step) {
             return Ok(());
         }
-        self.host.upload_sim(&self.ctx.queue, sim, METRES_PER_FORCE);
+        self.writer
+            .write_obj(&sim.scene, &sim.state.x, sim.state.time as f32)?;
+        self.host
+            .upload_sim(&self.ctx.queue, sim, metres_per_force(&sim.scene));
         let view = (&self.camera, self.style);
         Self::draw(
             self.ctx,
@@ -569,6 +584,8 @@ impl<'a> Recording<'a> {
             return Ok(());
         }
         if step == 0 {
+            self.writer
+                .write_obj(scene, &scene.cloth.rest_positions, 0.0)?;
             let start = (&scene.cloth.rest_positions[..], 0.0);
             self.host.upload(&self.ctx.queue, scene, start, &[]);
             let view = (&self.camera, self.style);
@@ -580,7 +597,11 @@ impl<'a> Recording<'a> {
                 &mut self.writer,
             );
         }
-        sim.set_line_scale(&self.ctx.queue, METRES_PER_FORCE);
+        if self.writer.wants_obj() {
+            let time = step as f32 * scene.config.solver.dt;
+            self.writer.write_obj(scene, &sim.read_positions()?, time)?;
+        }
+        sim.set_line_scale(&self.ctx.queue, metres_per_force(scene));
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         sim.record_force_lines(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
@@ -597,5 +618,32 @@ impl<'a> Recording<'a> {
     /// The frames written and the GIF's path.
     pub fn finish(self) -> (usize, std::path::PathBuf) {
         (self.writer.written(), self.writer.finish())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SHADER;
+    use wgpu::naga;
+
+    #[test]
+    fn the_render_shader_validates_with_naga() {
+        let module = naga::front::wgsl::parse_str(SHADER).expect("render.wgsl parses");
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .expect("render.wgsl validates");
+        let names: Vec<&str> = module
+            .entry_points
+            .iter()
+            .map(|e| e.name.as_str())
+            .collect();
+        for wanted in [
+            "vs_cloth", "vs_body", "vs_wire", "vs_line", "fs_cloth", "fs_body",
+        ] {
+            assert!(names.contains(&wanted), "{wanted} in {names:?}");
+        }
     }
 }

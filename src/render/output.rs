@@ -1,4 +1,5 @@
-//! `wgcloth run --out DIR`: the frames as PNG files and one animated GIF.
+//! `wgcloth run --out DIR`: the frames as PNG files and one animated GIF,
+//! and with `--export obj` each frame's geometry as OBJ.
 //! Everything it will write is checked before the run starts, so a bad
 //! directory costs no simulation and nothing is overwritten without
 //! `--force`.
@@ -10,8 +11,12 @@ use std::path::{Path, PathBuf};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, RgbaImage};
 
+use glam::Vec3;
+
 use crate::error::{Error, Result};
 use crate::render::Frame;
+use crate::render::obj::{obj_name, write_obj};
+use crate::scene::Scene;
 
 pub const GIF_NAME: &str = "animation.gif";
 
@@ -26,6 +31,7 @@ pub struct FrameWriter {
     /// Display time of each GIF frame, ms (GIF counts in 10 ms).
     delay_ms: u32,
     written: usize,
+    obj: bool,
 }
 
 fn image_error(path: &Path, e: image::ImageError) -> Error {
@@ -33,10 +39,15 @@ fn image_error(path: &Path, e: image::ImageError) -> Error {
 }
 
 impl FrameWriter {
-    /// Prepares `dir` for `frames` frames shown `delay_ms` apart: creates
-    /// it if missing, and refuses a file in its place, or (without
-    /// `force`) any output of ours already there.
-    pub fn create(dir: &Path, frames: usize, delay_ms: u32, force: bool) -> Result<FrameWriter> {
+    /// Prepares `dir` for `frames` frames shown `delay_ms` apart (with an
+    /// OBJ file each if `obj`): creates it if missing, and refuses a file
+    /// in its place, or (without `force`) any output of ours already there.
+    pub fn create(
+        dir: &Path,
+        frames: usize,
+        (delay_ms, obj): (u32, bool),
+        force: bool,
+    ) -> Result<FrameWriter> {
         if dir.exists() && !dir.is_dir() {
             return Err(Error::file(
                 dir,
@@ -44,7 +55,11 @@ impl FrameWriter {
             ));
         }
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let names = (0..frames).map(frame_name).chain([GIF_NAME.to_string()]);
+        let objs = (0..frames).filter(|_| obj).map(obj_name);
+        let names = (0..frames)
+            .map(frame_name)
+            .chain(objs)
+            .chain([GIF_NAME.to_string()]);
         if !force && let Some(taken) = names.map(|n| dir.join(n)).find(|p| p.exists()) {
             return Err(Error::file(
                 &taken,
@@ -62,7 +77,21 @@ impl FrameWriter {
             gif,
             delay_ms: delay_ms.next_multiple_of(10).max(20),
             written: 0,
+            obj,
         })
+    }
+
+    /// The next frame's geometry, when OBJ export is on: cloth at `x`, the
+    /// body placed at `time`.
+    pub fn write_obj(&self, scene: &Scene, x: &[Vec3], time: f32) -> Result<()> {
+        match self.obj {
+            true => write_obj(&self.dir.join(obj_name(self.written)), scene, x, time),
+            false => Ok(()),
+        }
+    }
+
+    pub fn wants_obj(&self) -> bool {
+        self.obj
     }
 
     pub fn write(&mut self, frame: &Frame) -> Result<()> {
