@@ -210,33 +210,49 @@ struct CameraUniform {
     light: [f32; 4],
 }
 
-/// The render pipelines and an offscreen target of one size.
-pub struct Renderer {
+/// The render pipelines for one colour format, to draw into any target
+/// of it (an offscreen [`Renderer`], or a window's surface).
+pub struct Pipelines {
     layout: wgpu::BindGroupLayout,
     cloth: wgpu::RenderPipeline,
     body: wgpu::RenderPipeline,
     wire: wgpu::RenderPipeline,
     force: wgpu::RenderPipeline,
     camera: wgpu::Buffer,
-    color: wgpu::Texture,
-    depth: wgpu::TextureView,
-    width: u32,
-    height: u32,
 }
 
-impl Renderer {
-    /// Pipelines and a width × height target; a size the adapter cannot
-    /// hold is an error naming the limit.
-    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Result<Renderer> {
-        let most = device.limits().max_texture_dimension_2d;
-        if width == 0 || height == 0 || width > most || height > most {
-            return Err(Error::config(
-                "--size",
-                format!(
-                    "{width}×{height} is not a frame this adapter renders (1 to {most} per side)"
-                ),
-            ));
-        }
+/// A depth buffer for a width × height target.
+pub fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+    texture(device, "depth", (width, height), DEPTH, usage)
+        .create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+fn texture(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+impl Pipelines {
+    pub fn new(device: &wgpu::Device, format: wgpu::TextureFormat) -> Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
@@ -296,7 +312,7 @@ impl Renderer {
                     module: &module,
                     entry_point: Some(fs),
                     compilation_options: Default::default(),
-                    targets: &[Some(COLOR.into())],
+                    targets: &[Some(format.into())],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -317,25 +333,7 @@ impl Renderer {
             wgpu::PrimitiveTopology::TriangleList,
             wgpu::PrimitiveTopology::LineList,
         );
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
-        let texture = |label, format, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let attachment = wgpu::TextureUsages::RENDER_ATTACHMENT;
-        Ok(Renderer {
+        Pipelines {
             cloth: pipeline(("vs_cloth", "fs_cloth"), triangles, behind, tested),
             body: pipeline(("vs_body", "fs_body"), triangles, behind, tested),
             wire: pipeline(("vs_wire", "fs_wire"), segments, Default::default(), tested),
@@ -354,28 +352,23 @@ impl Renderer {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            color: texture("frame", COLOR, attachment | wgpu::TextureUsages::COPY_SRC),
-            depth: texture("depth", DEPTH, attachment)
-                .create_view(&wgpu::TextureViewDescriptor::default()),
-            width,
-            height,
-        })
+        }
     }
 
-    pub fn size(&self) -> (u32, u32) {
-        (self.width, self.height)
-    }
-
-    /// Draws `source` as seen by `camera` and reads the frame back.
-    pub fn render(
+    /// Records a frame of `source` as seen by `camera` into a target
+    /// (colour view, depth view, width / height), cleared to white first.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        (view, depth, aspect): (&wgpu::TextureView, &wgpu::TextureView, f32),
         source: &Source,
         camera: &Camera,
         style: Style,
-    ) -> Result<Frame> {
-        let view_proj: Mat4 = camera.view_proj(self.width as f32 / self.height as f32);
+    ) {
+        let view_proj: Mat4 = camera.view_proj(aspect);
         let uniform = CameraUniform {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
@@ -400,46 +393,97 @@ impl Renderer {
                 bind(5, source.lines),
             ],
         });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("frame"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            ..Default::default()
+        });
+        pass.set_bind_group(0, &group, &[]);
+        let mut draw = |pipeline, vertices: u32| {
+            pass.set_pipeline(pipeline);
+            pass.draw(0..vertices, 0..1);
+        };
+        draw(&self.cloth, 3 * source.triangle_count);
+        draw(&self.body, 3 * source.body_triangle_count);
+        if style.wireframe {
+            draw(&self.wire, 6 * source.triangle_count);
+        }
+        if style.forces {
+            draw(&self.force, 2 * source.line_count);
+        }
+    }
+}
+
+/// The render pipelines with an offscreen RGBA8 (sRGB) target of one size,
+/// read back frame by frame.
+pub struct Renderer {
+    pipelines: Pipelines,
+    color: wgpu::Texture,
+    depth: wgpu::TextureView,
+    width: u32,
+    height: u32,
+}
+
+impl Renderer {
+    /// Pipelines and a width × height target; a size the adapter cannot
+    /// hold is an error naming the limit.
+    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Result<Renderer> {
+        let most = device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > most || height > most {
+            return Err(Error::config(
+                "--size",
+                format!(
+                    "{width}×{height} is not a frame this adapter renders (1 to {most} per side)"
+                ),
+            ));
+        }
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        Ok(Renderer {
+            pipelines: Pipelines::new(device, COLOR),
+            color: texture(device, "frame", (width, height), COLOR, usage),
+            depth: depth_target(device, width, height),
+            width,
+            height,
+        })
+    }
+
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Draws `source` as seen by `camera` and reads the frame back.
+    pub fn render(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        source: &Source,
+        camera: &Camera,
+        style: Style,
+    ) -> Result<Frame> {
         let view = self
             .color
             .create_view(&wgpu::TextureViewDescriptor::default());
         let mut encoder = device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("frame"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                ..Default::default()
-            });
-            pass.set_bind_group(0, &group, &[]);
-            let mut draw = |pipeline, vertices: u32| {
-                pass.set_pipeline(pipeline);
-                pass.draw(0..vertices, 0..1);
-            };
-            draw(&self.cloth, 3 * source.triangle_count);
-            draw(&self.body, 3 * source.body_triangle_count);
-            if style.wireframe {
-                draw(&self.wire, 6 * source.triangle_count);
-            }
-            if style.forces {
-                draw(&self.force, 2 * source.line_count);
-            }
-        }
+        let aspect = self.width as f32 / self.height as f32;
+        let target = (&view, &self.depth, aspect);
+        self.pipelines
+            .record(device, queue, &mut encoder, target, source, camera, style);
         // Rows padded to the copy alignment, then unpadded on the host.
         let row = 4 * self.width;
         let padded = row.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
