@@ -20,5 +20,22 @@ for component in rustfmt clippy; do
 done
 
 cargo fmt --check
-cargo clippy --release --all-targets -- -D warnings
+cargo clippy --release --all-targets --features viewer -- -D warnings
 cargo test --release
+
+# The interactive viewer (examples/viewer.rs, feature `viewer`): without a
+# display it must fail with one clear line and exit code 2; with Xvfb here
+# it must run a few frames.
+cargo build --release --features viewer --example viewer
+set +e
+message=$(env -u DISPLAY -u WAYLAND_DISPLAY target/release/examples/viewer 2>&1)
+code=$?
+set -e
+if [ "$code" != 2 ] || ! grep -q "no display" <<<"$message"; then
+  echo "viewer without a display: exit $code: $message"
+  exit 1
+fi
+if command -v xvfb-run >/dev/null; then
+  xvfb-run -a target/release/examples/viewer --grid 16 --frames 30
+fi
+echo "viewer: ok"
