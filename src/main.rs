@@ -276,11 +276,27 @@ fn run(args: &RunArgs) -> Result<()> {
         eprintln!("{n}");
     }
     let steps = config.solver.steps;
+    let options = args.out.as_ref().map(|dir| wgcloth::render::RecordOptions {
+        dir: dir.clone(),
+        size: args.size,
+        every: args.every,
+        style: wgcloth::render::Style {
+            wireframe: args.wireframe,
+            forces: !args.no_forces,
+        },
+        obj: args.export == Some(Export::Obj),
+        force: args.force,
+    });
+    // The directory first: its errors need no GPU.
+    let writer = match &options {
+        Some(o) => Some(o.prepare(&scene, steps)?),
+        None => None,
+    };
     // Frames need a GPU even for a CPU run: the CPU path uploads its state.
     // Without any adapter the run goes on without frames, as the main job
     // goes on without a GPU.
     let own_context;
-    let render_context = match (&args.out, &chosen) {
+    let render_context = match (&writer, &chosen) {
         (None, _) => None,
         (Some(_), Chosen::Gpu(ctx)) => Some(&**ctx),
         (Some(_), Chosen::Cpu) => match GpuContext::headless() {
@@ -296,23 +312,13 @@ fn run(args: &RunArgs) -> Result<()> {
             }
         },
     };
-    let mut recording = match (&args.out, render_context) {
-        (Some(dir), Some(ctx)) => {
-            let options = wgcloth::render::RecordOptions {
-                dir: dir.clone(),
-                size: args.size,
-                every: args.every,
-                style: wgcloth::render::Style {
-                    wireframe: args.wireframe,
-                    forces: !args.no_forces,
-                },
-                obj: args.export == Some(Export::Obj),
-                force: args.force,
-            };
-            Some(wgcloth::render::Recording::new(
-                ctx, &scene, steps, &options,
-            )?)
-        }
+    let mut recording = match (options, writer, render_context) {
+        (Some(options), Some(writer), Some(ctx)) => Some(wgcloth::render::Recording::new(
+            ctx,
+            &scene,
+            steps,
+            (&options, writer),
+        )?),
         _ => None,
     };
     let bar = progress_bar(steps);

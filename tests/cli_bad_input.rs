@@ -627,3 +627,51 @@ fn eval_net_with_data_of_the_other_network_names_both() {
         &[],
     );
 }
+
+#[test]
+fn out_naming_a_file_is_one_clear_error_and_the_file_is_kept() {
+    let dir = TempDir::new("out_file");
+    let path = dir.file("notes.txt", "mine");
+    let out = run_tiny(&["--out", s(&path)]);
+    expect_error("--out naming a file", &out, &[s(&path), "is a file"], &[]);
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "mine");
+}
+
+#[test]
+fn out_under_a_file_is_one_clear_error() {
+    let dir = TempDir::new("out_under_file");
+    let file = dir.file("blocker", "x");
+    let target = file.join("frames");
+    let out = run_tiny(&["--out", s(&target)]);
+    expect_error("--out under a file", &out, &["blocker"], &[]);
+}
+
+#[test]
+fn frames_already_there_need_force() {
+    let dir = TempDir::new("out_exists");
+    let frame = dir.file("frame_0000.png", "not a png of ours");
+    let out = run_tiny(&["--out", s(&dir.0)]);
+    expect_error(
+        "frames already in --out",
+        &out,
+        &["frame_0000.png", "--force"],
+        &[],
+    );
+    assert_eq!(
+        std::fs::read_to_string(&frame).unwrap(),
+        "not a png of ours"
+    );
+}
+
+#[test]
+fn every_0_is_rejected() {
+    let dir = TempDir::new("every_0");
+    let out = run_tiny(&["--out", s(&dir.path("frames")), "--every", "0"]);
+    expect_error("--every 0", &out, &["--every"], &[]);
+}
+
+#[test]
+fn unknown_export_format_is_a_usage_error() {
+    let out = run_tiny(&["--out", "frames", "--export", "fbx"]);
+    expect_clap_error("--export fbx", &out, "fbx");
+}

@@ -172,6 +172,10 @@ fn force_segments_are_green_where_contacts_are() {
         .filter(|p| near_green(project(view_proj, **p)))
         .count();
     assert_eq!(marked, starts.len(), "contacts with a green segment");
+    // The sphere stays in sight as it pushes the cloth.
+    let centre = sim.rigid_frame().unwrap().translation;
+    let middle = at(&without, project(view_proj, centre));
+    assert!(is_body(middle), "the body's centre in contact: {middle:?}");
     let green = |f: &Frame| {
         f.rgba
             .chunks_exact(4)

@@ -534,6 +534,19 @@ pub struct RecordOptions {
     pub force: bool,
 }
 
+impl RecordOptions {
+    /// The checks that need no GPU, done first: the frame interval and the
+    /// directory, which it prepares for the run's frames.
+    pub fn prepare(&self, scene: &Scene, steps: u64) -> Result<output::FrameWriter> {
+        if self.every == 0 {
+            return Err(Error::config("--every", "must be at least 1 step"));
+        }
+        let frames = 1 + (steps / self.every) as usize;
+        let delay_ms = (1e3 * scene.config.solver.dt * self.every as f32) as u32;
+        output::FrameWriter::create(&self.dir, frames, (delay_ms, self.obj), self.force)
+    }
+}
+
 /// Metres of force segment per unit of force: 5 cm on a 32×32 cloth, and
 /// in proportion to the vertex count, as each vertex's share of the
 /// contact force falls with it.
@@ -555,31 +568,21 @@ pub struct Recording<'a> {
 }
 
 impl<'a> Recording<'a> {
-    /// Checks the size and the directory before any step runs.
+    /// Checks the frame size before any step runs; `writer` comes from
+    /// `options.prepare`.
     pub fn new(
         ctx: &'a crate::gpu::GpuContext,
         scene: &Scene,
         steps: u64,
-        options: &RecordOptions,
+        (options, writer): (&RecordOptions, output::FrameWriter),
     ) -> Result<Recording<'a>> {
-        if options.every == 0 {
-            return Err(Error::config("--every", "must be at least 1 step"));
-        }
-        let renderer = Renderer::new(&ctx.device, options.size, options.size)?;
-        let frames = 1 + (steps / options.every) as usize;
-        let delay_ms = (1e3 * scene.config.solver.dt * options.every as f32) as u32;
         Ok(Recording {
             ctx,
-            renderer,
+            renderer: Renderer::new(&ctx.device, options.size, options.size)?,
             camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
             style: options.style,
             every: options.every,
-            writer: output::FrameWriter::create(
-                &options.dir,
-                frames,
-                (delay_ms, options.obj),
-                options.force,
-            )?,
+            writer,
             host: HostScene::new(&ctx.device, scene),
         })
     }
