@@ -27,15 +27,8 @@ impl Camera {
     pub fn framing(scene: &Scene, duration: f32) -> Camera {
         let mut points = scene.cloth.rest_positions.clone();
         if let Some(body) = &scene.rigid {
-            let placed = |t: f32| {
-                let at = body.translation(t);
-                body.mesh
-                    .vertices
-                    .iter()
-                    .map(move |v| body.rotation * *v + at)
-            };
             for k in 0..=16 {
-                points.extend(placed(duration * k as f32 / 16.0));
+                points.extend(body.placed_vertices(duration * k as f32 / 16.0));
             }
         }
         let (lo, hi) = points.iter().fold(

@@ -163,14 +163,10 @@ impl HostScene {
         };
         write(&self.positions, &vec4s(x, 1.0));
         if let Some(body) = &scene.rigid {
-            let at = body.translation(time);
-            let placed: Vec<Vec3> = body
-                .mesh
-                .vertices
-                .iter()
-                .map(|v| body.rotation * *v + at)
-                .collect();
-            write(&self.body_vertices, &vec4s(&placed, 1.0));
+            write(
+                &self.body_vertices,
+                &vec4s(&body.placed_vertices(time), 1.0),
+            );
         }
         write(&self.lines, lines);
     }

@@ -32,13 +32,7 @@ pub fn obj_text(scene: &Scene, x: &[Vec3], time: f32) -> String {
     };
     object("cloth", x, &scene.cloth.triangles, 0);
     if let Some(body) = &scene.rigid {
-        let at = body.translation(time);
-        let placed: Vec<Vec3> = body
-            .mesh
-            .vertices
-            .iter()
-            .map(|v| body.rotation * *v + at)
-            .collect();
+        let placed = body.placed_vertices(time);
         object("body", &placed, &body.mesh.triangles, x.len());
     }
     out

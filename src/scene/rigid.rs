@@ -89,4 +89,14 @@ impl RigidBody {
     pub fn translation(&self, t: f32) -> Vec3 {
         self.position + self.motion.displacement(t)
     }
+
+    /// The mesh's vertices in the world at time t.
+    pub fn placed_vertices(&self, t: f32) -> Vec<Vec3> {
+        let at = self.translation(t);
+        self.mesh
+            .vertices
+            .iter()
+            .map(|v| self.rotation * *v + at)
+            .collect()
+    }
 }
