@@ -16,7 +16,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use wgcloth::config::ModelKind;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
-use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target, metres_per_force};
+use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
 use wgcloth::{Config, Scene};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -146,7 +146,6 @@ impl App {
         let scene = Scene::new(&config).map_err(|e| e.to_string())?;
         let sim = GpuSim::new(gfx.kernels.clone(), &gfx.ctx.device, &gfx.ctx.queue, &scene)
             .map_err(|e| e.to_string())?;
-        sim.set_line_scale(&gfx.ctx.queue, metres_per_force(&scene));
         if self.orbit.is_none() {
             let period = scene.config.rigid.motion.period;
             self.orbit = Some(Orbit::new(Camera::framing(&scene, period)));

@@ -18,6 +18,7 @@ use crate::gpu::layout::{
 };
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::nn::weights::NetKind;
+use crate::render::metres_per_force;
 use crate::scene::{Motion, Scene};
 
 const WORKGROUP: u32 = 256;
@@ -385,8 +386,8 @@ impl Buffers {
             lines: zeroed("force lines", 2 * (n + r) * vec4),
             line_scale: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("force line scale"),
-                contents: bytemuck::cast_slice(&[DEFAULT_LINE_SCALE, 0.0, 0.0, 0.0]),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                contents: bytemuck::cast_slice(&[metres_per_force(scene), 0.0, 0.0, 0.0]),
+                usage: wgpu::BufferUsages::UNIFORM,
             }),
         }
     }
@@ -565,9 +566,6 @@ impl BindGroups {
     }
 }
 
-/// Metres of force segment per unit of force, until `set_line_scale`.
-pub const DEFAULT_LINE_SCALE: f32 = 0.05;
-
 impl GpuSim {
     /// Uploads `scene` onto the app's device. Fails with a clear error when
     /// the scene exceeds the device's limits.
@@ -636,9 +634,9 @@ impl GpuSim {
         })
     }
 
-    /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
     /// Records stage "lines": the last step's contact forces as segments
-    /// in [`GpuSim::force_lines`].
+    /// in [`GpuSim::force_lines`], `render::metres_per_force` long per unit
+    /// of force.
     pub fn record_force_lines(&self, encoder: &mut wgpu::CommandEncoder) {
         let p = &self.params;
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -656,15 +654,6 @@ impl GpuSim {
         );
     }
 
-    /// Segment length per unit of force for `record_force_lines`, metres.
-    pub fn set_line_scale(&self, queue: &wgpu::Queue, metres_per_force: f32) {
-        queue.write_buffer(
-            &self.buffers.line_scale,
-            0,
-            bytemuck::cast_slice(&[metres_per_force, 0.0, 0.0, 0.0]),
-        );
-    }
-
     /// Force segments, two vec4s per contact slot (w = 0: no contact):
     /// vertex–face slots, then face–vertex ones.
     pub fn force_lines(&self) -> &wgpu::Buffer {
@@ -677,6 +666,7 @@ impl GpuSim {
         (&self.buffers.rigid_vertices, &self.buffers.body_triangles)
     }
 
+    /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
     pub fn positions(&self) -> &wgpu::Buffer {
         &self.buffers.x
     }

@@ -459,10 +459,6 @@ impl Renderer {
         })
     }
 
-    pub fn size(&self) -> (u32, u32) {
-        (self.width, self.height)
-    }
-
     /// Draws `source` as seen by `camera` and reads the frame back.
     pub fn render(
         &self,
@@ -644,7 +640,6 @@ impl<'a> Recording<'a> {
             let time = step as f32 * scene.config.solver.dt;
             self.writer.write_obj(scene, &sim.read_positions()?, time)?;
         }
-        sim.set_line_scale(&self.ctx.queue, metres_per_force(scene));
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         sim.record_force_lines(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
