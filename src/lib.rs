@@ -15,9 +15,11 @@ pub mod error;
 pub mod gpu;
 pub mod math;
 pub mod nn;
+pub mod plot;
 pub mod render;
 pub mod run;
 pub mod scene;
+pub mod stage;
 
 pub use config::Config;
 pub use error::{Error, Result};

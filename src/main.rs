@@ -49,6 +49,10 @@ struct BenchArgs {
     /// Write the table as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
+    /// Draw ms/step against particle count (log-log) with the per-stage
+    /// breakdown, as a PNG.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -347,9 +351,12 @@ fn run(args: &RunArgs) -> Result<()> {
 }
 
 fn bench(args: &BenchArgs) -> Result<()> {
-    if let Some(path) = &args.report {
-        // Fail before minutes of measuring, not after.
+    // Fail before minutes of measuring, not after.
+    for path in args.report.iter().chain(&args.plot) {
         writable(path)?;
+    }
+    if let Some(plot) = &args.plot {
+        wgcloth::plot::check_png(plot)?;
     }
     let options = match args.quick {
         true => wgcloth::bench::BenchOptions::quick(),
@@ -363,6 +370,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.report {
         write_json(path, &report)?;
         println!("report: {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        wgcloth::bench::plot::write(&report, path)?;
+        println!("plot: {}", path.display());
     }
     Ok(())
 }
@@ -435,6 +446,10 @@ fn refuse_existing(path: &std::path::Path, force: bool) -> Result<()> {
 fn train(args: &TrainArgs) -> Result<()> {
     if let Some(out) = &args.out {
         refuse_existing(out, args.force)?;
+    }
+    if let Some(plot) = &args.plot {
+        wgcloth::plot::check_png(plot)?;
+        writable(plot)?;
     }
     let data = wgcloth::nn::dataset::Dataset::read(&args.data)?;
     let out = args

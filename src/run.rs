@@ -8,12 +8,13 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::config::{ModelKind, SceneKind};
-use crate::cpu::{self, CpuSim, STAGES};
+use crate::cpu::{self, CpuSim};
 use crate::error::{Error, Result};
 use crate::gpu::mlp::NetworkKernel;
 use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use crate::render::Recording;
 use crate::scene::Scene;
+use crate::stage::Stage;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {
@@ -163,6 +164,7 @@ fn run_cpu(
     mut recording: Option<&mut Recording>,
 ) -> Result<Report> {
     let config = scene.config.clone();
+    let has_body = scene.rigid.is_some();
     let mut sim = CpuSim::new(scene);
     if let Some(r) = recording.as_deref_mut() {
         r.cpu(0, &sim)?;
@@ -178,10 +180,10 @@ fn run_cpu(
         if k >= steps.untimed {
             timings.push(
                 wall,
-                STAGES
+                Stage::ALL
                     .iter()
-                    .zip(s.stage_seconds)
-                    .map(|(n, secs)| (*n, secs * 1e3)),
+                    .filter(|stage| has_body || !stage.needs_body())
+                    .map(|stage| (stage.name(), s.stage_seconds[stage.index()] * 1e3)),
             );
         }
         cg_iters += s.pcg.iterations as u64;

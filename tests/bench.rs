@@ -1,17 +1,22 @@
-//! `wgcloth bench` on a tiny table: every backend × model gets a row with
-//! the steps it was asked to time, the period ratios divide the right
-//! rows, and the network throughput is consistent with the work each
-//! kernel does. Speed itself is never asserted.
+//! `wgcloth bench` on a tiny table: every backend × model × grid gets a
+//! row with the steps it was asked to time and every stage's time, the
+//! growth exponents, traffic floors and period ratios divide the right
+//! rows, the network throughput is consistent with the work each kernel
+//! does, and the plot draws every series and stage. Speed itself is never
+//! asserted.
 
+use wgcloth::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
 use wgcloth::bench::{BenchOptions, VARIANTS, bench};
 use wgcloth::config::ModelKind;
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::run::Steps;
+use wgcloth::stage::Stage;
 
 fn tiny() -> BenchOptions {
     BenchOptions {
         quick: true,
-        grids: vec![6],
+        grids: vec![6, 10],
+        hardware_gpu_grids: Vec::new(),
         steps: Steps {
             untimed: 2,
             total: 5,
@@ -33,12 +38,18 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
     }
     let backends: &[&str] = if gpu { &["cpu", "gpu"] } else { &["cpu"] };
 
-    assert_eq!(report.rows.len(), backends.len() * VARIANTS.len());
-    for (step, (backend, v)) in report.rows.iter().zip(
-        backends
+    let grids = &opts.grids;
+    assert_eq!(
+        report.rows.len(),
+        backends.len() * grids.len() * VARIANTS.len()
+    );
+    let expected = backends.iter().flat_map(|b| {
+        grids
             .iter()
-            .flat_map(|b| VARIANTS.iter().map(move |v| (*b, *v))),
-    ) {
+            .flat_map(move |g| VARIANTS.iter().map(move |v| (*b, *g, *v)))
+    });
+    let stage_names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+    for (step, (backend, grid, v)) in report.rows.iter().zip(expected) {
         let (row, model) = (&step.report, v.model);
         let what = format!("{backend} {}", v.label());
         assert_eq!(step.label, v.label());
@@ -47,7 +58,8 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             (backend, model),
             "{what}"
         );
-        assert_eq!(row.grid, [6, 6], "{what}");
+        assert_eq!(row.grid, [grid, grid], "{what}");
+        assert_eq!(step.particles, (grid * grid) as usize, "{what}");
         assert_eq!(row.steps, opts.steps.total, "{what}");
         assert!(row.finite, "{what}");
         assert!(
@@ -55,14 +67,61 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             "{what}"
         );
         assert_eq!(row.network.is_some(), model.is_network(), "{what}");
-        if backend == "cpu" {
-            // CPU stage timers cover the step's stages.
-            assert!(
-                row.stage_ms.contains_key("pcg"),
-                "{what}: {:?}",
-                row.stage_ms
-            );
+        // Every stage is timed: CPU timers, GPU timestamp queries (which
+        // lavapipe has; an adapter without them reports none).
+        if backend == "cpu" || !row.stage_ms.is_empty() {
+            let keys: Vec<&str> = row.stage_ms.keys().map(|k| k.as_str()).collect();
+            let mut want = stage_names.clone();
+            want.sort();
+            assert_eq!(keys, want, "{what}");
         }
+        let staged: f64 = row.stage_ms.values().sum();
+        assert!(
+            (step.stage_coverage - staged / row.ms_per_step).abs() < 1e-9,
+            "{what}"
+        );
+    }
+
+    assert_eq!(report.scaling.len(), backends.len() * VARIANTS.len());
+    for g in &report.scaling {
+        let ms = |grid: u32| {
+            report
+                .rows
+                .iter()
+                .find(|r| {
+                    r.report.backend == g.backend && r.label == g.label && r.report.grid[0] == grid
+                })
+                .expect("the row")
+                .report
+                .ms_per_step
+        };
+        assert_eq!((g.from_grid, g.to_grid), (6, 10), "{g:?}");
+        let exponent = (ms(10) / ms(6)).ln() / (100.0f64 / 36.0).ln();
+        assert!((g.exponent - exponent).abs() < 1e-9, "{g:?}");
+    }
+
+    assert_eq!(report.bandwidth.len(), backends.len());
+    assert!(report.bandwidth.iter().all(|b| b.gb_per_s > 0.0));
+    assert_eq!(report.cg_traffic.len(), backends.len() * grids.len());
+    for t in &report.cg_traffic {
+        let row = report
+            .rows
+            .iter()
+            .find(|r| {
+                r.report.backend == t.backend && r.report.grid[0] == t.grid && r.label == "friction"
+            })
+            .expect("the friction row");
+        let per_iteration = row.report.stage_ms["pcg"] / row.report.cg_iterations_mean;
+        assert!((t.measured_ms - per_iteration).abs() < 1e-9, "{t:?}");
+        // At least every vector of the 13 a vertex's iteration touches.
+        assert!(
+            t.bytes_per_iteration >= 13 * 12 * row.particles as u64,
+            "{t:?}"
+        );
+        assert!(
+            (t.times_floor - t.measured_ms / t.floor_ms).abs() < 1e-9,
+            "{t:?}"
+        );
     }
 
     assert_eq!(report.periods.len(), backends.len() * VARIANTS.len());
@@ -116,5 +175,38 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
     let table = report.table();
     for v in VARIANTS {
         assert!(table.contains(&v.label()), "{table}");
+    }
+
+    // Every series of the log-log panel and every stage of the breakdown
+    // is drawn from the rows: taking a series' rows, or a stage's times,
+    // out of the report takes pixels of its colour off the figure (the
+    // legend keeps its own).
+    let pixels = |report: &wgcloth::bench::BenchReport, color| {
+        let canvas = figure(report).expect("a figure");
+        let (w, h) = (canvas.width() as u32, canvas.height() as u32);
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| canvas.pixel(x, y) == color)
+            .count()
+    };
+    for (v, color) in VARIANTS.iter().zip(VARIANT_COLORS) {
+        let mut without = report.clone();
+        without.rows.retain(|r| r.label != v.label());
+        assert!(
+            pixels(&without, color) < pixels(&report, color),
+            "{} not drawn",
+            v.label()
+        );
+    }
+    for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS) {
+        let mut without = report.clone();
+        for r in &mut without.rows {
+            r.report.stage_ms.remove(stage.name());
+        }
+        assert!(
+            pixels(&without, color) < pixels(&report, color),
+            "{} not drawn",
+            stage.name()
+        );
     }
 }

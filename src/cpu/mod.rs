@@ -16,6 +16,7 @@ use glam::{Mat3, Vec3};
 
 use crate::bvh::{Bvh, triangle_boxes};
 use crate::scene::Scene;
+use crate::stage::Stage;
 use assemble::StepParams;
 use collide::{Contact, Tolerances};
 use contact::{Model, Response};
@@ -26,18 +27,6 @@ use rigid::RigidFrame;
 /// the work (a 32² cloth's vectors stay on one thread).
 pub const GRAIN: usize = 2048;
 
-/// The stages of one step, in order; `stage_ms` in reports uses these names.
-pub const STAGES: [&str; 8] = [
-    "rigid",
-    "collide",
-    "contact",
-    "springs",
-    "assemble",
-    "pcg",
-    "integrate",
-    "measure",
-];
-
 /// What one step did.
 #[derive(Clone, Debug, Default)]
 pub struct StepStats {
@@ -45,8 +34,8 @@ pub struct StepStats {
     pub contacts: usize,
     /// Deepest cloth vertex inside the rigid surface after the step, m.
     pub max_penetration: f32,
-    /// Seconds spent in each of [`STAGES`].
-    pub stage_seconds: [f64; STAGES.len()],
+    /// Seconds spent in each of [`Stage::ALL`].
+    pub stage_seconds: [f64; Stage::ALL.len()],
 }
 
 /// Cloth state: positions, velocities, time.
@@ -133,94 +122,108 @@ impl CpuSim {
         self.scene.rigid.as_ref().map(|_| &self.frame)
     }
 
-    /// One backward Euler step. The rigid body is first moved to the end of
-    /// the step, so contacts are found against where it will be.
+    /// One backward Euler step: every stage in order. The rigid body is
+    /// first moved to the end of the step, so contacts are found against
+    /// where it will be.
     pub fn step(&mut self) -> StepStats {
         let mut stats = StepStats::default();
-        let mut clock = Instant::now();
-        let mut lap = |stage: usize, stats: &mut StepStats| {
-            let now = Instant::now();
-            stats.stage_seconds[stage] += (now - clock).as_secs_f64();
-            clock = now;
-        };
-        let cloth = &self.scene.cloth;
-        let h = self.params.dt;
-        let t_end = (self.state.time + h as f64) as f32;
-        let State { x, v, .. } = &mut self.state;
-
-        self.contacts.clear();
-        if let Some(body) = &self.scene.rigid {
-            rigid::transform(body, t_end, &mut self.frame);
-            lap(0, &mut stats);
-            collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
-            self.contacts = collide::vertex_face(body, &self.frame, x, self.tolerances);
-            self.contacts.extend(collide::face_vertex(
-                cloth,
-                &self.cloth_bvh,
-                x,
-                &self.frame,
-                self.tolerances,
-            ));
-            lap(1, &mut stats);
+        for stage in Stage::ALL {
+            let start = Instant::now();
+            self.run_stage(stage, &mut stats);
+            stats.stage_seconds[stage.index()] = start.elapsed().as_secs_f64();
         }
-        let (body, frame) = (&self.scene.rigid, &self.frame);
-        let geometry = |c: &Contact| {
-            let body = body.as_ref().expect("contacts need a rigid body");
-            c.geometry(cloth, body, frame, x)
-        };
-        contact::respond(
-            &self.model,
-            &self.contacts,
-            v,
-            geometry,
-            &mut self.responses,
-        );
-        lap(2, &mut stats);
-        springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks);
-        lap(3, &mut stats);
-        assemble::springs_and_inertia(
-            cloth,
-            &self.params,
-            v,
-            &self.spring_forces,
-            &self.spring_blocks,
-            &mut self.matrix,
-            &mut self.rhs,
-        );
-        assemble::contacts(
-            cloth,
-            h,
-            v,
-            &self.contacts,
-            &self.responses,
-            &mut self.matrix,
-            &mut self.rhs,
-        );
-        lap(4, &mut stats);
-        // v holds the initial guess (last velocity; pinned entries are 0).
-        let cfg = &self.scene.config.solver;
-        stats.pcg = pcg::solve(
-            &self.matrix,
-            &cloth.adjacency,
-            &cloth.pinned,
-            &self.rhs,
-            v,
-            cfg.cg_iters,
-            cfg.cg_tol,
-            &mut self.scratch,
-        );
-        lap(5, &mut stats);
-        integrate::integrate(cloth, h, x, v);
-        lap(6, &mut stats);
-        if let Some(body) = &self.scene.rigid {
-            stats.max_penetration = collide::max_penetration(body, &self.frame, x);
-        }
-        lap(7, &mut stats);
-
         stats.contacts = self.contacts.len();
-        self.state.time += h as f64;
+        self.state.time += self.params.dt as f64;
         self.state.step += 1;
         stats
+    }
+
+    /// Runs one stage of the current step on what the earlier stages left
+    /// (the per-stage benches time them one by one); `step` runs them all.
+    pub fn run_stage(&mut self, stage: Stage, stats: &mut StepStats) {
+        let cloth = &self.scene.cloth;
+        let h = self.params.dt;
+        let State { x, v, .. } = &mut self.state;
+        let body = &self.scene.rigid;
+        match stage {
+            Stage::Rigid => {
+                if let Some(body) = body {
+                    let t_end = (self.state.time + h as f64) as f32;
+                    rigid::transform(body, t_end, &mut self.frame);
+                }
+            }
+            Stage::Collide => {
+                self.contacts.clear();
+                if let Some(body) = body {
+                    collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
+                    self.contacts = collide::vertex_face(body, &self.frame, x, self.tolerances);
+                    self.contacts.extend(collide::face_vertex(
+                        cloth,
+                        &self.cloth_bvh,
+                        x,
+                        &self.frame,
+                        self.tolerances,
+                    ));
+                }
+            }
+            Stage::Contact => {
+                let frame = &self.frame;
+                let geometry = |c: &Contact| {
+                    let body = body.as_ref().expect("contacts need a rigid body");
+                    c.geometry(cloth, body, frame, x)
+                };
+                contact::respond(
+                    &self.model,
+                    &self.contacts,
+                    v,
+                    geometry,
+                    &mut self.responses,
+                );
+            }
+            Stage::Springs => {
+                springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks)
+            }
+            Stage::Assemble => {
+                assemble::springs_and_inertia(
+                    cloth,
+                    &self.params,
+                    v,
+                    &self.spring_forces,
+                    &self.spring_blocks,
+                    &mut self.matrix,
+                    &mut self.rhs,
+                );
+                assemble::contacts(
+                    cloth,
+                    h,
+                    v,
+                    &self.contacts,
+                    &self.responses,
+                    &mut self.matrix,
+                    &mut self.rhs,
+                );
+            }
+            Stage::Pcg => {
+                // v holds the initial guess (last velocity; pinned entries are 0).
+                let cfg = &self.scene.config.solver;
+                stats.pcg = pcg::solve(
+                    &self.matrix,
+                    &cloth.adjacency,
+                    &cloth.pinned,
+                    &self.rhs,
+                    v,
+                    cfg.cg_iters,
+                    cfg.cg_tol,
+                    &mut self.scratch,
+                );
+            }
+            Stage::Integrate => integrate::integrate(cloth, h, x, v),
+            Stage::Measure => {
+                if let Some(body) = body {
+                    stats.max_penetration = collide::max_penetration(body, &self.frame, x);
+                }
+            }
+        }
     }
 
     /// Kinetic, gravitational and elastic energy (J), in f64.

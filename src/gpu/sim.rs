@@ -20,14 +20,12 @@ use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_by
 use crate::nn::weights::NetKind;
 use crate::render::metres_per_force;
 use crate::scene::{Motion, Scene};
+use crate::stage::Stage;
 
 const WORKGROUP: u32 = 256;
 
 /// `MAX_TRIANGLE_CONTACTS` in wgsl/common.wgsl.
 const MAX_TRIANGLE_CONTACTS: usize = 8;
-
-/// Passes, in recording order: the CPU's stages (`stage_ms` uses these names).
-pub use crate::cpu::STAGES as PASSES;
 
 /// Cloth grid cells per tile edge, and tiles per super-tile edge
 /// (`TILE` in wgsl/collide.wgsl).
@@ -612,11 +610,11 @@ impl GpuSim {
                 queries: device.create_query_set(&wgpu::QuerySetDescriptor {
                     label: Some("stage timestamps"),
                     ty: wgpu::QueryType::Timestamp,
-                    count: 2 * PASSES.len() as u32,
+                    count: 2 * Stage::ALL.len() as u32,
                 }),
                 resolve: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("timestamps"),
-                    size: (16 * PASSES.len()) as u64,
+                    size: (16 * Stage::ALL.len()) as u64,
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
                 }),
@@ -685,9 +683,14 @@ impl GpuSim {
         3 * self.params.n_triangles
     }
 
-    fn pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder, k: usize) -> wgpu::ComputePass<'e> {
+    fn pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        stage: Stage,
+    ) -> wgpu::ComputePass<'e> {
+        let k = stage.index();
         encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(PASSES[k]),
+            label: Some(stage.name()),
             timestamp_writes: self
                 .timer
                 .as_ref()
@@ -714,82 +717,94 @@ impl GpuSim {
     }
 
     /// The passes a step records: the rigid-body ones only with a body.
-    fn active_passes(&self) -> impl Iterator<Item = usize> + '_ {
-        let rigid_only = ["rigid", "collide", "contact", "measure"];
-        (0..PASSES.len())
-            .filter(move |&k| self.params.has_rigid != 0 || !rigid_only.contains(&PASSES[k]))
+    fn active_passes(&self) -> impl Iterator<Item = Stage> + '_ {
+        Stage::ALL
+            .into_iter()
+            .filter(move |stage| self.params.has_rigid != 0 || !stage.needs_body())
     }
 
     /// Records one backward Euler step into `encoder`; nothing is read
     /// back. Returns the number of dispatches recorded.
     pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder) -> u32 {
+        let count = self
+            .active_passes()
+            .map(|stage| self.record_stage(encoder, stage))
+            .sum();
+        if let Some(t) = &self.timer {
+            let queries = 2 * Stage::ALL.len() as u32;
+            encoder.resolve_query_set(&t.queries, 0..queries, &t.resolve, 0);
+        }
+        count
+    }
+
+    /// Records one stage's pass on what the earlier passes left (the
+    /// per-stage benches time them one by one); a rigid-body stage records
+    /// nothing without a body. Returns the number of dispatches recorded.
+    pub fn record_stage(&self, encoder: &mut wgpu::CommandEncoder, stage: Stage) -> u32 {
         let p = &self.params;
+        if p.has_rigid == 0 && stage.needs_body() {
+            return 0;
+        }
         let (n, s, r) = (p.n_vertices, p.n_springs, p.n_rigid_vertices);
         let g = &self.groups;
         let mut count = 0;
-        for k in self.active_passes() {
-            if PASSES[k] == "collide" {
-                // Face–vertex contacts append to their triangle's list.
-                encoder.clear_buffer(&self.buffers.triangle_contact_count, 0, None);
-            }
-            let mut pass = self.pass(encoder, k);
-            let mut run = |entry: (&str, &str), group: &wgpu::BindGroup, threads: u32| {
-                self.dispatch(&mut pass, entry, group, threads, &mut count)
-            };
-            match PASSES[k] {
-                "rigid" => run(("rigid", "main"), &g.rigid, r.max(1)),
-                "collide" => {
-                    run(("collide", "tiles"), &g.collide, p.tiles_x * p.tiles_y);
-                    run(
-                        ("collide", "supertiles"),
-                        &g.collide,
-                        p.supertiles_x * p.supertiles_y,
-                    );
-                    run(("collide", "vertex_face"), &g.collide, n);
-                    run(("collide", "face_vertex"), &g.collide, r);
-                }
-                "contact" => match &self.network {
-                    None => {
-                        run(("contact", "vertex_face"), &g.contact, n);
-                        run(("contact", "face_vertex"), &g.contact, r);
-                    }
-                    Some(net) => {
-                        run(("contact", "reset_batch"), &g.contact, 1);
-                        run(("contact", "gather"), &g.contact, n + r);
-                        count += net.record(&mut pass);
-                        let (args, offset) = net.per_contact_dispatch();
-                        pass.set_pipeline(self.kernels.pipeline("contact", "respond_batch"));
-                        pass.set_bind_group(0, &g.contact, &[]);
-                        pass.dispatch_workgroups_indirect(args, offset);
-                        count += 1;
-                    }
-                },
-                "springs" => run(("springs", "main"), &g.springs, s),
-                "assemble" => {
-                    run(("assemble", "vertex"), &g.assemble, n);
-                    run(("assemble", "spring"), &g.assemble, s);
-                }
-                "pcg" => {
-                    run(("pcg", "init"), &g.pcg[0], n);
-                    // Writes scalars[0], which iteration 0 reads.
-                    run(("pcg", "init_scalars"), &g.pcg[1], 1);
-                    let iters = p.cg_max_iters as usize;
-                    for it in 0..iters {
-                        let group = &g.pcg[it % 2];
-                        run(("pcg", "spmv"), group, n);
-                        run(("pcg", "update"), group, n);
-                        run(("pcg", "direction"), group, n);
-                    }
-                    // The last iteration wrote scalars[iters % 2].
-                    run(("pcg", "finish"), &g.pcg[iters % 2], 1);
-                }
-                "integrate" => run(("integrate", "main"), &g.integrate, n),
-                "measure" => run(("measure", "main"), &g.measure, n),
-                other => unreachable!("no pass {other}"),
-            }
+        if stage == Stage::Collide {
+            // Face–vertex contacts append to their triangle's list.
+            encoder.clear_buffer(&self.buffers.triangle_contact_count, 0, None);
         }
-        if let Some(t) = &self.timer {
-            encoder.resolve_query_set(&t.queries, 0..2 * PASSES.len() as u32, &t.resolve, 0);
+        let mut pass = self.pass(encoder, stage);
+        let mut run = |entry: (&str, &str), group: &wgpu::BindGroup, threads: u32| {
+            self.dispatch(&mut pass, entry, group, threads, &mut count)
+        };
+        match stage {
+            Stage::Rigid => run(("rigid", "main"), &g.rigid, r.max(1)),
+            Stage::Collide => {
+                run(("collide", "tiles"), &g.collide, p.tiles_x * p.tiles_y);
+                run(
+                    ("collide", "supertiles"),
+                    &g.collide,
+                    p.supertiles_x * p.supertiles_y,
+                );
+                run(("collide", "vertex_face"), &g.collide, n);
+                run(("collide", "face_vertex"), &g.collide, r);
+            }
+            Stage::Contact => match &self.network {
+                None => {
+                    run(("contact", "vertex_face"), &g.contact, n);
+                    run(("contact", "face_vertex"), &g.contact, r);
+                }
+                Some(net) => {
+                    run(("contact", "reset_batch"), &g.contact, 1);
+                    run(("contact", "gather"), &g.contact, n + r);
+                    count += net.record(&mut pass);
+                    let (args, offset) = net.per_contact_dispatch();
+                    pass.set_pipeline(self.kernels.pipeline("contact", "respond_batch"));
+                    pass.set_bind_group(0, &g.contact, &[]);
+                    pass.dispatch_workgroups_indirect(args, offset);
+                    count += 1;
+                }
+            },
+            Stage::Springs => run(("springs", "main"), &g.springs, s),
+            Stage::Assemble => {
+                run(("assemble", "vertex"), &g.assemble, n);
+                run(("assemble", "spring"), &g.assemble, s);
+            }
+            Stage::Pcg => {
+                run(("pcg", "init"), &g.pcg[0], n);
+                // Writes scalars[0], which iteration 0 reads.
+                run(("pcg", "init_scalars"), &g.pcg[1], 1);
+                let iters = p.cg_max_iters as usize;
+                for it in 0..iters {
+                    let group = &g.pcg[it % 2];
+                    run(("pcg", "spmv"), group, n);
+                    run(("pcg", "update"), group, n);
+                    run(("pcg", "direction"), group, n);
+                }
+                // The last iteration wrote scalars[iters % 2].
+                run(("pcg", "finish"), &g.pcg[iters % 2], 1);
+            }
+            Stage::Integrate => run(("integrate", "main"), &g.integrate, n),
+            Stage::Measure => run(("measure", "main"), &g.measure, n),
         }
         count
     }
@@ -885,9 +900,10 @@ impl GpuSim {
         let ticks: Vec<u64> = self.read(&t.resolve)?;
         Ok(Some(
             self.active_passes()
-                .map(|k| {
+                .map(|stage| {
+                    let k = stage.index();
                     let dt = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
-                    (PASSES[k], dt as f64 * t.period_ns as f64 * 1e-6)
+                    (stage.name(), dt as f64 * t.period_ns as f64 * 1e-6)
                 })
                 .collect(),
         ))

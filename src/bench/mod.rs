@@ -3,6 +3,11 @@
 //! contacts and CG iterations; the networks' throughput over batches of
 //! contacts; and the thesis's headline measure, seconds per sphere period
 //! with the analytic force against each network on the same backend.
+//! [`traffic`] sets each PCG iteration against its memory-traffic floor;
+//! [`plot`] draws the figure.
+
+pub mod plot;
+pub mod traffic;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -17,6 +22,7 @@ use crate::nn::domain::{Rng, uniform_inputs};
 use crate::nn::weights::{self, Shipped};
 use crate::run::{self, Chosen, Report, Steps, median};
 use crate::scene::Scene;
+use crate::stage::Stage;
 
 /// A model and, for a network model, the shipped network it runs instead
 /// of its default one.
@@ -86,6 +92,9 @@ pub const PERIOD_STEPS: u64 = 200;
 pub struct BenchOptions {
     pub quick: bool,
     pub grids: Vec<u32>,
+    /// Further grids run on a hardware GPU only (a software adapter and
+    /// the CPU would take hours over them).
+    pub hardware_gpu_grids: Vec<u32>,
     /// Steps before the timed ones, and timed steps per row.
     pub steps: Steps,
     /// Grid of the sphere-period rows (the thesis's: 32²), and its steps.
@@ -103,6 +112,7 @@ impl BenchOptions {
         BenchOptions {
             quick: false,
             grids: vec![32, 64, 128, 256],
+            hardware_gpu_grids: vec![512, 1024],
             steps: Steps {
                 untimed: UNTIMED_STEPS,
                 total: UNTIMED_STEPS + 40,
@@ -119,6 +129,7 @@ impl BenchOptions {
         BenchOptions {
             quick: true,
             grids: vec![32, 64],
+            hardware_gpu_grids: Vec::new(),
             steps: Steps {
                 untimed: UNTIMED_STEPS,
                 total: UNTIMED_STEPS + 20,
@@ -164,6 +175,12 @@ pub struct NetworkRow {
 #[derive(Clone, Debug, Serialize)]
 pub struct StepRow {
     pub label: String,
+    /// Cloth vertices (grid²) and springs.
+    pub particles: usize,
+    pub springs: usize,
+    /// Σ stage_ms / ms_per_step: how much of the step the stages account
+    /// for (on the GPU the rest is submission and waiting).
+    pub stage_coverage: f64,
     #[serde(flatten)]
     pub report: Report,
 }
@@ -181,6 +198,33 @@ pub struct PeriodRow {
     pub ratio_to_analytic: Option<f64>,
 }
 
+/// A step's growth with the particle count: ms ∝ particles^exponent
+/// between two grids (≤ 1: no faster than linear).
+#[derive(Clone, Debug, Serialize)]
+pub struct ScalingRow {
+    pub backend: String,
+    pub label: String,
+    pub from_grid: u32,
+    pub to_grid: u32,
+    pub exponent: f64,
+}
+
+/// One PCG iteration of the friction rows against its memory-traffic
+/// floor on the same backend.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrafficRow {
+    pub backend: String,
+    pub grid: u32,
+    /// [`traffic::Layout::iteration_bytes`] for this backend's layout.
+    pub bytes_per_iteration: u64,
+    /// Those bytes at the measured copy bandwidth.
+    pub floor_ms: f64,
+    /// The pcg stage's median time over its iterations (the stage's
+    /// setup pass included).
+    pub measured_ms: f64,
+    pub times_floor: f64,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
     pub quick: bool,
@@ -190,6 +234,9 @@ pub struct BenchReport {
     /// The GPU adapter, or why there are no GPU rows.
     pub gpu: String,
     pub rows: Vec<StepRow>,
+    pub scaling: Vec<ScalingRow>,
+    pub bandwidth: Vec<traffic::Bandwidth>,
+    pub cg_traffic: Vec<TrafficRow>,
     pub networks: Vec<NetworkRow>,
     pub periods: Vec<PeriodRow>,
 }
@@ -211,13 +258,29 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     let (chosen, gpu_note) = backends();
     let mut rows = Vec::new();
     for backend in &chosen {
-        for &grid in &opts.grids {
+        for grid in grids(opts, backend) {
             for v in VARIANTS {
                 let label = v.label();
                 progress(&format!("step {} {label} {grid}²", name(backend)));
-                let report = run::run(backend, v.scene(grid)?, opts.steps, |_| {}, None)?;
-                rows.push(StepRow { label, report });
+                let scene = v.scene(grid)?;
+                let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
+                let report = run::run(backend, scene, opts.steps, |_| {}, None)?;
+                let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
+                rows.push(StepRow {
+                    label,
+                    particles,
+                    springs,
+                    stage_coverage,
+                    report,
+                });
             }
+        }
+    }
+    progress("copy bandwidth");
+    let mut bandwidth = vec![traffic::cpu_bandwidth()];
+    for backend in &chosen {
+        if let Chosen::Gpu(ctx) = backend {
+            bandwidth.push(traffic::gpu_bandwidth(ctx)?);
         }
     }
     let mut periods = Vec::new();
@@ -266,10 +329,94 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             rayon::current_num_threads()
         ),
         gpu: gpu_note,
+        scaling: scaling(&rows),
+        cg_traffic: cg_traffic(&rows, &bandwidth),
+        bandwidth,
         rows,
         networks,
         periods,
     })
+}
+
+/// The grids a backend runs: the hardware-GPU ones only on a hardware GPU.
+fn grids(opts: &BenchOptions, backend: &Chosen) -> Vec<u32> {
+    let hardware = match backend {
+        Chosen::Gpu(ctx) => ctx.adapter.device_type != wgpu::DeviceType::Cpu,
+        Chosen::Cpu => false,
+    };
+    let mut grids = opts.grids.clone();
+    if hardware {
+        grids.extend(&opts.hardware_gpu_grids);
+    }
+    grids
+}
+
+/// Each backend × variant's growth from its smallest grid of at least 64²
+/// (the smallest of all when only the largest is) to its largest.
+fn scaling(rows: &[StepRow]) -> Vec<ScalingRow> {
+    let mut out = Vec::new();
+    let mut series: Vec<(&str, &str)> = Vec::new();
+    for r in rows {
+        let key = (r.report.backend.as_str(), r.label.as_str());
+        if !series.contains(&key) {
+            series.push(key);
+        }
+    }
+    for (backend, label) in series {
+        let of: Vec<&StepRow> = rows
+            .iter()
+            .filter(|r| r.report.backend == backend && r.label == label)
+            .collect();
+        let Some(to) = of.iter().max_by_key(|r| r.particles) else {
+            continue;
+        };
+        let smallest = |at_least: u32| {
+            of.iter()
+                .filter(|r| r.report.grid[0] >= at_least && r.particles < to.particles)
+                .min_by_key(|r| r.particles)
+        };
+        if let Some(from) = smallest(64).or_else(|| smallest(0)) {
+            let (a, b) = (from, to);
+            out.push(ScalingRow {
+                backend: backend.into(),
+                label: label.into(),
+                from_grid: a.report.grid[0],
+                to_grid: b.report.grid[0],
+                exponent: (b.report.ms_per_step / a.report.ms_per_step).ln()
+                    / (b.particles as f64 / a.particles as f64).ln(),
+            });
+        }
+    }
+    out
+}
+
+/// The friction rows' PCG iterations against the floor of their backend.
+fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<TrafficRow> {
+    rows.iter()
+        .filter(|r| r.label == ModelKind::Friction.name())
+        .filter_map(|r| {
+            let backend = r.report.backend.as_str();
+            let gb_per_s = bandwidth.iter().find(|b| b.backend == backend)?.gb_per_s;
+            let layout = if backend == "gpu" {
+                traffic::GPU
+            } else {
+                traffic::CPU
+            };
+            let pcg_ms = r.report.stage_ms.get(Stage::Pcg.name())?;
+            let iterations = r.report.cg_iterations_mean;
+            let bytes = layout.iteration_bytes(r.particles as u64, r.springs as u64);
+            let floor_ms = bytes as f64 / (gb_per_s * 1e9) * 1e3;
+            let measured_ms = pcg_ms / iterations;
+            (iterations > 0.0).then(|| TrafficRow {
+                backend: backend.into(),
+                grid: r.report.grid[0],
+                bytes_per_iteration: bytes,
+                floor_ms,
+                measured_ms,
+                times_floor: measured_ms / floor_ms,
+            })
+        })
+        .collect()
 }
 
 fn name(backend: &Chosen) -> &'static str {
@@ -387,28 +534,30 @@ impl BenchReport {
     /// The terminal tables.
     pub fn table(&self) -> String {
         let mut out = format!("cpu: {}\ngpu: {}\n\n", self.cpu, self.gpu);
-        let stages: Vec<&String> = {
-            let mut s: Vec<&String> = self
-                .rows
-                .iter()
-                .flat_map(|r| r.report.stage_ms.keys())
-                .collect();
-            s.sort();
-            s.dedup();
-            s
-        };
+        let stages: Vec<&str> = Stage::ALL
+            .iter()
+            .map(|s| s.name())
+            .filter(|s| self.rows.iter().any(|r| r.report.stage_ms.contains_key(*s)))
+            .collect();
         out += &format!(
-            "{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}",
-            "backend", "model", "grid", "ms/step", "contacts", "cg"
+            "{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}{:>7}",
+            "backend", "model", "grid", "ms/step", "contacts", "cg", "staged"
         );
         for s in &stages {
             out += &format!("{:>11}", s);
         }
         out += "\n";
-        for StepRow { label, report: r } in &self.rows {
+        for row in &self.rows {
+            let r = &row.report;
             out += &format!(
-                "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}",
-                r.backend, label, r.grid[0], r.ms_per_step, r.contacts_mean, r.cg_iterations_mean
+                "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}{:>6.0}%",
+                r.backend,
+                row.label,
+                r.grid[0],
+                r.ms_per_step,
+                r.contacts_mean,
+                r.cg_iterations_mean,
+                100.0 * row.stage_coverage
             );
             for s in &stages {
                 match r.stage_ms.get(*s) {
@@ -417,6 +566,32 @@ impl BenchReport {
                 }
             }
             out += "\n";
+        }
+        out += "\nstep growth, ms/step ∝ particles^exponent\n";
+        for g in &self.scaling {
+            out += &format!(
+                "{:<8}{:<32}{:>4}² → {:>4}²{:>8.2}\n",
+                g.backend, g.label, g.from_grid, g.to_grid, g.exponent
+            );
+        }
+        out += "\ncopy bandwidth\n";
+        for b in &self.bandwidth {
+            out += &format!("{:<8}{:>8.1} GB/s  {}\n", b.backend, b.gb_per_s, b.method);
+        }
+        out += &format!(
+            "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
+            "backend", "grid", "MB/iter", "floor ms", "measured ms", "× floor"
+        );
+        for t in &self.cg_traffic {
+            out += &format!(
+                "{:<8}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.1}\n",
+                t.backend,
+                t.grid,
+                t.bytes_per_iteration as f64 * 1e-6,
+                t.floor_ms,
+                t.measured_ms,
+                t.times_floor
+            );
         }
         out += &format!(
             "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",

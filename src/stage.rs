@@ -1,0 +1,62 @@
+//! The stages of one step, in order. Each is a module of src/cpu/ and a
+//! pass of a wgsl/ file with the same name; `stage_ms` in reports and the
+//! per-stage benches use these names.
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// Places the rigid body at the end of the step.
+    Rigid,
+    /// Vertex–face and face–vertex contacts.
+    Collide,
+    /// The contact model's forces and Jacobians (eqs. 6, 8, 9, or a network).
+    Contact,
+    /// Spring forces and stiffness blocks (eqs. 4–5).
+    Springs,
+    /// The backward Euler system A v' = b.
+    Assemble,
+    /// Jacobi-preconditioned CG.
+    Pcg,
+    /// x' = x + h v'.
+    Integrate,
+    /// The deepest penetration after the step.
+    Measure,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 8] = [
+        Stage::Rigid,
+        Stage::Collide,
+        Stage::Contact,
+        Stage::Springs,
+        Stage::Assemble,
+        Stage::Pcg,
+        Stage::Integrate,
+        Stage::Measure,
+    ];
+
+    pub const fn name(self) -> &'static str {
+        match self {
+            Stage::Rigid => "rigid",
+            Stage::Collide => "collide",
+            Stage::Contact => "contact",
+            Stage::Springs => "springs",
+            Stage::Assemble => "assemble",
+            Stage::Pcg => "pcg",
+            Stage::Integrate => "integrate",
+            Stage::Measure => "measure",
+        }
+    }
+
+    /// Position in [`Stage::ALL`].
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Stages with nothing to do in a scene without a rigid body.
+    pub const fn needs_body(self) -> bool {
+        matches!(
+            self,
+            Stage::Rigid | Stage::Collide | Stage::Contact | Stage::Measure
+        )
+    }
+}
