@@ -17,15 +17,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let grid: u32 = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(32);
     let mut config = Config::default();
     config.cloth.grid = [grid, grid];
-    if let Some(w) = args.get(3) {
-        config.contact.weights = Some(w.into());
-    }
+    let weights = args.get(3).map(std::path::PathBuf::from);
     let steps_per_period = (config.rigid.motion.period / config.solver.dt).round() as u64;
     let mut sims = [ModelKind::Friction, ModelKind::FrictionNet].map(|model| {
-        let config = Config {
+        let mut config = Config {
             model,
             ..config.clone()
         };
+        if model.is_network() {
+            config.contact.weights = weights.clone();
+        }
         Scene::new(&config).map(CpuSim::new)
     });
     let [Ok(analytic), Ok(net)] = &mut sims else {

@@ -269,6 +269,9 @@ pub struct SolverConfig {
     pub cg_tol: f32,
     /// m/s².
     pub gravity: [f32; 3],
+    /// m/s: a vertex faster than this stops the run as diverging (the
+    /// sphere moves at about 1 m/s).
+    pub max_speed: f32,
 }
 
 impl Default for SolverConfig {
@@ -279,6 +282,7 @@ impl Default for SolverConfig {
             cg_iters: 25,
             cg_tol: 1e-6,
             gravity: [0.0, -9.81, 0.0],
+            max_speed: 100.0,
         }
     }
 }
@@ -458,6 +462,17 @@ impl Config {
         }
         non_negative("solver.cg_tol", &[s.cg_tol])?;
         finite("solver.gravity", &s.gravity)?;
+        positive("solver.max_speed", &[s.max_speed])?;
+        if let (Some(path), false) = (&self.contact.weights, self.model.is_network()) {
+            return Err(Error::config(
+                "contact.weights",
+                format!(
+                    "model `{}` uses no network, so {} would be ignored; use friction-net or naive-net",
+                    self.model.name(),
+                    path.display()
+                ),
+            ));
+        }
         Ok(())
     }
 }

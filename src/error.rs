@@ -31,9 +31,14 @@ pub enum Error {
     #[error("GPU: {0}")]
     Gpu(String),
 
-    /// The simulation state stopped being finite or the solver broke down.
-    #[error("simulation diverged at step {step}: {reason}")]
-    Diverged { step: u64, reason: String },
+    /// The simulation state stopped being finite, exploded or the solver
+    /// broke down (`health::diagnose` names the vertex).
+    #[error("simulation diverged at step {step}, vertex {vertex}: {reason}")]
+    Diverged {
+        step: u64,
+        vertex: u32,
+        reason: String,
+    },
 }
 
 impl Error {

@@ -13,6 +13,7 @@ pub mod config;
 pub mod cpu;
 pub mod error;
 pub mod gpu;
+pub mod health;
 pub mod math;
 pub mod nn;
 pub mod plot;

@@ -10,7 +10,7 @@ use wgcloth::config::{ModelKind, SceneKind, Shape};
 use wgcloth::gpu::GpuContext;
 use wgcloth::nn::train::thesis_hidden;
 use wgcloth::nn::weights::NetKind;
-use wgcloth::run::{self, Backend, Chosen, check_finite, choose_backend};
+use wgcloth::run::{self, Backend, Chosen, check_diverged, choose_backend};
 use wgcloth::{Config, Error, Result, Scene};
 
 #[derive(Parser)]
@@ -159,6 +159,10 @@ struct RunArgs {
     /// With --out: replace frames already in DIR.
     #[arg(long)]
     force: bool,
+    /// If the run diverges, write the state before the diverging step
+    /// here (OBJ, objects `cloth` and `body`).
+    #[arg(long, value_name = "FILE.obj")]
+    last_good: Option<PathBuf>,
 }
 
 /// Geometry formats `run --export` writes.
@@ -205,6 +209,9 @@ struct SceneArgs {
     /// PCG relative tolerance; 0 runs every iteration.
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     cg_tol: Option<f32>,
+    /// Speed (m/s) beyond which a vertex stops the run as diverging.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    max_speed: Option<f32>,
     /// TOML configuration; flags override its values.
     #[arg(long, value_name = "FILE.toml")]
     config: Option<PathBuf>,
@@ -245,6 +252,9 @@ impl SceneArgs {
         if let Some(t) = self.cg_tol {
             c.solver.cg_tol = t;
         }
+        if let Some(m) = self.max_speed {
+            c.solver.max_speed = m;
+        }
         if let Some(w) = &self.weights {
             c.contact.weights = Some(w.clone());
         }
@@ -271,10 +281,12 @@ fn progress_bar(steps: u64) -> ProgressBar {
 
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
-    if let Some(path) = &args.report {
+    for path in args.report.iter().chain(&args.last_good) {
         writable(path)?;
     }
     let scene = Scene::new(&config)?;
+    // Kept to write the last good state.
+    let run_scene = scene.clone();
     let (chosen, notice) = choose_backend(args.backend)?;
     if let Some(n) = notice {
         eprintln!("{n}");
@@ -347,7 +359,11 @@ fn run(args: &RunArgs) -> Result<()> {
         write_json(path, &report)?;
         println!("report       {}", path.display());
     }
-    check_finite(&report)
+    if let (Some(path), Some(good)) = (&args.last_good, &report.last_good) {
+        wgcloth::render::obj::write_obj(path, &run_scene, &good.x, good.time as f32)?;
+        println!("last good    step {} in {}", good.step, path.display());
+    }
+    check_diverged(&report)
 }
 
 fn bench(args: &BenchArgs) -> Result<()> {

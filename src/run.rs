@@ -8,10 +8,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::config::{ModelKind, SceneKind};
-use crate::cpu::{self, CpuSim};
+use crate::cpu::{self, CpuSim, State, integrate};
 use crate::error::{Error, Result};
 use crate::gpu::mlp::NetworkKernel;
 use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
+use crate::health::{self, Divergence, FailedStep};
 use crate::render::Recording;
 use crate::scene::Scene;
 use crate::stage::Stage;
@@ -79,8 +80,12 @@ pub struct Report {
     /// Deepest any cloth vertex got inside the rigid surface, m (≥ 0).
     pub max_penetration: f32,
     pub finite: bool,
-    /// The step after which the state was first found non-finite.
-    pub diverged_at: Option<u64>,
+    /// The step that diverged, the vertex it started at and why
+    /// (`health::diagnose`); the run stopped there.
+    pub divergence: Option<Divergence>,
+    /// The state before the diverging step.
+    #[serde(skip)]
+    pub last_good: Option<State>,
     pub cg_iterations_mean: f64,
     pub cg_residual_max: f32,
     pub cg_breakdowns: u64,
@@ -172,8 +177,11 @@ fn run_cpu(
     let mut timings = Timings::default();
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
     let (mut cg_residual_max, mut max_penetration) = (0.0f32, 0.0f32);
-    let mut diverged_at = None;
+    let mut divergence = None;
+    let mut last_good = sim.state.clone();
+    let max_speed = config.solver.max_speed;
     for k in 0..steps.total {
+        keep(&mut last_good, &sim.state);
         let start = Instant::now();
         let s = sim.step();
         let wall = start.elapsed().as_secs_f64() * 1e3;
@@ -191,14 +199,25 @@ fn run_cpu(
         breakdowns += s.pcg.breakdown as u64;
         cg_residual_max = cg_residual_max.max(s.pcg.relative_residual);
         max_penetration = max_penetration.max(s.max_penetration);
+        let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
+        if health::failed(flags, s.pcg.breakdown) {
+            let (matrix, b) = sim.system();
+            divergence = Some(health::diagnose(&FailedStep {
+                step: k + 1,
+                flags,
+                breakdown: s.pcg.breakdown,
+                diag: &matrix.diag,
+                b,
+                x: &sim.state.x,
+                v: &sim.state.v,
+                max_speed,
+            }));
+            break;
+        }
         if let Some(r) = recording.as_deref_mut() {
             r.cpu(k + 1, &sim)?;
         }
         progress(k + 1);
-        if !sim.is_finite() {
-            diverged_at = Some(k + 1);
-            break;
-        }
     }
     let done = sim.state.step.max(1) as f64;
     let (ms_per_step, stage_ms) = timings.medians();
@@ -219,7 +238,8 @@ fn run_cpu(
         dispatches_per_step: None,
         max_penetration,
         finite: sim.is_finite(),
-        diverged_at,
+        last_good: divergence.is_some().then_some(last_good),
+        divergence,
         cg_iterations_mean: cg_iters as f64 / done,
         cg_residual_max,
         cg_breakdowns: breakdowns,
@@ -264,14 +284,45 @@ fn run_gpu(
     }
     let mut timings = Timings::default();
     let mut dispatches = 0;
+    let (mut divergence, mut last_good) = (None, None);
+    let mut breakdowns = 0;
     for k in 0..steps.total {
         let start = Instant::now();
-        dispatches = sim.step();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        sim.record_checkpoint(&mut encoder);
+        dispatches = sim.record_step(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
         ctx.finish()?;
         let wall = start.elapsed().as_secs_f64() * 1e3;
         let stages = sim.read_stage_ms()?.unwrap_or_default();
         if k >= steps.untimed {
             timings.push(wall, stages);
+        }
+        let state = sim.read_state()?;
+        let breakdown = state.cg_breakdowns > breakdowns;
+        breakdowns = state.cg_breakdowns;
+        if health::failed(state.health, breakdown) {
+            let (diag, _, b) = sim.read_system()?;
+            let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
+            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+            divergence = Some(health::diagnose(&FailedStep {
+                step: k + 1,
+                flags: state.health,
+                breakdown,
+                diag: &diag,
+                b: &b,
+                x: &x,
+                v: &v,
+                max_speed: scene.config.solver.max_speed,
+            }));
+            let (x, v) = sim.read_kept()?;
+            last_good = Some(State {
+                x,
+                v,
+                time: k as f64 * scene.config.solver.dt as f64,
+                step: k,
+            });
+            break;
         }
         if let Some(r) = recording.as_deref_mut() {
             r.gpu(k + 1, &sim, &scene)?;
@@ -298,8 +349,8 @@ fn run_gpu(
         dispatches_per_step: Some(dispatches),
         max_penetration: f32::from_bits(state.max_penetration_bits),
         finite,
-        // The GPU state is only read back at the end.
-        diverged_at: (!finite).then_some(state.steps as u64),
+        divergence,
+        last_good,
         cg_iterations_mean: state.cg_iterations_total as f64 / done,
         cg_residual_max: state.cg_residual_max,
         cg_breakdowns: state.cg_breakdowns as u64,
@@ -419,17 +470,34 @@ impl Report {
             self.max_penetration,
             if self.finite { "finite" } else { "NOT FINITE" },
             self.energy_final,
-        )
+        ) + &self
+            .divergence
+            .as_ref()
+            .map(|d| {
+                format!(
+                    "\ndiverged     at step {}, vertex {}: {}",
+                    d.step, d.vertex, d.reason
+                )
+            })
+            .unwrap_or_default()
     }
 }
 
-/// Fails a run whose state stopped being finite.
-pub fn check_finite(report: &Report) -> Result<()> {
-    match report.diverged_at {
-        Some(step) => Err(Error::Diverged {
-            step,
-            reason: "positions or velocities are no longer finite".into(),
+/// Fails a run that diverged.
+pub fn check_diverged(report: &Report) -> Result<()> {
+    match &report.divergence {
+        Some(d) => Err(Error::Diverged {
+            step: d.step,
+            vertex: d.vertex,
+            reason: d.reason.clone(),
         }),
         None => Ok(()),
     }
+}
+
+/// Copies `from` into `to` without allocating.
+fn keep(to: &mut State, from: &State) {
+    to.x.copy_from_slice(&from.x);
+    to.v.copy_from_slice(&from.v);
+    (to.time, to.step) = (from.time, from.step);
 }

@@ -211,6 +211,23 @@ fn dt_inf_is_rejected() {
 }
 
 #[test]
+fn max_speed_0_is_rejected() {
+    expect_field_error(&["--max-speed", "0"], "solver.max_speed", "--max-speed");
+}
+
+#[test]
+fn weights_for_an_analytic_model_are_rejected_not_ignored() {
+    let case = "--model friction --weights weights/naive_mlp.safetensors";
+    let out = run_tiny(&[
+        "--model",
+        "friction",
+        "--weights",
+        "weights/naive_mlp.safetensors",
+    ]);
+    expect_error(case, &out, &["contact.weights", "friction"], &[]);
+}
+
+#[test]
 fn cg_iters_0_is_rejected() {
     expect_field_error(&["--cg-iters", "0"], "solver.cg_iters", "--cg-iters");
 }

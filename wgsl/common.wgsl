@@ -17,6 +17,7 @@ struct Params {
     motion_vector: vec3<f32>, cells_x: u32,
     cells_y: u32, tiles_x: u32, tiles_y: u32, supertiles_x: u32,
     supertiles_y: u32, net_width: u32, net_rows: u32, net_outputs: u32,
+    max_speed: f32, pad0: u32, pad1: u32, pad2: u32,
 }
 
 // `Params::model` (mirrors `gpu::sim::params_for`).
@@ -41,8 +42,9 @@ struct StepState {
     max_penetration_bits: atomic<u32>,
     last_iterations: u32,
     last_residual: f32,
-    pad0: u32,
-    pad1: u32,
+    // NOT_FINITE | TOO_FAST of wgsl/integrate.wgsl, sticky.
+    health: atomic<u32>,
+    pad: u32,
 }
 
 // A symmetric 3×3 block: a = (xx, yy, zz, xy), b = (xz, yz, 0, 0).

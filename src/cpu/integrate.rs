@@ -6,6 +6,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
+use crate::health::{NOT_FINITE, TOO_FAST};
 use crate::scene::Cloth;
 
 pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3]) {
@@ -21,4 +22,25 @@ pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3]) {
                 *x += dt * *v;
             }
         });
+}
+
+/// The flags a vertex raises after the step: [`NOT_FINITE`], else
+/// [`TOO_FAST`] beyond `max_speed` (m/s).
+pub fn vertex_health(x: Vec3, v: Vec3, max_speed: f32) -> u32 {
+    if !x.is_finite() || !v.is_finite() {
+        NOT_FINITE
+    } else if v.length_squared() > max_speed * max_speed {
+        TOO_FAST
+    } else {
+        0
+    }
+}
+
+/// Every vertex's flags, or'ed (wgsl/integrate.wgsl raises the same).
+pub fn health(x: &[Vec3], v: &[Vec3], max_speed: f32) -> u32 {
+    x.par_iter()
+        .with_min_len(GRAIN)
+        .zip(v)
+        .map(|(x, v)| vertex_health(*x, *v, max_speed))
+        .reduce(|| 0, |a, b| a | b)
 }

@@ -47,6 +47,9 @@ pub struct Params {
     pub net_width: u32,
     pub net_rows: u32,
     pub net_outputs: u32,
+    /// `solver.max_speed`: a faster vertex raises `StepState::health`.
+    pub max_speed: f32,
+    pub pad: [u32; 3],
 }
 
 /// Clock and run statistics kept on the GPU.
@@ -63,7 +66,10 @@ pub struct StepState {
     pub max_penetration_bits: u32,
     pub last_iterations: u32,
     pub last_residual: f32,
-    pub pad: [u32; 2],
+    /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
+    /// pass and kept until the state is replaced.
+    pub health: u32,
+    pub pad: u32,
 }
 
 /// Symmetric 3×3 block: (xx, yy, zz, xy), (xz, yz, 0, 0).
@@ -145,7 +151,7 @@ mod tests {
 
     #[test]
     fn sizes_match_the_wgsl_layout() {
-        assert_eq!(size_of::<Params>(), 192);
+        assert_eq!(size_of::<Params>(), 208);
         assert_eq!(size_of::<StepState>(), 48);
         assert_eq!(size_of::<Sym3>(), 32);
         assert_eq!(size_of::<Contact>(), 64);

@@ -38,6 +38,9 @@ struct Buffers {
     params: wgpu::Buffer,
     x: wgpu::Buffer,
     v: wgpu::Buffer,
+    /// Positions and velocities as `record_checkpoint` last copied them.
+    x_kept: wgpu::Buffer,
+    v_kept: wgpu::Buffer,
     rest: wgpu::Buffer,
     pinned: wgpu::Buffer,
     springs: wgpu::Buffer,
@@ -159,6 +162,7 @@ fn params_for(scene: &Scene) -> Params {
         vertex_mass: cloth.vertex_mass,
         stiffness: cloth.stiffness,
         cg_tol: cfg.solver.cg_tol,
+        max_speed: cfg.solver.max_speed,
         damping_mass: cfg.cloth.damping_mass,
         damping_stiffness: cfg.cloth.damping_stiffness,
         thickness: cfg.contact.thickness,
@@ -308,6 +312,8 @@ impl Buffers {
                 wgpu::BufferUsages::VERTEX,
             ),
             v: zeroed("velocities", n * vec4),
+            x_kept: zeroed("kept positions", n * vec4),
+            v_kept: zeroed("kept velocities", n * vec4),
             rest: storage(
                 "rest positions",
                 bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
@@ -817,6 +823,26 @@ impl GpuSim {
             .write_buffer(&self.buffers.v, 0, bytemuck::cast_slice(&vec4s(v, 0.0)));
         self.queue
             .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&time));
+        // A new state starts healthy.
+        let health = std::mem::offset_of!(StepState, health) as u64;
+        self.queue
+            .write_buffer(&self.buffers.state, health, bytemuck::bytes_of(&0u32));
+    }
+
+    /// Records a copy of the positions and velocities: the last good state
+    /// to return to when the next step diverges ([`GpuSim::read_kept`]).
+    pub fn record_checkpoint(&self, encoder: &mut wgpu::CommandEncoder) {
+        let b = &self.buffers;
+        encoder.copy_buffer_to_buffer(&b.x, 0, &b.x_kept, 0, b.x.size());
+        encoder.copy_buffer_to_buffer(&b.v, 0, &b.v_kept, 0, b.v.size());
+    }
+
+    /// The positions and velocities of the last checkpoint.
+    pub fn read_kept(&self) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
+        Ok((
+            self.read_vec3(&self.buffers.x_kept)?,
+            self.read_vec3(&self.buffers.v_kept)?,
+        ))
     }
 
     /// Records and submits one step; returns its dispatch count.
