@@ -5,28 +5,18 @@
 //! kept, and the CLI reports it in one line, in its report and as an OBJ.
 //! Without an adapter the GPU halves fail under CI=true and skip elsewhere.
 
+mod common;
+
+use common::gpu_context as gpu;
 use std::process::Command;
 
 use glam::Vec3;
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::gpu::{GpuSim, Kernels};
 use wgcloth::health::{self, FailedStep, NOT_FINITE, TOO_FAST};
 use wgcloth::run::{self, Chosen, Steps};
 use wgcloth::{Config, Scene};
-
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::headless() {
-        Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-            panic!("CI needs a GPU adapter: {e}")
-        }
-        Err(e) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-    }
-}
 
 /// The hanging cloth at 8² (in the x-y plane, pinned at its top corners)
 /// under gravity along −z: its free edge falls out of the plane at about

@@ -1,6 +1,8 @@
 //! The GPU stages against their CPU twins on lavapipe (or any adapter).
 //! Without an adapter these tests fail under CI=true and skip elsewhere.
 
+mod common;
+
 use std::sync::Arc;
 
 use glam::{Mat3, Vec3};
@@ -10,19 +12,9 @@ use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::{Config, Scene};
 
 fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
-    match GpuContext::headless() {
-        Ok(ctx) => {
-            let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels build"));
-            Some((ctx, kernels))
-        }
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-            panic!("CI needs a GPU adapter: {e}")
-        }
-        Err(e) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-    }
+    let ctx = common::gpu_context()?;
+    let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels build"));
+    Some((ctx, kernels))
 }
 
 fn max_dev(a: &[Vec3], b: &[Vec3]) -> f32 {

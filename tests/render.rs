@@ -2,6 +2,9 @@
 //! the geometry they draw, not against stored images. Without an adapter
 //! these tests fail under CI=true and skip elsewhere.
 
+mod common;
+
+use common::gpu_context as gpu;
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
@@ -14,19 +17,6 @@ use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines, 
 use wgcloth::{Config, Scene};
 
 const SIZE: u32 = 256;
-
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::headless() {
-        Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-            panic!("CI needs a GPU adapter: {e}")
-        }
-        Err(e) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-    }
-}
 
 fn scene(kind: SceneKind) -> Scene {
     let mut c = Config {

@@ -47,3 +47,18 @@ impl Rng {
         Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
     }
 }
+
+/// The headless adapter: under CI=true a missing one fails the test,
+/// elsewhere the GPU half of a test is skipped with a notice.
+pub fn gpu_context() -> Option<wgcloth::gpu::GpuContext> {
+    match wgcloth::gpu::GpuContext::headless() {
+        Ok(ctx) => Some(ctx),
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI needs a GPU adapter: {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping GPU test: {e}");
+            None
+        }
+    }
+}
