@@ -15,6 +15,7 @@ pub mod error;
 pub mod gpu;
 pub mod health;
 pub mod math;
+pub mod monitor;
 pub mod nn;
 pub mod plot;
 pub mod render;

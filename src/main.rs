@@ -163,6 +163,13 @@ struct RunArgs {
     /// here (OBJ, objects `cloth` and `body`).
     #[arg(long, value_name = "FILE.obj")]
     last_good: Option<PathBuf>,
+    /// Write a CSV row every --monitor-every steps: energy, fastest
+    /// vertex, resident memory and GPU allocator bytes (for soaks).
+    #[arg(long, value_name = "FILE.csv")]
+    monitor: Option<PathBuf>,
+    /// With --monitor: a row every K steps (and one of the start).
+    #[arg(long, value_name = "K", default_value_t = 1000)]
+    monitor_every: u64,
 }
 
 /// Geometry formats `run --export` writes.
@@ -281,8 +288,16 @@ fn progress_bar(steps: u64) -> ProgressBar {
 
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
-    for path in args.report.iter().chain(&args.last_good) {
+    for path in args
+        .report
+        .iter()
+        .chain(&args.last_good)
+        .chain(&args.monitor)
+    {
         writable(path)?;
+    }
+    if args.monitor_every == 0 {
+        return Err(Error::config("--monitor-every", "must be at least 1"));
     }
     let scene = Scene::new(&config)?;
     // Kept to write the last good state.
@@ -314,7 +329,7 @@ fn run(args: &RunArgs) -> Result<()> {
     let own_context;
     let render_context = match (&writer, &chosen) {
         (None, _) => None,
-        (Some(_), Chosen::Gpu(ctx)) => Some(&**ctx),
+        (Some(_), Chosen::Gpu { ctx, .. }) => Some(&**ctx),
         (Some(_), Chosen::Cpu) => match GpuContext::headless() {
             Ok(ctx) => {
                 own_context = ctx;
@@ -337,16 +352,27 @@ fn run(args: &RunArgs) -> Result<()> {
         )?),
         _ => None,
     };
+    let mut monitor = match &args.monitor {
+        Some(path) => Some(wgcloth::monitor::Monitor::create(path, args.monitor_every)?),
+        None => None,
+    };
     let bar = progress_bar(steps);
     let report = run::run(
         &chosen,
         scene,
         run::Steps::all(steps),
-        |k| bar.set_position(k),
-        recording.as_mut(),
+        run::Observers {
+            progress: Some(&mut |k| bar.set_position(k)),
+            notice: Some(&mut |line| bar.suspend(|| eprintln!("{line}"))),
+            recording: recording.as_mut(),
+            monitor: monitor.as_mut(),
+        },
     )?;
     bar.finish_and_clear();
     println!("{}", report.summary());
+    if let Some(monitor) = &monitor {
+        println!("{}", monitor.summary());
+    }
     if let Some(recording) = recording {
         let (frames, gif) = recording.finish();
         println!(

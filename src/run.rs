@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
@@ -13,6 +13,7 @@ use crate::error::{Error, Result};
 use crate::gpu::mlp::NetworkKernel;
 use crate::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use crate::health::{self, Divergence, FailedStep};
+use crate::monitor::Monitor;
 use crate::render::Recording;
 use crate::scene::Scene;
 use crate::stage::Stage;
@@ -28,7 +29,30 @@ pub enum Backend {
 /// The backend a run uses.
 pub enum Chosen {
     Cpu,
-    Gpu(Box<GpuContext>),
+    /// With `cpu_fallback` (what `auto` picks), a device fault moves the
+    /// run to the CPU, from the last state copied to the host, with a
+    /// notice; without it the fault ends the run with an error.
+    Gpu {
+        ctx: Box<GpuContext>,
+        cpu_fallback: bool,
+    },
+}
+
+impl Chosen {
+    /// The GPU, a fault ending the run.
+    pub fn gpu(ctx: GpuContext) -> Chosen {
+        Chosen::Gpu {
+            ctx: Box::new(ctx),
+            cpu_fallback: false,
+        }
+    }
+
+    pub fn context(&self) -> Option<&GpuContext> {
+        match self {
+            Chosen::Gpu { ctx, .. } => Some(ctx),
+            Chosen::Cpu => None,
+        }
+    }
 }
 
 /// Resolves `auto`, and says why when it falls back to the CPU (no
@@ -36,7 +60,7 @@ pub enum Chosen {
 pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
     match requested {
         Backend::Cpu => Ok((Chosen::Cpu, None)),
-        Backend::Gpu => Ok((Chosen::Gpu(Box::new(GpuContext::headless()?)), None)),
+        Backend::Gpu => Ok((Chosen::gpu(GpuContext::headless()?), None)),
         Backend::Auto => Ok(match GpuContext::headless() {
             // A software rasteriser (lavapipe) runs the kernels on the same
             // CPU cores, several times slower than the reference path.
@@ -47,7 +71,13 @@ pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
                     describe(&ctx.adapter)
                 )),
             ),
-            Ok(ctx) => (Chosen::Gpu(Box::new(ctx)), None),
+            Ok(ctx) => (
+                Chosen::Gpu {
+                    ctx: Box::new(ctx),
+                    cpu_fallback: true,
+                },
+                None,
+            ),
             Err(e) => (
                 Chosen::Cpu,
                 Some(format!(
@@ -86,6 +116,9 @@ pub struct Report {
     /// The state before the diverging step.
     #[serde(skip)]
     pub last_good: Option<State>,
+    /// A GPU fault the run survived by finishing on the CPU (`auto`); the
+    /// statistics then cover the CPU's steps.
+    pub device_fault: Option<DeviceFault>,
     pub cg_iterations_mean: f64,
     pub cg_residual_max: f32,
     pub cg_breakdowns: u64,
@@ -110,8 +143,37 @@ pub fn median(values: &mut [f64]) -> f64 {
 /// Per-step wall and stage times, summarised as medians.
 #[derive(Default)]
 struct Timings {
-    wall_ms: Vec<f64>,
-    stage_ms: BTreeMap<String, Vec<f64>>,
+    wall_ms: Series,
+    stage_ms: BTreeMap<String, Series>,
+}
+
+/// The most values a [`Series`] holds.
+const SERIES_CAP: usize = 8192;
+
+/// A series of step times in bounded memory, so a soak of any length
+/// stays flat: up to [`SERIES_CAP`] steps every value is kept; beyond, every
+/// other one is dropped and then only every `stride`-th step kept, an
+/// evenly spaced sample of the whole run.
+#[derive(Default)]
+struct Series {
+    values: Vec<f64>,
+    stride: u64,
+    seen: u64,
+}
+
+impl Series {
+    fn push(&mut self, value: f64) {
+        self.stride = self.stride.max(1);
+        if self.seen.is_multiple_of(self.stride) {
+            self.values.push(value);
+            if self.values.len() == SERIES_CAP {
+                let kept: Vec<f64> = self.values.iter().copied().step_by(2).collect();
+                self.values = kept;
+                self.stride *= 2;
+            }
+        }
+        self.seen += 1;
+    }
 }
 
 impl Timings {
@@ -126,9 +188,9 @@ impl Timings {
         let stages = self
             .stage_ms
             .iter_mut()
-            .map(|(k, v)| (k.clone(), median(v)))
+            .map(|(k, v)| (k.clone(), median(&mut v.values)))
             .collect();
-        (median(&mut self.wall_ms), stages)
+        (median(&mut self.wall_ms.values), stages)
     }
 }
 
@@ -146,33 +208,104 @@ impl Steps {
     }
 }
 
-/// Runs `steps.total` steps, calling `progress` after each.
-/// Runs `scene`, rendering frames into `recording` when given (of the
-/// initial state and after every `--every` steps).
-pub fn run(
-    chosen: &Chosen,
-    scene: Scene,
-    steps: Steps,
-    progress: impl FnMut(u64),
-    recording: Option<&mut Recording>,
-) -> Result<Report> {
-    match chosen {
-        Chosen::Cpu => run_cpu(scene, steps, progress, recording),
-        Chosen::Gpu(ctx) => run_gpu(ctx, scene, steps, progress, recording),
+/// What a run feeds as it goes; every part is optional.
+#[derive(Default)]
+pub struct Observers<'a, 'r> {
+    /// Told the number of steps done after each step.
+    pub progress: Option<&'a mut dyn FnMut(u64)>,
+    /// Told, in one line, of a GPU fault the run survives on the CPU.
+    pub notice: Option<&'a mut dyn FnMut(&str)>,
+    /// Frames of the initial state and of every `--every` steps.
+    pub recording: Option<&'a mut Recording<'r>>,
+    /// Samples every K steps (`run --monitor`).
+    pub monitor: Option<&'a mut Monitor>,
+}
+
+impl Observers<'_, '_> {
+    fn progress(&mut self, done: u64) {
+        if let Some(p) = self.progress.as_mut() {
+            p(done)
+        }
+    }
+
+    fn notice(&mut self, line: &str) {
+        if let Some(n) = self.notice.as_mut() {
+            n(line)
+        }
     }
 }
 
-fn run_cpu(
-    scene: Scene,
-    steps: Steps,
-    mut progress: impl FnMut(u64),
-    mut recording: Option<&mut Recording>,
-) -> Result<Report> {
-    let config = scene.config.clone();
-    let has_body = scene.rigid.is_some();
-    let mut sim = CpuSim::new(scene);
-    if let Some(r) = recording.as_deref_mut() {
-        r.cpu(0, &sim)?;
+/// A GPU fault that `--backend auto` survived by finishing on the CPU.
+#[derive(Clone, Debug, Serialize)]
+pub struct DeviceFault {
+    pub error: String,
+    /// The step the GPU had reached when it failed.
+    pub failed_at: u64,
+    /// The checkpoint the CPU resumed from (≤ `failed_at`).
+    pub resumed_from: u64,
+}
+
+/// How often a GPU run that may fall back copies its state to the host:
+/// often enough to lose little on a fault, rarely enough to cost nothing.
+const CHECKPOINT_INTERVAL: Duration = Duration::from_secs(2);
+
+/// The host's copy of a GPU run's state, where the CPU resumes after a
+/// device fault.
+struct Checkpoint {
+    sim: CpuSim,
+    reached: u64,
+    taken: Instant,
+}
+
+/// Runs `scene` for `steps.total` steps on `chosen`.
+pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> Result<Report> {
+    let (ctx, cpu_fallback) = match chosen {
+        Chosen::Cpu => return run_cpu(CpuSim::new(scene), steps, &mut obs),
+        Chosen::Gpu { ctx, cpu_fallback } => (ctx, *cpu_fallback),
+    };
+    if !cpu_fallback {
+        return run_gpu(ctx, &scene, steps, &mut obs, None);
+    }
+    let mut checkpoint = Checkpoint {
+        sim: CpuSim::new(scene.clone()),
+        reached: 0,
+        taken: Instant::now(),
+    };
+    let error = match run_gpu(ctx, &scene, steps, &mut obs, Some(&mut checkpoint)) {
+        Err(Error::Gpu(what)) => what,
+        done => return done,
+    };
+    let resumed_from = checkpoint.sim.state.step;
+    // Frames need the device that failed.
+    let frames = match obs.recording.take() {
+        Some(_) => format!("; frames stop at step {}", checkpoint.reached),
+        None => String::new(),
+    };
+    obs.notice(&format!(
+        "notice: the GPU failed at step {} ({error}); continuing on the CPU reference path from step {resumed_from}{frames}",
+        checkpoint.reached + 1
+    ));
+    let mut report = run_cpu(checkpoint.sim, steps, &mut obs)?;
+    report.device_fault = Some(DeviceFault {
+        error,
+        failed_at: checkpoint.reached + 1,
+        resumed_from,
+    });
+    Ok(report)
+}
+
+/// Steps `sim` from where its state is to `steps.total`.
+fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report> {
+    let config = sim.scene.config.clone();
+    let has_body = sim.scene.rigid.is_some();
+    let first = sim.state.step;
+    if first == 0 {
+        if let Some(r) = obs.recording.as_deref_mut() {
+            r.cpu(0, &sim)?;
+        }
+        if let Some(m) = obs.monitor.as_deref_mut() {
+            m.record(0, &sim.scene, &sim.state.x, &sim.state.v, None)?;
+        }
     }
     let mut timings = Timings::default();
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
@@ -180,7 +313,7 @@ fn run_cpu(
     let mut divergence = None;
     let mut last_good = sim.state.clone();
     let max_speed = config.solver.max_speed;
-    for k in 0..steps.total {
+    for k in first..steps.total {
         keep(&mut last_good, &sim.state);
         let start = Instant::now();
         let s = sim.step();
@@ -214,12 +347,15 @@ fn run_cpu(
             }));
             break;
         }
-        if let Some(r) = recording.as_deref_mut() {
+        if let Some(r) = obs.recording.as_deref_mut() {
             r.cpu(k + 1, &sim)?;
         }
-        progress(k + 1);
+        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(k + 1)) {
+            m.record(k + 1, &sim.scene, &sim.state.x, &sim.state.v, None)?;
+        }
+        obs.progress(k + 1);
     }
-    let done = sim.state.step.max(1) as f64;
+    let done = (sim.state.step - first).max(1) as f64;
     let (ms_per_step, stage_ms) = timings.medians();
     Ok(Report {
         backend: "cpu".into(),
@@ -240,6 +376,7 @@ fn run_cpu(
         finite: sim.is_finite(),
         last_good: divergence.is_some().then_some(last_good),
         divergence,
+        device_fault: None,
         cg_iterations_mean: cg_iters as f64 / done,
         cg_residual_max,
         cg_breakdowns: breakdowns,
@@ -270,18 +407,26 @@ fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<Stri
     ))
 }
 
+/// Runs `scene` on the GPU. With a `checkpoint` the state is copied to
+/// it every [`CHECKPOINT_INTERVAL`] for the CPU to resume from.
 fn run_gpu(
     ctx: &GpuContext,
-    scene: Scene,
+    scene: &Scene,
     steps: Steps,
-    mut progress: impl FnMut(u64),
-    mut recording: Option<&mut Recording>,
+    obs: &mut Observers,
+    mut checkpoint: Option<&mut Checkpoint>,
 ) -> Result<Report> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
-    let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, &scene)?;
-    if let Some(r) = recording.as_deref_mut() {
-        r.gpu(0, &sim, &scene)?;
+    let sim = GpuSim::new(kernels, &ctx.device, &ctx.queue, scene)?;
+    ctx.finish()?;
+    if let Some(r) = obs.recording.as_deref_mut() {
+        r.gpu(0, &sim, scene)?;
     }
+    if let Some(m) = obs.monitor.as_deref_mut() {
+        let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+        m.record(0, scene, &x, &v, Some(&ctx.device))?;
+    }
+    let dt = scene.config.solver.dt as f64;
     let mut timings = Timings::default();
     let mut dispatches = 0;
     let (mut divergence, mut last_good) = (None, None);
@@ -319,15 +464,32 @@ fn run_gpu(
             last_good = Some(State {
                 x,
                 v,
-                time: k as f64 * scene.config.solver.dt as f64,
+                time: k as f64 * dt,
                 step: k,
             });
             break;
         }
-        if let Some(r) = recording.as_deref_mut() {
-            r.gpu(k + 1, &sim, &scene)?;
+        if let Some(r) = obs.recording.as_deref_mut() {
+            r.gpu(k + 1, &sim, scene)?;
         }
-        progress(k + 1);
+        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(k + 1)) {
+            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+            m.record(k + 1, scene, &x, &v, Some(&ctx.device))?;
+        }
+        if let Some(c) = checkpoint.as_deref_mut() {
+            c.reached = k + 1;
+            if c.taken.elapsed() >= CHECKPOINT_INTERVAL {
+                let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+                c.sim.state = State {
+                    x,
+                    v,
+                    time: (k + 1) as f64 * dt,
+                    step: k + 1,
+                };
+                c.taken = Instant::now();
+            }
+        }
+        obs.progress(k + 1);
     }
     let state = sim.read_state()?;
     let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
@@ -339,7 +501,7 @@ fn run_gpu(
         backend: "gpu".into(),
         adapter: describe(&ctx.adapter),
         model: config.model,
-        network: describe_network(&scene, sim.network_kernel()),
+        network: describe_network(scene, sim.network_kernel()),
         scene: config.scene,
         grid: config.cloth.grid,
         steps: state.steps as u64,
@@ -351,11 +513,12 @@ fn run_gpu(
         finite,
         divergence,
         last_good,
+        device_fault: None,
         cg_iterations_mean: state.cg_iterations_total as f64 / done,
         cg_residual_max: state.cg_residual_max,
         cg_breakdowns: state.cg_breakdowns as u64,
         contacts_mean: state.contacts_total as f64 / done,
-        energy_final: cpu::energy(&scene, &x, &v).total(),
+        energy_final: cpu::energy(scene, &x, &v).total(),
     })
 }
 
@@ -471,15 +634,25 @@ impl Report {
             if self.finite { "finite" } else { "NOT FINITE" },
             self.energy_final,
         ) + &self
-            .divergence
+            .device_fault
             .as_ref()
-            .map(|d| {
+            .map(|f| {
                 format!(
-                    "\ndiverged     at step {}, vertex {}: {}",
-                    d.step, d.vertex, d.reason
+                    "\nGPU fault    at step {} ({}); finished on the CPU from step {}",
+                    f.failed_at, f.error, f.resumed_from
                 )
             })
             .unwrap_or_default()
+            + &self
+                .divergence
+                .as_ref()
+                .map(|d| {
+                    format!(
+                        "\ndiverged     at step {}, vertex {}: {}",
+                        d.step, d.vertex, d.reason
+                    )
+                })
+                .unwrap_or_default()
     }
 }
 
@@ -500,4 +673,31 @@ fn keep(to: &mut State, from: &State) {
     to.x.copy_from_slice(&from.x);
     to.v.copy_from_slice(&from.v);
     (to.time, to.step) = (from.time, from.step);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Past the cap a series keeps an evenly spaced sample of every step,
+    /// in bounded memory, with the median of the whole.
+    #[test]
+    fn a_long_series_keeps_an_even_sample() {
+        let mut series = Series::default();
+        let n = 5 * SERIES_CAP as u64 + 123;
+        for k in 0..n {
+            series.push(k as f64);
+        }
+        assert!(series.values.len() < SERIES_CAP);
+        assert_eq!(series.stride, 8);
+        for (i, v) in series.values.iter().enumerate() {
+            assert_eq!(*v, (i as u64 * series.stride) as f64);
+        }
+        let all_median = (n - 1) as f64 / 2.0;
+        let sampled = median(&mut series.values);
+        assert!(
+            (sampled - all_median).abs() <= series.stride as f64,
+            "{sampled} vs {all_median}"
+        );
+    }
 }

@@ -86,10 +86,11 @@ fn a_run_past_max_speed_stops_at_that_step_naming_the_fastest_vertex() {
     assert!(step > 1, "the first step should be good");
     let mut backends = vec![Chosen::Cpu];
     if let Some(ctx) = gpu() {
-        backends.push(Chosen::Gpu(Box::new(ctx)));
+        backends.push(Chosen::gpu(ctx));
     }
     for backend in &backends {
-        let report = run::run(backend, scene.clone(), Steps::all(50), |_| {}, None).expect("runs");
+        let report =
+            run::run(backend, scene.clone(), Steps::all(50), Default::default()).expect("runs");
         let what = &report.backend;
         let d = report.divergence.as_ref().expect("diverged");
         assert_eq!(d.step, step, "{what}: {d:?}");

@@ -247,7 +247,7 @@ fn backends() -> (Vec<Chosen>, String) {
     match GpuContext::headless() {
         Ok(ctx) => {
             let note = describe(&ctx.adapter);
-            (vec![Chosen::Cpu, Chosen::Gpu(Box::new(ctx))], note)
+            (vec![Chosen::Cpu, Chosen::gpu(ctx)], note)
         }
         Err(e) => (vec![Chosen::Cpu], format!("no GPU rows: {e}")),
     }
@@ -264,7 +264,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                 progress(&format!("step {} {label} {grid}²", name(backend)));
                 let scene = v.scene(grid)?;
                 let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
-                let report = run::run(backend, scene, opts.steps, |_| {}, None)?;
+                let report = run::run(backend, scene, opts.steps, Default::default())?;
                 let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
                 rows.push(StepRow {
                     label,
@@ -279,7 +279,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     progress("copy bandwidth");
     let mut bandwidth = vec![traffic::cpu_bandwidth()];
     for backend in &chosen {
-        if let Chosen::Gpu(ctx) = backend {
+        if let Some(ctx) = backend.context() {
             bandwidth.push(traffic::gpu_bandwidth(ctx)?);
         }
     }
@@ -293,7 +293,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             let mut runs = (0..opts.repeats)
                 .map(|_| {
                     let start = Instant::now();
-                    run::run(backend, scene.clone(), steps, |_| {}, None)?;
+                    run::run(backend, scene.clone(), steps, Default::default())?;
                     Ok(start.elapsed().as_secs_f64())
                 })
                 .collect::<Result<Vec<f64>>>()?;
@@ -315,10 +315,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             });
         }
     }
-    let gpu = chosen.iter().find_map(|c| match c {
-        Chosen::Gpu(ctx) => Some(&**ctx),
-        Chosen::Cpu => None,
-    });
+    let gpu = chosen.iter().find_map(Chosen::context);
     let networks = network_rows(opts, gpu, &mut progress)?;
     Ok(BenchReport {
         quick: opts.quick,
@@ -340,10 +337,9 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
 
 /// The grids a backend runs: the hardware-GPU ones only on a hardware GPU.
 fn grids(opts: &BenchOptions, backend: &Chosen) -> Vec<u32> {
-    let hardware = match backend {
-        Chosen::Gpu(ctx) => ctx.adapter.device_type != wgpu::DeviceType::Cpu,
-        Chosen::Cpu => false,
-    };
+    let hardware = backend
+        .context()
+        .is_some_and(|ctx| ctx.adapter.device_type != wgpu::DeviceType::Cpu);
     let mut grids = opts.grids.clone();
     if hardware {
         grids.extend(&opts.hardware_gpu_grids);
@@ -422,7 +418,7 @@ fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Traffic
 fn name(backend: &Chosen) -> &'static str {
     match backend {
         Chosen::Cpu => "cpu",
-        Chosen::Gpu(_) => "gpu",
+        Chosen::Gpu { .. } => "gpu",
     }
 }
 

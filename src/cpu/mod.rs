@@ -228,21 +228,7 @@ impl CpuSim {
 
     /// Kinetic, gravitational and elastic energy (J), in f64.
     pub fn energy(&self) -> Energy {
-        let cloth = &self.scene.cloth;
-        let m = cloth.vertex_mass as f64;
-        let g = Vec3::from_array(self.scene.config.solver.gravity).as_dvec3();
-        let kinetic = self
-            .state
-            .v
-            .iter()
-            .map(|v| 0.5 * m * v.as_dvec3().length_squared())
-            .sum();
-        let gravity = self.state.x.iter().map(|x| -m * g.dot(x.as_dvec3())).sum();
-        Energy {
-            kinetic,
-            gravity,
-            elastic: springs::potential_energy(cloth, &self.state.x),
-        }
+        energy(&self.scene, &self.state.x, &self.state.v)
     }
 
     /// True when every position and velocity is finite.

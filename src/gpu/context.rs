@@ -5,6 +5,7 @@ use crate::error::{Error, Result};
 
 use bytemuck::Pod;
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 /// A device and queue with what the simulator needs to know of them.
 #[derive(Clone, Debug)]
@@ -87,7 +88,7 @@ impl GpuContext {
         let fault: Arc<Mutex<Option<String>>> = Arc::default();
         let record = |fault: &Arc<Mutex<Option<String>>>, what: String| {
             let mut slot = fault.lock().unwrap_or_else(|e| e.into_inner());
-            slot.get_or_insert(what);
+            slot.get_or_insert(one_line(&what));
         };
         let f = fault.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&f, e.to_string())));
@@ -110,19 +111,50 @@ impl GpuContext {
 
     /// Waits for submitted work and reports any fault the device recorded.
     pub fn finish(&self) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu(format!("waiting for the device failed: {e}")))?;
+        wait(&self.device)?;
         match self
             .fault
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .as_ref()
         {
-            Some(what) => Err(Error::Gpu(what.lines().next().unwrap_or(what).to_string())),
+            Some(what) => Err(Error::Gpu(what.clone())),
             None => Ok(()),
         }
     }
+}
+
+/// wgpu's multi-line error ("Validation Error", "Caused by:", the cause
+/// indented) as one line: "Validation Error: cause: inner cause".
+fn one_line(error: &str) -> String {
+    error
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && *l != "Caused by:")
+        .collect::<Vec<_>>()
+        .join(": ")
+}
+
+/// The longest the host waits for submitted work: far beyond any step
+/// (a 256² step takes about a second on lavapipe), so reaching it means a
+/// hung or lost device, which then ends the run instead of hanging it.
+pub const WATCHDOG: Duration = Duration::from_secs(120);
+
+/// Waits for all submitted work, at most [`WATCHDOG`].
+pub fn wait(device: &wgpu::Device) -> Result<()> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: None,
+            timeout: Some(WATCHDOG),
+        })
+        .map(|_| ())
+        .map_err(|e| match e {
+            wgpu::PollError::Timeout => Error::Gpu(format!(
+                "the device did not finish its work within {} s (hung or lost)",
+                WATCHDOG.as_secs()
+            )),
+            e => Error::Gpu(format!("waiting for the device failed: {e}")),
+        })
 }
 
 /// Copies `buffer` back to the host (blocks until the GPU is done), as
@@ -146,9 +178,7 @@ pub fn read_buffer<T: Pod>(
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);
     });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| Error::Gpu(format!("waiting for the device failed: {e}")))?;
+    wait(device)?;
     rx.recv()
         .map_err(|_| Error::Gpu("readback never completed".into()))?
         .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;

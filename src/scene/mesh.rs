@@ -182,14 +182,22 @@ impl TriMesh {
     /// triangles), rejecting non-finite vertices, indices out of range and
     /// meshes with no usable triangle.
     pub fn load_obj(path: &Path) -> Result<TriMesh> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        TriMesh::parse_obj(&bytes, path)
+    }
+
+    /// [`TriMesh::load_obj`] on the file's bytes; `path` only names it in
+    /// errors. Materials are not read: the body is drawn in one colour.
+    pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh> {
         let options = tobj::LoadOptions {
             triangulate: true,
             ignore_points: true,
             ignore_lines: true,
             ..Default::default()
         };
-        let (models, _materials) = tobj::load_obj(path, &options)
-            .map_err(|e| Error::file(path, format!("not a readable OBJ mesh: {e}")))?;
+        let (models, _materials) =
+            tobj::load_obj_buf(&mut &bytes[..], &options, |_| Ok(Default::default()))
+                .map_err(|e| Error::file(path, format!("not a readable OBJ mesh: {e}")))?;
         let mut mesh = TriMesh::default();
         for model in &models {
             let m = &model.mesh;
