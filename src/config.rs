@@ -356,12 +356,20 @@ impl Config {
     /// Parses a TOML document; unknown or mistyped fields are errors naming
     /// the file and line.
     pub fn from_toml(text: &str, path: &Path) -> Result<Config> {
-        toml::from_str(text).map_err(|e| {
+        toml::from_str(text).map_err(|mut e| {
             let line = e
                 .span()
                 .map(|s| format!("line {}: ", text[..s.start].matches('\n').count() + 1))
                 .unwrap_or_default();
-            Error::file(path, format!("{line}{}", e.message().trim()))
+            // Without the input, the error's display names the dotted key.
+            e.set_input(None);
+            let shown = e.to_string();
+            let key = shown
+                .lines()
+                .find_map(|l| l.strip_prefix("in `")?.strip_suffix('`'))
+                .map(|k| format!("`{k}`: "))
+                .unwrap_or_default();
+            Error::file(path, format!("{line}{key}{}", e.message().trim()))
         })
     }
 

@@ -93,7 +93,7 @@ struct TrainArgs {
     epochs: usize,
     #[arg(long, default_value_t = 512)]
     batch: usize,
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     lr: f64,
     #[arg(long, default_value_t = 10)]
     patience: usize,
@@ -542,6 +542,9 @@ fn train(args: &TrainArgs) -> Result<()> {
 }
 
 fn eval_net(args: &EvalNetArgs) -> Result<()> {
+    if args.samples == 0 {
+        return Err(Error::config("--samples", "must be at least 1"));
+    }
     let file = wgcloth::nn::weights::WeightsFile::read(&args.file)?;
     let held_out = args
         .data

@@ -692,3 +692,196 @@ fn unknown_export_format_is_a_usage_error() {
     let out = run_tiny(&["--out", "frames", "--export", "fbx"]);
     expect_clap_error("--export fbx", &out, "fbx");
 }
+
+// ------------------------------------------------- every config field
+
+/// Each field of the configuration with a value its check refuses, in
+/// the scene and model the check applies to; the error names the field.
+const BAD_FIELDS: &[(&str, &str)] = &[
+    ("[cloth]\ngrid = [1, 4]", "cloth.grid"),
+    ("[cloth]\ngrid = [10000, 10000]", "cloth.grid"),
+    ("[cloth]\nsize = [1.0, 0.0]", "cloth.size"),
+    ("[cloth]\nmass = 0.0", "cloth.mass"),
+    ("[cloth]\nstiffness = inf", "cloth.stiffness"),
+    ("[cloth]\ndamping_mass = -0.1", "cloth.damping_mass"),
+    (
+        "[cloth]\ndamping_stiffness = nan",
+        "cloth.damping_stiffness",
+    ),
+    ("[cloth]\ncenter = [0.0, inf, 0.0]", "cloth.center"),
+    (
+        "[cloth.rotation]\naxis = [0.0, 0.0, 0.0]\ndegrees = 30.0",
+        "cloth.rotation",
+    ),
+    ("[cloth.rotation]\ndegrees = nan", "cloth.rotation"),
+    ("[rigid]\nradius = 0.0", "rigid.radius"),
+    ("[rigid]\nsubdivisions = 8", "rigid.subdivisions"),
+    (
+        "[rigid]\nshape = \"box\"\nhalf_extents = [0.1, -0.1, 0.1]",
+        "rigid.half_extents",
+    ),
+    (
+        "[rigid]\nshape = \"box\"\nsubdivisions = 0",
+        "rigid.subdivisions",
+    ),
+    (
+        "[rigid]\nshape = \"plane\"\nplane_size = [0.0, 1.0]",
+        "rigid.plane_size",
+    ),
+    ("[rigid]\nshape = \"obj\"", "rigid.mesh"),
+    (
+        "[rigid]\nshape = \"obj\"\nmesh = \"body.obj\"\nscale = 0.0",
+        "rigid.scale",
+    ),
+    ("[rigid]\nposition = [nan, 0.0, 0.0]", "rigid.position"),
+    (
+        "[rigid.rotation]\naxis = [0.0, 0.0, 0.0]\ndegrees = 10.0",
+        "rigid.rotation",
+    ),
+    (
+        "[rigid.motion]\nkind = \"linear\"\nvelocity = [0.0, 0.0, inf]",
+        "rigid.motion.velocity",
+    ),
+    (
+        "[rigid.motion]\naxis = [0.0, 0.0, 0.0]",
+        "rigid.motion.axis",
+    ),
+    ("[rigid.motion]\namplitude = nan", "rigid.motion.amplitude"),
+    ("[rigid.motion]\nperiod = 0.0", "rigid.motion.period"),
+    ("[rigid.motion]\nphase_deg = inf", "rigid.motion.phase_deg"),
+    ("[contact]\nthickness = 0.0", "contact.thickness"),
+    ("[contact]\nmax_depth = -0.01", "contact.max_depth"),
+    (
+        "model = \"naive-net\"\n[contact]\nnaive_stiffness = nan",
+        "contact.naive_stiffness",
+    ),
+    ("[contact]\nforce_scale = 0.0", "contact.force_scale"),
+    ("[contact]\nkn = 0.0", "contact.kn"),
+    ("[contact]\nkd = -1.0", "contact.kd"),
+    ("model = \"friction\"\n[contact]\nkt = 0.0", "contact.kt"),
+    ("[contact]\nmu = -0.5", "contact.mu"),
+    (
+        "model = \"naive\"\n[contact]\nweights = \"weights/naive_mlp.safetensors\"",
+        "contact.weights",
+    ),
+    ("[solver]\ndt = inf", "solver.dt"),
+    ("[solver]\ncg_iters = 0", "solver.cg_iters"),
+    ("[solver]\ncg_tol = -1e-6", "solver.cg_tol"),
+    ("[solver]\ngravity = [0.0, nan, 0.0]", "solver.gravity"),
+    ("[solver]\nmax_speed = 0.0", "solver.max_speed"),
+    ("[solver]\nsteps = -1", "solver.steps"),
+    ("scene = \"cube\"", "`scene`"),
+    ("model = \"learned\"", "`model`"),
+    ("[cloth]\npins = \"middle\"", "cloth.pins"),
+    ("[rigid.motion]\nkind = \"orbit\"", "rigid.motion.kind"),
+    ("[cloth]\ngrid = [-1, 4]", "cloth.grid"),
+];
+
+#[test]
+fn every_config_field_rejects_a_bad_value_by_name() {
+    let dir = TempDir::new("every_field");
+    for (k, (toml, field)) in BAD_FIELDS.iter().enumerate() {
+        let path = dir.file(&format!("c{k}.toml"), toml);
+        // The grid cases need the file's grid, not the tiny one.
+        let out = match field.starts_with("cloth.grid") {
+            true => wgcloth(&[
+                "run",
+                "--backend",
+                "cpu",
+                "--steps",
+                "2",
+                "--config",
+                s(&path),
+            ]),
+            false => run_tiny(&["--config", s(&path)]),
+        };
+        expect_error(&format!("{toml:?}"), &out, &[field], &[]);
+    }
+}
+
+// ------------------------------------------- monitor, data and training
+
+#[test]
+fn monitor_every_0_is_rejected_and_writes_nothing() {
+    let dir = TempDir::new("monitor_every_0");
+    let csv = dir.path("m.csv");
+    let out = run_tiny(&["--monitor", s(&csv), "--monitor-every", "0"]);
+    expect_error("--monitor-every 0", &out, &["--monitor-every"], &[]);
+    assert!(
+        !csv.exists(),
+        "no monitor file for a run that never started"
+    );
+}
+
+#[test]
+fn monitor_in_a_missing_directory_names_the_path() {
+    let dir = TempDir::new("monitor_missing_dir");
+    let csv = dir.path("nowhere/m.csv");
+    let out = run_tiny(&["--monitor", s(&csv)]);
+    expect_error("--monitor nowhere/m.csv", &out, &[s(&csv)], &[]);
+}
+
+#[test]
+fn gen_data_with_no_samples_is_rejected_and_writes_nothing() {
+    let dir = TempDir::new("gen_data_empty");
+    let data = dir.path("d.safetensors");
+    let out = wgcloth(&[
+        "gen-data",
+        "--out",
+        s(&data),
+        "--recorded",
+        "0",
+        "--uniform",
+        "0",
+    ]);
+    expect_error("gen-data with no samples", &out, &["--recorded"], &[]);
+    assert!(!data.exists());
+}
+
+#[test]
+fn eval_net_with_0_samples_is_rejected() {
+    let out = wgcloth(&[
+        "eval-net",
+        "weights/naive_mlp.safetensors",
+        "--samples",
+        "0",
+    ]);
+    expect_error("eval-net --samples 0", &out, &["--samples"], &[]);
+}
+
+#[test]
+fn train_flags_out_of_range_are_rejected_by_name_and_write_nothing() {
+    let dir = TempDir::new("train_flags");
+    let data = dir.path("d.safetensors");
+    let made = wgcloth(&[
+        "gen-data",
+        "--out",
+        s(&data),
+        "--recorded",
+        "0",
+        "--uniform",
+        "64",
+    ]);
+    assert!(made.status.success(), "{}", describe("gen-data", &made));
+    let weights = dir.path("w.safetensors");
+    for (flag, value) in [
+        ("--epochs", "0"),
+        ("--batch", "0"),
+        ("--hidden", "8,0"),
+        ("--lr", "nan"),
+        ("--lr", "-1"),
+        ("--lr", "0"),
+    ] {
+        let out = wgcloth(&[
+            "train",
+            "--data",
+            s(&data),
+            "--out",
+            s(&weights),
+            flag,
+            value,
+        ]);
+        expect_error(&format!("train {flag} {value}"), &out, &[flag], &[]);
+        assert!(!weights.exists(), "train {flag} {value} wrote weights");
+    }
+}

@@ -245,6 +245,12 @@ pub fn generate(
     seed: u64,
     mut progress: impl FnMut(&str, f32),
 ) -> Result<Dataset> {
+    if recorded + uniform == 0 {
+        return Err(Error::config(
+            "--recorded",
+            "with --uniform 0 there would be no samples; ask for some of either",
+        ));
+    }
     let mut rng = Rng::new(seed);
     let mut data = Dataset::new(kind);
     let mut contacts = Vec::new();

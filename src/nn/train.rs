@@ -241,10 +241,21 @@ pub fn train(
             format!("{} samples are too few to train on", data.len()),
         ));
     }
-    if opts.batch == 0 || opts.epochs == 0 || opts.hidden.contains(&0) {
+    for (flag, value) in [("--epochs", opts.epochs), ("--batch", opts.batch)] {
+        if value == 0 {
+            return Err(Error::config(flag, "must be at least 1"));
+        }
+    }
+    if opts.hidden.contains(&0) {
         return Err(Error::config(
-            "train",
-            "epochs, batch and every hidden width must be ≥ 1",
+            "--hidden",
+            format!("every width must be at least 1, got {:?}", opts.hidden),
+        ));
+    }
+    if !(opts.learning_rate.is_finite() && opts.learning_rate > 0.0) {
+        return Err(Error::config(
+            "--lr",
+            format!("must be a positive number, got {}", opts.learning_rate),
         ));
     }
     let kind = match (opts.contact_frame, data.kind) {
