@@ -357,7 +357,7 @@ impl WeightsFile {
             .into_iter()
             .filter(|(k, _)| !standard.contains(&k.as_str()))
             .collect();
-        Ok(WeightsFile {
+        let file = WeightsFile {
             kind,
             layers,
             negative_slope,
@@ -366,7 +366,24 @@ impl WeightsFile {
             output_mean,
             output_std,
             notes,
-        })
+        };
+        // Finite tensors can still overflow f32 once the scalers are folded
+        // in (a weight of 1e38 over an input range of 0.05): the network
+        // would compute non-finite forces.
+        if let Some(k) = file
+            .folded()
+            .layers
+            .iter()
+            .position(|l| !l.weight.iter().chain(&l.bias).all(|w| w.is_finite()))
+        {
+            return Err(Error::file(
+                path,
+                format!(
+                    "layer {k} overflows f32 once the scalers (input range, output std) are folded into it"
+                ),
+            ));
+        }
+        Ok(file)
     }
 
     pub fn to_bytes(&self) -> Vec<u8> {

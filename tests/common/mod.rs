@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod loaders;
+
 use glam::{Mat3, Vec3};
 
 /// Central finite-difference Jacobian of f: R³ → R³ at x.

@@ -1,0 +1,7 @@
+//! Fuzzes the weights loader with the checks of tests/common/loaders.rs.
+#![no_main]
+
+#[path = "../../tests/common/loaders.rs"]
+mod loaders;
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| loaders::weights(data));
