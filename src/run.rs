@@ -282,8 +282,8 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
         None => String::new(),
     };
     obs.notice(&format!(
-        "notice: the GPU failed at step {} ({error}); continuing on the CPU reference path from step {resumed_from}{frames}",
-        checkpoint.reached + 1
+        "notice: the GPU failed after {} steps ({error}); continuing on the CPU reference path from step {resumed_from}{frames}",
+        checkpoint.reached
     ));
     let mut report = run_cpu(checkpoint.sim, steps, &mut obs)?;
     report.device_fault = Some(DeviceFault {

@@ -432,6 +432,25 @@ fn obj_face_index_out_of_range() {
     expect_error("OBJ face index 7 of 3", &out, &[s(&path)], &[]);
 }
 
+/// Indices tobj would turn into wrapped `usize` arithmetic (a panic in
+/// debug builds; found by fuzzing) are refused by line.
+#[test]
+fn obj_indices_out_of_range_name_the_line() {
+    let dir = TempDir::new("obj_indices");
+    let head = "v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\nvt 0 0\nvn 0 0 1\n";
+    for face in [
+        "f 0 1 2",
+        "f -4 -1 -2",
+        "f 1/-2 2/1 3/1",
+        "f 1//1 2//2 3//1",
+        "f 1 2 99999999999",
+    ] {
+        let path = dir.file("mesh.obj", &format!("{head}{face}\n"));
+        let out = run_tiny(&["--scene", "sphere", "--mesh", s(&path)]);
+        expect_error(face, &out, &[s(&path), "line 6", "out of range"], &[]);
+    }
+}
+
 #[test]
 fn obj_without_faces() {
     let dir = TempDir::new("obj_no_faces");

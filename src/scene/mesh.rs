@@ -189,6 +189,7 @@ impl TriMesh {
     /// [`TriMesh::load_obj`] on the file's bytes; `path` only names it in
     /// errors. Materials are not read: the body is drawn in one colour.
     pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh> {
+        check_obj_indices(bytes).map_err(|reason| Error::file(path, reason))?;
         let options = tobj::LoadOptions {
             triangulate: true,
             ignore_points: true,
@@ -247,6 +248,55 @@ impl TriMesh {
         }
         Ok(mesh)
     }
+}
+
+/// Rejects element indices that tobj 4 turns into out-of-range `usize`
+/// arithmetic (which overflows, a panic in debug builds): 0, a relative
+/// index reaching before the first element of its kind, or an absolute
+/// one past the last. Found by fuzzing (fuzz/regressions/obj).
+fn check_obj_indices(bytes: &[u8]) -> std::result::Result<(), String> {
+    let text = String::from_utf8_lossy(bytes);
+    const KINDS: [(&str, &str); 3] = [
+        ("v", "vertex"),
+        ("vt", "texture coordinate"),
+        ("vn", "normal"),
+    ];
+    let count = |kind: &str| {
+        text.lines()
+            .filter(|l| l.split_whitespace().next() == Some(kind))
+            .count() as i64
+    };
+    let totals = KINDS.map(|(kind, _)| count(kind));
+    let mut seen = [0i64; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let Some(first) = words.next() else { continue };
+        if let Some(k) = KINDS.iter().position(|(kind, _)| *kind == first) {
+            seen[k] += 1;
+            continue;
+        }
+        if !matches!(first, "f" | "l" | "p") {
+            continue;
+        }
+        for word in words {
+            for (k, part) in word.split('/').enumerate().take(3) {
+                // What does not parse is tobj's to reject.
+                let Ok(index) = part.parse::<i64>() else {
+                    continue;
+                };
+                let name = KINDS[k].1;
+                if index == 0 || index < -seen[k] || index > totals[k] {
+                    return Err(format!(
+                        "line {}: {name} index {index} is out of range ({} defined before it, {} in all)",
+                        n + 1,
+                        seen[k],
+                        totals[k]
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
