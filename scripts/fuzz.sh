@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Fuzzes the three loaders (weights, OBJ, config) for SECONDS each
-# (default 600), one after another, from the seed corpus in fuzz/seeds.
+# Fuzzes the loaders (TARGETs, default all: weights obj config) for
+# SECONDS each (default 600), one after another, from fuzz/seeds.
+#   scripts/fuzz.sh [SECONDS [TARGET...]]
 # Needs a nightly toolchain and cargo-fuzz:
 #   rustup toolchain install nightly && cargo install cargo-fuzz
 # New inputs go to fuzz/corpus/TARGET; a crash goes to fuzz/artifacts/TARGET
@@ -8,11 +9,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/../fuzz"
 seconds=${1:-600}
-# -s none: safe Rust needs no AddressSanitizer, and it triples the speed;
+shift || true
+targets=("$@")
+[ ${#targets[@]} -gt 0 ] || targets=(weights obj config)
+# -s none: our code and the loaders are safe Rust, so no AddressSanitizer;
 # -a keeps debug assertions (integer overflow) on.
 cargo +nightly fuzz build -s none -a
 crashed=()
-for target in weights obj config; do
+for target in "${targets[@]}"; do
     mkdir -p "corpus/$target"
     dict=()
     [ -f "dicts/$target.dict" ] && dict=("-dict=dicts/$target.dict")
