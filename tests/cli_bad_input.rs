@@ -707,6 +707,20 @@ fn every_0_is_rejected() {
 }
 
 #[test]
+fn frame_sizes_the_adapter_cannot_render_are_rejected_and_write_nothing() {
+    let dir = TempDir::new("frame_size");
+    let frames = dir.path("frames");
+    for size in ["0", "100000"] {
+        let out = run_tiny(&["--out", s(&frames), "--size", size]);
+        expect_error(&format!("--size {size}"), &out, &["--size"], &[]);
+        assert!(
+            !frames.exists(),
+            "--size {size} created the frame directory"
+        );
+    }
+}
+
+#[test]
 fn unknown_export_format_is_a_usage_error() {
     let out = run_tiny(&["--out", "frames", "--export", "fbx"]);
     expect_clap_error("--export fbx", &out, "fbx");

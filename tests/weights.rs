@@ -136,6 +136,10 @@ fn malformed_files_are_rejected_naming_the_problem() {
     };
     let mut bad_range = f.clone();
     bad_range.input_max[3] = bad_range.input_min[3];
+    // Finite, but 3e38 over an input range of 0.01 is not an f32.
+    let mut overflow = f.clone();
+    overflow.input_max[2] = overflow.input_min[2] + 0.01;
+    overflow.layers[0].weight[2] = 3e38;
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty", vec![], "not a safetensors file"),
         (
@@ -163,6 +167,11 @@ fn malformed_files_are_rejected_naming_the_problem() {
         ("layers do not chain", unchained.to_bytes(), "layer1.weight"),
         ("non-finite value", nan.to_bytes(), "non-finite"),
         ("max ≤ min", bad_range.to_bytes(), "max ≤ min"),
+        (
+            "folds to non-finite",
+            overflow.to_bytes(),
+            "layer 0 overflows f32",
+        ),
         ("wrong format", with_meta(&f, "format", "pytorch"), "format"),
         ("wrong model", with_meta(&f, "model", "cloth"), "model"),
         (

@@ -533,11 +533,26 @@ impl RecordOptions {
         if self.every == 0 {
             return Err(Error::config("--every", "must be at least 1 step"));
         }
+        // Before the directory exists; `Renderer::new` checks the adapter's
+        // own (possibly lower) limit once there is a device.
+        if !(1..=MAX_FRAME_SIZE).contains(&self.size) {
+            return Err(Error::config(
+                "--size",
+                format!(
+                    "must be 1 to {MAX_FRAME_SIZE} pixels per side, got {}",
+                    self.size
+                ),
+            ));
+        }
         let frames = 1 + (steps / self.every) as usize;
         let delay_ms = (1e3 * scene.config.solver.dt * self.every as f32) as u32;
         output::FrameWriter::create(&self.dir, frames, (delay_ms, self.obj), self.force)
     }
 }
+
+/// The largest frame side any adapter is asked for (common GPUs' and
+/// lavapipe's 2D texture limit).
+pub const MAX_FRAME_SIZE: u32 = 16384;
 
 /// Metres of force segment per unit of force: 5 cm on a 32×32 cloth, and
 /// in proportion to the vertex count, as each vertex's share of the
