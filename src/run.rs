@@ -252,7 +252,7 @@ const CHECKPOINT_INTERVAL: Duration = Duration::from_secs(2);
 /// The host's copy of a GPU run's state, where the CPU resumes after a
 /// device fault.
 struct Checkpoint {
-    sim: CpuSim,
+    state: State,
     reached: u64,
     taken: Instant,
 }
@@ -267,7 +267,7 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
         return run_gpu(ctx, &scene, steps, &mut obs, None);
     }
     let mut checkpoint = Checkpoint {
-        sim: CpuSim::new(scene.clone()),
+        state: State::initial(&scene),
         reached: 0,
         taken: Instant::now(),
     };
@@ -275,7 +275,7 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
         Err(Error::Gpu(what)) => what,
         done => return done,
     };
-    let resumed_from = checkpoint.sim.state.step;
+    let resumed_from = checkpoint.state.step;
     // Frames need the device that failed.
     let frames = match obs.recording.take() {
         Some(_) => format!("; frames stop at step {}", checkpoint.reached),
@@ -285,7 +285,10 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
         "notice: the GPU failed after {} steps ({error}); continuing on the CPU reference path from step {resumed_from}{frames}",
         checkpoint.reached
     ));
-    let mut report = run_cpu(checkpoint.sim, steps, &mut obs)?;
+    // Built only now: the CPU path's system matrix is large.
+    let mut sim = CpuSim::new(scene);
+    sim.state = checkpoint.state;
+    let mut report = run_cpu(sim, steps, &mut obs)?;
     report.device_fault = Some(DeviceFault {
         error,
         failed_at: checkpoint.reached + 1,
@@ -480,7 +483,7 @@ fn run_gpu(
             c.reached = k + 1;
             if c.taken.elapsed() >= CHECKPOINT_INTERVAL {
                 let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
-                c.sim.state = State {
+                c.state = State {
                     x,
                     v,
                     time: (k + 1) as f64 * dt,

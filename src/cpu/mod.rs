@@ -47,6 +47,18 @@ pub struct State {
     pub step: u64,
 }
 
+impl State {
+    /// The cloth at rest, before the first step.
+    pub fn initial(scene: &Scene) -> State {
+        State {
+            x: scene.cloth.rest_positions.clone(),
+            v: vec![Vec3::ZERO; scene.cloth.vertex_count()],
+            time: 0.0,
+            step: 0,
+        }
+    }
+}
+
 pub struct CpuSim {
     pub scene: Scene,
     pub state: State,
@@ -69,12 +81,7 @@ impl CpuSim {
         let cfg = &scene.config;
         let cloth = &scene.cloth;
         let n = cloth.vertex_count();
-        let state = State {
-            x: cloth.rest_positions.clone(),
-            v: vec![Vec3::ZERO; n],
-            time: 0.0,
-            step: 0,
-        };
+        let state = State::initial(&scene);
         let params = StepParams {
             dt: cfg.solver.dt,
             gravity: Vec3::from_array(cfg.solver.gravity),
