@@ -1,0 +1,619 @@
+//! `wgcloth bench` (DESIGN "Command line"): one row per backend × model ×
+//! grid with the median ms/step after a warm-up, the per-stage medians,
+//! contacts and CG iterations; the networks' throughput over batches of
+//! contacts; and the thesis's headline measure, seconds per sphere period
+//! with the analytic force against each network on the same backend.
+//! [`traffic`] sets each PCG iteration against its memory-traffic floor;
+//! [`plot`] draws the figure.
+
+pub mod plot;
+pub mod traffic;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::run::{self, Chosen, Report, Steps, median};
+use wgcloth::config::{Config, ModelKind, SceneKind};
+use wgcloth::error::Result;
+use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
+use wgcloth::gpu::{GpuContext, Kernels, context::describe};
+use wgcloth::nn::domain::{Rng, uniform_inputs};
+use wgcloth::nn::weights::{self, Shipped};
+use wgcloth::scene::Scene;
+use wgcloth::stage::Stage;
+
+/// A model and, for a network model, the shipped network it runs instead
+/// of its default one.
+#[derive(Clone, Copy, Debug)]
+pub struct Variant {
+    pub model: ModelKind,
+    pub network: Option<Shipped>,
+}
+
+impl Variant {
+    const fn of(model: ModelKind) -> Variant {
+        Variant {
+            model,
+            network: None,
+        }
+    }
+
+    /// The model's name, and the network's file stem when not the default.
+    pub fn label(&self) -> String {
+        match self.network {
+            None => self.model.name().into(),
+            Some(net) => {
+                let stem = net.path.trim_start_matches("weights/");
+                format!(
+                    "{} ({})",
+                    self.model.name(),
+                    stem.trim_end_matches(".safetensors")
+                )
+            }
+        }
+    }
+
+    /// The sphere scene at N×N with this variant's network.
+    pub fn scene(&self, grid: u32) -> Result<Scene> {
+        let mut scene = scene(SceneKind::Sphere, self.model, grid)?;
+        if let Some(net) = self.network {
+            scene.network = Some(Arc::new(net.read()?.network()));
+            // Names the network in the report.
+            scene.config.contact.weights = Some(net.path.into());
+        }
+        Ok(scene)
+    }
+}
+
+/// Every model with its default network, and the friction model with the
+/// thesis-size network too.
+pub const VARIANTS: [Variant; 5] = [
+    Variant::of(ModelKind::Naive),
+    Variant::of(ModelKind::Friction),
+    Variant::of(ModelKind::NaiveNet),
+    Variant::of(ModelKind::FrictionNet),
+    Variant {
+        model: ModelKind::FrictionNet,
+        network: Some(weights::FRICTION_THESIS),
+    },
+];
+
+/// Steps before the timed ones: the sphere reaches the cloth and pushes it
+/// (about 0.8 s into the default motion).
+pub const UNTIMED_STEPS: u64 = 80;
+
+/// One sphere period of the default motion (2 s at h = 0.01 s).
+pub const PERIOD_STEPS: u64 = 200;
+
+/// What `wgcloth bench` measures.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub quick: bool,
+    pub grids: Vec<u32>,
+    /// Further grids run on a hardware GPU only (a software adapter and
+    /// the CPU would take hours over them).
+    pub hardware_gpu_grids: Vec<u32>,
+    /// Steps before the timed ones, and timed steps per row.
+    pub steps: Steps,
+    /// Grid of the sphere-period rows (the thesis's: 32²), and its steps.
+    pub period_grid: u32,
+    pub period_steps: u64,
+    /// Contacts per network batch.
+    pub batch_sizes: Vec<usize>,
+    /// Timed repeats of each batch and period.
+    pub repeats: usize,
+}
+
+impl BenchOptions {
+    /// Every grid from 32² to 256², batches of 1k to 1M contacts.
+    pub fn full() -> BenchOptions {
+        BenchOptions {
+            quick: false,
+            grids: vec![32, 64, 128, 256],
+            hardware_gpu_grids: vec![512, 1024],
+            steps: Steps {
+                untimed: UNTIMED_STEPS,
+                total: UNTIMED_STEPS + 40,
+            },
+            period_grid: 32,
+            period_steps: PERIOD_STEPS,
+            batch_sizes: vec![1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000],
+            repeats: 3,
+        }
+    }
+
+    /// Two grids, fewer steps and batches: a few minutes on lavapipe.
+    pub fn quick() -> BenchOptions {
+        BenchOptions {
+            quick: true,
+            grids: vec![32, 64],
+            hardware_gpu_grids: Vec::new(),
+            steps: Steps {
+                untimed: UNTIMED_STEPS,
+                total: UNTIMED_STEPS + 20,
+            },
+            batch_sizes: vec![1_000, 16_000],
+            repeats: 1,
+            ..BenchOptions::full()
+        }
+    }
+}
+
+/// A benchmark scene: N×N cloth and the thesis's solver, 25 PCG
+/// iterations at tolerance 0, so every model does the same solver work.
+pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Result<Scene> {
+    let mut c = Config {
+        scene: kind,
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    c.solver.cg_iters = 25;
+    c.solver.cg_tol = 0.0;
+    Scene::new(&c)
+}
+
+/// The network and its input Jacobian over one batch of contacts.
+#[derive(Clone, Debug, Serialize)]
+pub struct NetworkRow {
+    pub network: &'static str,
+    pub backend: String,
+    /// `reverse` on the CPU; the GPU kernel's name.
+    pub kernel: String,
+    pub contacts: usize,
+    /// Floating-point operations per contact as the kernel does them.
+    pub flop_per_contact: usize,
+    /// Median over the repeats.
+    pub ms: f64,
+    pub contacts_per_s: f64,
+    pub gflop_per_s: f64,
+}
+
+/// One step row: the run's report under the variant's label.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepRow {
+    pub label: String,
+    /// Cloth vertices (grid²) and springs.
+    pub particles: usize,
+    pub springs: usize,
+    /// Σ stage_ms / ms_per_step: how much of the step the stages account
+    /// for (on the GPU the rest is submission and waiting).
+    pub stage_coverage: f64,
+    #[serde(flatten)]
+    pub report: Report,
+}
+
+/// Wall time of one sphere period (at 32² unless told otherwise), from a
+/// fresh simulator.
+#[derive(Clone, Debug, Serialize)]
+pub struct PeriodRow {
+    pub backend: String,
+    pub label: String,
+    pub model: ModelKind,
+    pub seconds: f64,
+    /// Against the analytic model the network learned (friction for
+    /// friction-net, naive for naive-net), same backend, same run.
+    pub ratio_to_analytic: Option<f64>,
+}
+
+/// A step's growth with the particle count: ms ∝ particles^exponent
+/// between two grids (≤ 1: no faster than linear).
+#[derive(Clone, Debug, Serialize)]
+pub struct ScalingRow {
+    pub backend: String,
+    pub label: String,
+    pub from_grid: u32,
+    pub to_grid: u32,
+    pub exponent: f64,
+}
+
+/// One PCG iteration of the friction rows against its memory-traffic
+/// floor on the same backend.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrafficRow {
+    pub backend: String,
+    pub grid: u32,
+    /// [`traffic::Layout::iteration_bytes`] for this backend's layout.
+    pub bytes_per_iteration: u64,
+    /// Those bytes at the measured copy bandwidth.
+    pub floor_ms: f64,
+    /// The pcg stage's median time over its iterations (the stage's
+    /// setup pass included).
+    pub measured_ms: f64,
+    pub times_floor: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub quick: bool,
+    pub period_grid: u32,
+    pub period_steps: u64,
+    pub cpu: String,
+    /// The GPU adapter, or why there are no GPU rows.
+    pub gpu: String,
+    pub rows: Vec<StepRow>,
+    pub scaling: Vec<ScalingRow>,
+    pub bandwidth: Vec<traffic::Bandwidth>,
+    pub cg_traffic: Vec<TrafficRow>,
+    pub networks: Vec<NetworkRow>,
+    pub periods: Vec<PeriodRow>,
+}
+
+/// The CPU, and the GPU where an adapter exists; the adapter, or why
+/// there is none.
+fn backends() -> (Vec<Chosen>, String) {
+    match GpuContext::headless() {
+        Ok(ctx) => {
+            let note = describe(&ctx.adapter);
+            (vec![Chosen::Cpu, Chosen::gpu(ctx)], note)
+        }
+        Err(e) => (vec![Chosen::Cpu], format!("no GPU rows: {e}")),
+    }
+}
+
+/// Runs the whole table; `progress` hears what is being measured.
+pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<BenchReport> {
+    let (chosen, gpu_note) = backends();
+    let mut rows = Vec::new();
+    for backend in &chosen {
+        for grid in grids(opts, backend) {
+            for v in VARIANTS {
+                let label = v.label();
+                progress(&format!("step {} {label} {grid}²", name(backend)));
+                let scene = v.scene(grid)?;
+                let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
+                let report = run::run(backend, scene, opts.steps, Default::default())?;
+                let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
+                rows.push(StepRow {
+                    label,
+                    particles,
+                    springs,
+                    stage_coverage,
+                    report,
+                });
+            }
+        }
+    }
+    progress("copy bandwidth");
+    let mut bandwidth = vec![traffic::cpu_bandwidth()];
+    for backend in &chosen {
+        if let Some(ctx) = backend.context() {
+            bandwidth.push(traffic::gpu_bandwidth(ctx)?);
+        }
+    }
+    let mut periods = Vec::new();
+    for backend in &chosen {
+        let mut seconds = Vec::new();
+        for v in VARIANTS {
+            progress(&format!("period {} {}", name(backend), v.label()));
+            let scene = v.scene(opts.period_grid)?;
+            let steps = Steps::all(opts.period_steps);
+            let mut runs = (0..opts.repeats)
+                .map(|_| {
+                    let start = Instant::now();
+                    run::run(backend, scene.clone(), steps, Default::default())?;
+                    Ok(start.elapsed().as_secs_f64())
+                })
+                .collect::<Result<Vec<f64>>>()?;
+            seconds.push((v, median(&mut runs)));
+        }
+        let of = |m: ModelKind| seconds.iter().find(|(v, _)| v.model == m).map(|(_, s)| *s);
+        for &(v, s) in &seconds {
+            let analytic = match v.model {
+                ModelKind::FrictionNet => of(ModelKind::Friction),
+                ModelKind::NaiveNet => of(ModelKind::Naive),
+                _ => None,
+            };
+            periods.push(PeriodRow {
+                backend: name(backend).into(),
+                label: v.label(),
+                model: v.model,
+                seconds: s,
+                ratio_to_analytic: analytic.map(|a| s / a),
+            });
+        }
+    }
+    let gpu = chosen.iter().find_map(Chosen::context);
+    let networks = network_rows(opts, gpu, &mut progress)?;
+    Ok(BenchReport {
+        quick: opts.quick,
+        period_grid: opts.period_grid,
+        period_steps: opts.period_steps,
+        cpu: format!(
+            "CPU reference path ({} threads)",
+            rayon::current_num_threads()
+        ),
+        gpu: gpu_note,
+        scaling: scaling(&rows),
+        cg_traffic: cg_traffic(&rows, &bandwidth),
+        bandwidth,
+        rows,
+        networks,
+        periods,
+    })
+}
+
+/// The grids a backend runs: the hardware-GPU ones only on a hardware GPU.
+fn grids(opts: &BenchOptions, backend: &Chosen) -> Vec<u32> {
+    let hardware = backend
+        .context()
+        .is_some_and(|ctx| ctx.adapter.device_type != wgpu::DeviceType::Cpu);
+    let mut grids = opts.grids.clone();
+    if hardware {
+        grids.extend(&opts.hardware_gpu_grids);
+    }
+    grids
+}
+
+/// Each backend × variant's growth from its smallest grid of at least 64²
+/// (the smallest of all when only the largest is) to its largest.
+fn scaling(rows: &[StepRow]) -> Vec<ScalingRow> {
+    let mut out = Vec::new();
+    let mut series: Vec<(&str, &str)> = Vec::new();
+    for r in rows {
+        let key = (r.report.backend.as_str(), r.label.as_str());
+        if !series.contains(&key) {
+            series.push(key);
+        }
+    }
+    for (backend, label) in series {
+        let of: Vec<&StepRow> = rows
+            .iter()
+            .filter(|r| r.report.backend == backend && r.label == label)
+            .collect();
+        let Some(to) = of.iter().max_by_key(|r| r.particles) else {
+            continue;
+        };
+        let smallest = |at_least: u32| {
+            of.iter()
+                .filter(|r| r.report.grid[0] >= at_least && r.particles < to.particles)
+                .min_by_key(|r| r.particles)
+        };
+        if let Some(from) = smallest(64).or_else(|| smallest(0)) {
+            let (a, b) = (from, to);
+            out.push(ScalingRow {
+                backend: backend.into(),
+                label: label.into(),
+                from_grid: a.report.grid[0],
+                to_grid: b.report.grid[0],
+                exponent: (b.report.ms_per_step / a.report.ms_per_step).ln()
+                    / (b.particles as f64 / a.particles as f64).ln(),
+            });
+        }
+    }
+    out
+}
+
+/// The friction rows' PCG iterations against the floor of their backend.
+fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<TrafficRow> {
+    rows.iter()
+        .filter(|r| r.label == ModelKind::Friction.name())
+        .filter_map(|r| {
+            let backend = r.report.backend.as_str();
+            let gb_per_s = bandwidth.iter().find(|b| b.backend == backend)?.gb_per_s;
+            let layout = if backend == "gpu" {
+                traffic::GPU
+            } else {
+                traffic::CPU
+            };
+            let pcg_ms = r.report.stage_ms.get(Stage::Pcg.name())?;
+            let iterations = r.report.cg_iterations_mean;
+            let bytes = layout.iteration_bytes(r.particles as u64, r.springs as u64);
+            let floor_ms = bytes as f64 / (gb_per_s * 1e9) * 1e3;
+            let measured_ms = pcg_ms / iterations;
+            (iterations > 0.0).then(|| TrafficRow {
+                backend: backend.into(),
+                grid: r.report.grid[0],
+                bytes_per_iteration: bytes,
+                floor_ms,
+                measured_ms,
+                times_floor: measured_ms / floor_ms,
+            })
+        })
+        .collect()
+}
+
+fn name(backend: &Chosen) -> &'static str {
+    match backend {
+        Chosen::Cpu => "cpu",
+        Chosen::Gpu { .. } => "gpu",
+    }
+}
+
+/// Floating-point work per batch at most: the CPU and a software adapter
+/// get a few seconds' worth, a real GPU far more.
+const CPU_BUDGET: f64 = 4e9;
+const GPU_BUDGET: f64 = 2e12;
+
+fn network_rows(
+    opts: &BenchOptions,
+    gpu: Option<&GpuContext>,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<NetworkRow>> {
+    let kernels = match gpu {
+        Some(ctx) => Some(Arc::new(Kernels::new(&ctx.device)?)),
+        None => None,
+    };
+    let mut rows = Vec::new();
+    let largest = opts.batch_sizes.iter().copied().max().unwrap_or(0);
+    for shipped in weights::SHIPPED {
+        let network = shipped.read()?.network();
+        let (net, kind, wrt) = (&network.mlp, network.kind, network.kind.wrt());
+        let mut rng = Rng::new(5);
+        let inputs: Vec<f32> = (0..largest)
+            .flat_map(|_| uniform_inputs(kind, &mut rng))
+            .collect();
+        // A contact is one row of the network, or two for the contact frame's.
+        let evaluations = kind.evaluations();
+        for &n in &opts.batch_sizes {
+            let rows_n = n * evaluations;
+            let batch = &inputs[..rows_n * net.inputs()];
+            let flop = 2 * network.jacobian_multiply_adds();
+            if (n * flop) as f64 <= CPU_BUDGET {
+                progress(&format!("network {} cpu {n}", shipped.path));
+                let ms = timed(opts.repeats, || {
+                    net.forward_jacobian_parallel(batch, wrt.clone());
+                    Ok(())
+                })?;
+                rows.push(network_row(shipped, "cpu", "reverse", n, flop, ms));
+            }
+            let (Some(ctx), Some(kernels)) = (gpu, &kernels) else {
+                continue;
+            };
+            let software = ctx.adapter.device_type == wgpu::DeviceType::Cpu;
+            let budget = if software { CPU_BUDGET } else { GPU_BUDGET };
+            // Every kernel does at least the reverse-mode work: skip a batch
+            // over budget before allocating it.
+            if (n * flop) as f64 > budget {
+                continue;
+            }
+            let on_gpu = NetworkBatch::new(
+                kernels.clone(),
+                &ctx.device,
+                net,
+                wrt.clone(),
+                BatchShape::new(rows_n),
+            )?;
+            let flop = 2 * on_gpu.network().multiply_adds_per_contact() * evaluations;
+            if (n * flop) as f64 > budget {
+                continue;
+            }
+            progress(&format!("network {} gpu {n}", shipped.path));
+            on_gpu.upload(&ctx.queue, batch)?;
+            let ms = timed(opts.repeats, || {
+                on_gpu.run(&ctx.device, &ctx.queue);
+                ctx.finish()
+            })?;
+            let kernel = on_gpu.network().kernel().name();
+            rows.push(network_row(shipped, "gpu", kernel, n, flop, ms));
+        }
+    }
+    Ok(rows)
+}
+
+fn network_row(
+    shipped: Shipped,
+    backend: &str,
+    kernel: &str,
+    contacts: usize,
+    flop_per_contact: usize,
+    ms: f64,
+) -> NetworkRow {
+    let contacts_per_s = contacts as f64 / (ms * 1e-3);
+    NetworkRow {
+        network: shipped.path,
+        backend: backend.into(),
+        kernel: kernel.into(),
+        contacts,
+        flop_per_contact,
+        ms,
+        contacts_per_s,
+        gflop_per_s: contacts_per_s * flop_per_contact as f64 * 1e-9,
+    }
+}
+
+/// Median wall time of `repeats` calls after one untimed call, ms.
+fn timed(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
+    let mut ms = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = Instant::now();
+        f()?;
+        ms.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(&mut ms))
+}
+
+impl BenchReport {
+    /// The terminal tables.
+    pub fn table(&self) -> String {
+        let mut out = format!("cpu: {}\ngpu: {}\n\n", self.cpu, self.gpu);
+        let stages: Vec<&str> = Stage::ALL
+            .iter()
+            .map(|s| s.name())
+            .filter(|s| self.rows.iter().any(|r| r.report.stage_ms.contains_key(*s)))
+            .collect();
+        out += &format!(
+            "{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}{:>7}",
+            "backend", "model", "grid", "ms/step", "contacts", "cg", "staged"
+        );
+        for s in &stages {
+            out += &format!("{:>11}", s);
+        }
+        out += "\n";
+        for row in &self.rows {
+            let r = &row.report;
+            out += &format!(
+                "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}{:>6.0}%",
+                r.backend,
+                row.label,
+                r.grid[0],
+                r.ms_per_step,
+                r.contacts_mean,
+                r.cg_iterations_mean,
+                100.0 * row.stage_coverage
+            );
+            for s in &stages {
+                match r.stage_ms.get(*s) {
+                    Some(ms) => out += &format!("{ms:>11.3}"),
+                    None => out += &format!("{:>11}", "-"),
+                }
+            }
+            out += "\n";
+        }
+        out += "\nstep growth, ms/step ∝ particles^exponent\n";
+        for g in &self.scaling {
+            out += &format!(
+                "{:<8}{:<32}{:>4}² → {:>4}²{:>8.2}\n",
+                g.backend, g.label, g.from_grid, g.to_grid, g.exponent
+            );
+        }
+        out += "\ncopy bandwidth\n";
+        for b in &self.bandwidth {
+            out += &format!("{:<8}{:>8.1} GB/s  {}\n", b.backend, b.gb_per_s, b.method);
+        }
+        out += &format!(
+            "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
+            "backend", "grid", "MB/iter", "floor ms", "measured ms", "× floor"
+        );
+        for t in &self.cg_traffic {
+            out += &format!(
+                "{:<8}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.1}\n",
+                t.backend,
+                t.grid,
+                t.bytes_per_iteration as f64 * 1e-6,
+                t.floor_ms,
+                t.measured_ms,
+                t.times_floor
+            );
+        }
+        out += &format!(
+            "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",
+            self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
+        );
+        for p in &self.periods {
+            out += &format!(
+                "{:<8}{:<32}{:>10.3}{:>14}\n",
+                p.backend,
+                p.label,
+                p.seconds,
+                p.ratio_to_analytic
+                    .map(|r| format!("{r:.2}"))
+                    .unwrap_or_default()
+            );
+        }
+        out += &format!(
+            "\nnetwork and input Jacobian over a batch\n{:<40}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
+            "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
+        );
+        for n in &self.networks {
+            out += &format!(
+                "{:<40}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
+                n.network, n.backend, n.kernel, n.contacts, n.ms, n.contacts_per_s, n.gflop_per_s
+            );
+        }
+        out
+    }
+}

@@ -1,0 +1,212 @@
+//! `bench --plot`: ms/step against particle count on log-log axes, one
+//! line per backend × model (GPU solid, CPU dashed) with a linear-growth
+//! guide; beside it each stage's share of the step for the default network
+//! model, one bar per backend × grid.
+
+use std::path::Path;
+
+use image::Rgb;
+
+use crate::bench::{BenchReport, StepRow, VARIANTS};
+use crate::plot::{Canvas, GRID, INK, LogAxis, decade_label};
+use wgcloth::config::ModelKind;
+use wgcloth::error::{Error, Result};
+use wgcloth::stage::Stage;
+
+/// One colour per entry of [`VARIANTS`].
+pub const VARIANT_COLORS: [Rgb<u8>; VARIANTS.len()] = [
+    Rgb([150, 150, 150]),
+    Rgb([40, 90, 200]),
+    Rgb([230, 150, 30]),
+    Rgb([200, 40, 40]),
+    Rgb([120, 60, 170]),
+];
+
+/// One colour per entry of [`Stage::ALL`].
+pub const STAGE_COLORS: [Rgb<u8>; Stage::ALL.len()] = [
+    Rgb([140, 86, 75]),
+    Rgb([31, 119, 180]),
+    Rgb([214, 39, 40]),
+    Rgb([44, 160, 44]),
+    Rgb([255, 127, 14]),
+    Rgb([148, 103, 189]),
+    Rgb([23, 190, 207]),
+    Rgb([188, 189, 34]),
+];
+
+/// The part of a step no stage accounts for.
+pub const UNSTAGED: Rgb<u8> = Rgb([225, 225, 225]);
+
+const SIZE: (u32, u32) = (1120, 560);
+
+/// The figure of `report`.
+pub fn figure(report: &BenchReport) -> Result<Canvas> {
+    let mut c = Canvas::new(SIZE.0, SIZE.1);
+    step_lines(&mut c, report, (70.0, 600.0))?;
+    stage_bars(&mut c, report, (690.0, 960.0));
+    Ok(c)
+}
+
+pub fn write(report: &BenchReport, path: &Path) -> Result<()> {
+    figure(report)?.save(path)
+}
+
+fn variant_color(row: &StepRow) -> Rgb<u8> {
+    VARIANTS
+        .iter()
+        .position(|v| v.label() == row.label)
+        .map_or(INK, |k| VARIANT_COLORS[k])
+}
+
+/// The log-log panel between x = left and right.
+fn step_lines(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) -> Result<()> {
+    let (top, bottom) = (40.0, c.height() - 50.0);
+    let no_rows = || Error::config("--plot", "no step rows to plot");
+    let x = LogAxis::covering(report.rows.iter().map(|r| r.particles as f64), left, right)
+        .ok_or_else(no_rows)?;
+    let y = LogAxis::covering(
+        report.rows.iter().map(|r| r.report.ms_per_step),
+        bottom,
+        top,
+    )
+    .ok_or_else(no_rows)?;
+    for d in x.decades() {
+        c.line((x.at(d), top), (x.at(d), bottom), GRID, 1, None);
+        let label = decade_label(d);
+        c.text(
+            x.at(d) - Canvas::text_width(&label) / 2.0,
+            bottom + 8.0,
+            &label,
+            INK,
+        );
+    }
+    for d in y.decades() {
+        c.line((left, y.at(d)), (right, y.at(d)), GRID, 1, None);
+        let label = decade_label(d);
+        c.text(
+            left - 8.0 - Canvas::text_width(&label),
+            y.at(d) - 4.0,
+            &label,
+            INK,
+        );
+    }
+    c.text(left, 16.0, "ms per step (log-log)", INK);
+    c.text(
+        (left + right) / 2.0 - 100.0,
+        bottom + 28.0,
+        "particles (cloth vertices)",
+        INK,
+    );
+    // Slope 1 through the smallest GPU (else CPU) friction row.
+    let friction = ModelKind::Friction.name();
+    if let Some(anchor) = ["gpu", "cpu"].iter().find_map(|b| {
+        report
+            .rows
+            .iter()
+            .filter(|r| r.report.backend == *b && r.label == friction)
+            .min_by_key(|r| r.particles)
+    }) {
+        let (p0, ms0) = (anchor.particles as f64, anchor.report.ms_per_step);
+        let far = 10f64.powf(x.hi);
+        let end = (x.at(far), y.at(ms0 * far / p0));
+        c.line((x.at(p0), y.at(ms0)), end, INK, 1, Some(3));
+        c.text(end.0 - 60.0, end.1.max(top) - 12.0, "linear", INK);
+    }
+    for backend in ["cpu", "gpu"] {
+        let dash = (backend == "cpu").then_some(6);
+        for v in VARIANTS {
+            let label = v.label();
+            let mut points: Vec<&StepRow> = report
+                .rows
+                .iter()
+                .filter(|r| r.report.backend == backend && r.label == label)
+                .collect();
+            points.sort_by_key(|r| r.particles);
+            let at = |r: &StepRow| (x.at(r.particles as f64), y.at(r.report.ms_per_step));
+            for pair in points.windows(2) {
+                c.line(at(pair[0]), at(pair[1]), variant_color(pair[0]), 2, dash);
+            }
+            for r in points {
+                let (px, py) = at(r);
+                c.fill((px - 3.0, py - 3.0), (px + 4.0, py + 4.0), variant_color(r));
+            }
+        }
+    }
+    // Legend, top left inside the panel.
+    let (lx, mut ly) = (left + 10.0, top + 8.0);
+    for (v, color) in VARIANTS.iter().zip(VARIANT_COLORS) {
+        c.fill((lx, ly + 2.0), (lx + 20.0, ly + 6.0), color);
+        c.text(lx + 26.0, ly, &v.label(), INK);
+        ly += 12.0;
+    }
+    c.line((lx, ly + 4.0), (lx + 20.0, ly + 4.0), INK, 2, None);
+    c.text(lx + 26.0, ly, "gpu", INK);
+    c.line(
+        (lx + 70.0, ly + 4.0),
+        (lx + 90.0, ly + 4.0),
+        INK,
+        2,
+        Some(6),
+    );
+    c.text(lx + 96.0, ly, "cpu", INK);
+    Ok(())
+}
+
+/// The per-stage panel between x = left and right, legend beyond it.
+fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
+    let (top, bottom) = (40.0, c.height() - 66.0);
+    let model = ModelKind::FrictionNet.name();
+    c.text(
+        left - 40.0,
+        16.0,
+        &format!("share of the step per stage, {model}"),
+        INK,
+    );
+    for pct in [0, 25, 50, 75, 100] {
+        let py = bottom - (bottom - top) * pct as f64 / 100.0;
+        c.line((left, py), (right, py), GRID, 1, None);
+        c.text(left - 40.0, py - 4.0, &format!("{pct:>3}%"), INK);
+    }
+    let bars: Vec<&StepRow> = report.rows.iter().filter(|r| r.label == model).collect();
+    let slot = (right - left) / bars.len().max(1) as f64;
+    for (k, row) in bars.iter().enumerate() {
+        let (x0, x1) = (
+            left + slot * (k as f64 + 0.2),
+            left + slot * (k as f64 + 0.8),
+        );
+        let step = row.report.ms_per_step;
+        let mut share = 0.0;
+        let mut y_at = |ms: f64| {
+            share = (share + ms / step).min(1.0);
+            bottom - (bottom - top) * share
+        };
+        let mut below = bottom;
+        for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS) {
+            if let Some(ms) = row.report.stage_ms.get(stage.name()) {
+                // At least a pixel, so every timed stage shows.
+                let above = y_at(*ms).min(below - 1.0);
+                c.fill((x0, above), (x1, below), color);
+                below = above;
+            }
+        }
+        c.fill((x0, top), (x1, below), UNSTAGED);
+        let grid = row.report.grid[0].to_string();
+        let mid = (x0 + x1) / 2.0;
+        c.text(
+            mid - Canvas::text_width(&grid) / 2.0,
+            bottom + 6.0,
+            &grid,
+            INK,
+        );
+        c.text(mid - 12.0, bottom + 18.0, &row.report.backend, INK);
+    }
+    c.text(left + 40.0, bottom + 36.0, "grid (N x N) and backend", INK);
+    let (lx, mut ly) = (right + 24.0, top + 8.0);
+    for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS).rev() {
+        c.fill((lx, ly), (lx + 14.0, ly + 8.0), color);
+        c.text(lx + 20.0, ly, stage.name(), INK);
+        ly += 14.0;
+    }
+    c.fill((lx, ly), (lx + 14.0, ly + 8.0), UNSTAGED);
+    c.text(lx + 20.0, ly, "unstaged", INK);
+}

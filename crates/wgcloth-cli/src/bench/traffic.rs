@@ -1,0 +1,140 @@
+//! The memory-traffic floor of a PCG iteration: the bytes its three passes
+//! (wgsl/pcg.wgsl `spmv`, `update`, `direction`; the same three fused loops
+//! in src/cpu/pcg.rs) must move between memory and the processor if every
+//! array they touch crosses once, and the copy bandwidth that moves them.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use wgcloth::error::Result;
+use wgcloth::gpu::GpuContext;
+
+/// How a backend stores the solver's data, in bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// One vertex's entry of a vector (x, r, z, p, q, P⁻¹).
+    pub vector: u64,
+    /// A diagonal block of A.
+    pub diag_block: u64,
+    /// A spring's off-diagonal block of A.
+    pub off_block: u64,
+    /// A vertex's pinned flag.
+    pub flag: u64,
+}
+
+/// wgsl/pcg.wgsl: `vec4<f32>` vectors, `Sym3` blocks (8 floats), u32 flags.
+pub const GPU: Layout = Layout {
+    vector: 16,
+    diag_block: 32,
+    off_block: 32,
+    flag: 4,
+};
+
+/// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags.
+pub const CPU: Layout = Layout {
+    vector: 12,
+    diag_block: 36,
+    off_block: 36,
+    flag: 1,
+};
+
+impl Layout {
+    /// Bytes one iteration must move for `vertices` and `springs`. Per
+    /// vertex: `spmv` reads A's diagonal block, the flag, the adjacency
+    /// offset and p, and writes q (neighbours' p come from cache);
+    /// `update` reads and writes x and r, reads p, q and P⁻¹ and writes z;
+    /// `direction` reads z and reads and writes p: 13 vectors in all. Per
+    /// spring: its off-diagonal block once and its two adjacency entries
+    /// (spring and neighbour index, u32 each) at each end.
+    pub fn iteration_bytes(&self, vertices: u64, springs: u64) -> u64 {
+        let per_vertex = self.diag_block + self.flag + 4 + 13 * self.vector;
+        let per_spring = self.off_block + 2 * 8;
+        vertices * per_vertex + springs * per_spring
+    }
+}
+
+/// Copy bandwidth of one backend, GB/s (read plus write bytes per second).
+#[derive(Clone, Debug, Serialize)]
+pub struct Bandwidth {
+    pub backend: String,
+    /// How it was measured.
+    pub method: String,
+    pub gb_per_s: f64,
+}
+
+/// Bytes copied per measurement: well past any cache.
+const COPY_BYTES: u64 = 256 << 20;
+
+/// Timed repeats; the best is the achievable bandwidth.
+const REPEATS: usize = 5;
+
+/// A parallel copy between two 256 MiB arrays on every rayon thread.
+pub fn cpu_bandwidth() -> Bandwidth {
+    let n = COPY_BYTES as usize / 4;
+    let src = vec![1.0f32; n];
+    let mut dst = vec![0.0f32; n];
+    let mut best = f64::INFINITY;
+    for _ in 0..REPEATS {
+        let start = Instant::now();
+        dst.par_chunks_mut(1 << 16)
+            .zip(src.par_chunks(1 << 16))
+            .for_each(|(d, s)| d.copy_from_slice(s));
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&dst);
+    Bandwidth {
+        backend: "cpu".into(),
+        method: format!(
+            "parallel copy of 256 MiB on {} threads, best of {REPEATS}",
+            rayon::current_num_threads()
+        ),
+        gb_per_s: 2.0 * COPY_BYTES as f64 / best * 1e-9,
+    }
+}
+
+/// `copy_buffer_to_buffer` between two device buffers (256 MiB, or the
+/// adapter's largest buffer), four copies per submission.
+pub fn gpu_bandwidth(ctx: &GpuContext) -> Result<Bandwidth> {
+    let bytes = COPY_BYTES.min(ctx.device.limits().max_buffer_size) & !3;
+    let buffer = |usage| {
+        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("bandwidth"),
+            size: bytes,
+            usage,
+            mapped_at_creation: false,
+        })
+    };
+    let src = buffer(wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
+    let dst = buffer(wgpu::BufferUsages::COPY_DST);
+    let copies = 4;
+    let run = || {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        // Written once, so the copies move real data.
+        encoder.clear_buffer(&src, 0, None);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.finish()?;
+        let start = Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        for _ in 0..copies {
+            encoder.copy_buffer_to_buffer(&src, 0, &dst, 0, bytes);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.finish()?;
+        Ok(start.elapsed().as_secs_f64())
+    };
+    run()?;
+    let mut best = f64::INFINITY;
+    for _ in 0..REPEATS {
+        best = best.min(run()?);
+    }
+    Ok(Bandwidth {
+        backend: "gpu".into(),
+        method: format!(
+            "copy_buffer_to_buffer, {copies} × {} MiB per submission, best of {REPEATS}",
+            bytes >> 20
+        ),
+        gb_per_s: 2.0 * (copies as u64 * bytes) as f64 / best * 1e-9,
+    })
+}

@@ -1,0 +1,164 @@
+//! What `wgcloth run --out` writes: each frame drawn by the library's
+//! offscreen [`Renderer`] as a PNG, the animated GIF, and with
+//! `--export obj` each frame's geometry as OBJ.
+
+pub mod obj;
+pub mod output;
+
+use wgcloth::cpu::CpuSim;
+use wgcloth::error::{Error, Result};
+use wgcloth::gpu::{GpuContext, GpuSim};
+use wgcloth::render::{
+    Camera, HostScene, MAX_FRAME_SIZE, Renderer, Source, Style, metres_per_force,
+};
+use wgcloth::scene::Scene;
+
+/// What `wgcloth run --out` records.
+#[derive(Clone, Debug)]
+pub struct RecordOptions {
+    pub dir: std::path::PathBuf,
+    pub size: u32,
+    /// A frame every this many steps (and one of the initial state).
+    pub every: u64,
+    pub style: Style,
+    /// Also each frame's geometry as OBJ (`--export obj`).
+    pub obj: bool,
+    pub force: bool,
+}
+
+impl RecordOptions {
+    /// The checks that need no GPU, done first: the frame interval and the
+    /// directory, which it prepares for the run's frames.
+    pub fn prepare(&self, scene: &Scene, steps: u64) -> Result<output::FrameWriter> {
+        if self.every == 0 {
+            return Err(Error::config("--every", "must be at least 1 step"));
+        }
+        // Before the directory exists; `Renderer::new` checks the adapter's
+        // own (possibly lower) limit once there is a device.
+        if !(1..=MAX_FRAME_SIZE).contains(&self.size) {
+            return Err(Error::config(
+                "--size",
+                format!(
+                    "must be 1 to {MAX_FRAME_SIZE} pixels per side, got {}",
+                    self.size
+                ),
+            ));
+        }
+        let frames = 1 + (steps / self.every) as usize;
+        let delay_ms = (1e3 * scene.config.solver.dt * self.every as f32) as u32;
+        output::FrameWriter::create(&self.dir, frames, (delay_ms, self.obj), self.force)
+    }
+}
+
+/// The frames of a run, rendered on `ctx` (for a CPU run too: the CPU
+/// path uploads its state) and written as they come.
+pub struct Recording<'a> {
+    ctx: &'a GpuContext,
+    renderer: Renderer,
+    camera: Camera,
+    style: Style,
+    every: u64,
+    writer: output::FrameWriter,
+    /// The CPU path's state on the GPU (unused by a GPU run).
+    host: HostScene,
+}
+
+impl<'a> Recording<'a> {
+    /// Checks the frame size before any step runs; `writer` comes from
+    /// `options.prepare`.
+    pub fn new(
+        ctx: &'a GpuContext,
+        scene: &Scene,
+        steps: u64,
+        (options, writer): (&RecordOptions, output::FrameWriter),
+    ) -> Result<Recording<'a>> {
+        Ok(Recording {
+            ctx,
+            renderer: Renderer::new(&ctx.device, options.size, options.size)?,
+            camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
+            style: options.style,
+            every: options.every,
+            writer,
+            host: HostScene::new(&ctx.device, scene),
+        })
+    }
+
+    fn due(&self, step: u64) -> bool {
+        step.is_multiple_of(self.every)
+    }
+
+    /// Renders `source` and writes the frame.
+    fn draw(
+        ctx: &GpuContext,
+        renderer: &Renderer,
+        (camera, style): (&Camera, Style),
+        source: &Source,
+        writer: &mut output::FrameWriter,
+    ) -> Result<()> {
+        let frame = renderer.render(&ctx.device, &ctx.queue, source, camera, style)?;
+        ctx.finish()?;
+        writer.write(&frame)
+    }
+
+    /// After step `step` of a CPU run (0: the initial state).
+    pub fn cpu(&mut self, step: u64, sim: &CpuSim) -> Result<()> {
+        if !self.due(step) {
+            return Ok(());
+        }
+        self.writer
+            .write_obj(&sim.scene, &sim.state.x, sim.state.time as f32)?;
+        self.host
+            .upload_sim(&self.ctx.queue, sim, metres_per_force(&sim.scene));
+        let view = (&self.camera, self.style);
+        Self::draw(
+            self.ctx,
+            &self.renderer,
+            view,
+            &self.host.source(),
+            &mut self.writer,
+        )
+    }
+
+    /// After step `step` of a GPU run: draws from the simulator's buffers,
+    /// except the initial state, drawn from the scene (the simulator places
+    /// the body only as it steps).
+    pub fn gpu(&mut self, step: u64, sim: &GpuSim, scene: &Scene) -> Result<()> {
+        if !self.due(step) {
+            return Ok(());
+        }
+        if step == 0 {
+            self.writer
+                .write_obj(scene, &scene.cloth.rest_positions, 0.0)?;
+            let start = (&scene.cloth.rest_positions[..], 0.0);
+            self.host.upload(&self.ctx.queue, scene, start, &[]);
+            let view = (&self.camera, self.style);
+            return Self::draw(
+                self.ctx,
+                &self.renderer,
+                view,
+                &self.host.source(),
+                &mut self.writer,
+            );
+        }
+        if self.writer.wants_obj() {
+            let time = step as f32 * scene.config.solver.dt;
+            self.writer.write_obj(scene, &sim.read_positions()?, time)?;
+        }
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        sim.record_force_lines(&mut encoder);
+        self.ctx.queue.submit([encoder.finish()]);
+        let view = (&self.camera, self.style);
+        Self::draw(
+            self.ctx,
+            &self.renderer,
+            view,
+            &Source::gpu(sim, scene),
+            &mut self.writer,
+        )
+    }
+
+    /// The frames written and the GIF's path.
+    pub fn finish(self) -> (usize, std::path::PathBuf) {
+        (self.writer.written(), self.writer.finish())
+    }
+}

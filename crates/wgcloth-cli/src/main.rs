@@ -1,0 +1,678 @@
+//! The `wgcloth` command line (names fixed by DESIGN.md).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use wgcloth::config::{ModelKind, SceneKind, Shape};
+use wgcloth::gpu::GpuContext;
+use wgcloth::nn::weights::NetKind;
+use wgcloth::{Config, Error, Result, Scene};
+use wgcloth_cli::run::{self, Backend, Chosen, check_diverged, choose_backend};
+use wgcloth_learn::train::thesis_hidden;
+
+/// A flag whose values are the names of a library enum's variants.
+fn choice<T: Copy + Send + Sync + 'static>(
+    all: &'static [T],
+    name: fn(T) -> &'static str,
+) -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(all.iter().map(|&v| name(v)))
+        .map(move |s| *all.iter().find(|&&v| name(v) == s).expect("a listed name"))
+}
+
+#[derive(Parser)]
+#[command(
+    name = "wgcloth",
+    version,
+    about = "Implicit mass-spring cloth with learned collision response"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a scene and print a summary.
+    Run(RunArgs),
+    /// Run the same scene on the GPU and the CPU and compare the results.
+    Validate(ValidateArgs),
+    /// Record contacts and sample the domain: training data for a network.
+    GenData(GenDataArgs),
+    /// Train a network (candle) and write its weights file.
+    Train(TrainArgs),
+    /// Accuracy of a network's weights file.
+    EvalNet(EvalNetArgs),
+    /// The benchmark table: every backend × model × grid, the networks'
+    /// throughput, and seconds per sphere period.
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Two grids and fewer repeats: a few minutes on lavapipe.
+    #[arg(long)]
+    quick: bool,
+    /// Write the table as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+    /// Draw ms/step against particle count (log-log) with the per-stage
+    /// breakdown, as a PNG.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct GenDataArgs {
+    /// The data file to write (safetensors, `wgcloth-contacts/1`).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// Which network the data trains.
+    #[arg(long, default_value = "friction", value_parser = choice(&NetKind::DATA, NetKind::name))]
+    model: NetKind,
+    /// Contacts recorded from randomised sphere runs.
+    #[arg(long, default_value_t = 200_000)]
+    recorded: usize,
+    /// Uniform samples of the declared input domain.
+    #[arg(long, default_value_t = 800_000)]
+    uniform: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Replace an existing file.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    /// Training data from `wgcloth gen-data`.
+    #[arg(long, value_name = "FILE")]
+    data: PathBuf,
+    /// The weights file to write [default: the shipped file of the data's
+    /// network, weights/friction_mlp.safetensors or weights/naive_mlp.safetensors].
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Hidden layer widths [default: the thesis's, 256,256,128,128,128,128,128
+    /// for friction and 16,16,16,16,16 for naive].
+    #[arg(long, value_delimiter = ',')]
+    hidden: Option<Vec<usize>>,
+    #[arg(long, default_value_t = 60)]
+    epochs: usize,
+    #[arg(long, default_value_t = 512)]
+    batch: usize,
+    #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
+    lr: f64,
+    #[arg(long, default_value_t = 10)]
+    patience: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Loss curve (PNG).
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Continue from these weights (same architecture).
+    #[arg(long, value_name = "FILE.safetensors")]
+    init: Option<PathBuf>,
+    /// Train the friction network in the contact frame (model
+    /// `friction-contact`, the shipped small network's kind).
+    #[arg(long)]
+    contact_frame: bool,
+    /// Replace an existing weights file.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+struct EvalNetArgs {
+    /// The weights file.
+    file: PathBuf,
+    /// Held-out data (a `gen-data` file not used for training).
+    #[arg(long, value_name = "FILE")]
+    data: Option<PathBuf>,
+    /// Fresh uniform samples of the declared domain.
+    #[arg(long, default_value_t = 200_000)]
+    samples: usize,
+    #[arg(long, default_value_t = 12345)]
+    seed: u64,
+}
+
+#[derive(Args)]
+struct RunArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    #[arg(long, default_value = "auto")]
+    backend: Backend,
+    /// Write the run report as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+    /// Render frames into DIR: frame_NNNN.png and animation.gif.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// With --out: a frame every K steps (and one of the start).
+    #[arg(long, value_name = "K", default_value_t = 4)]
+    every: u64,
+    /// With --out: frames of N×N pixels.
+    #[arg(long, value_name = "N", default_value_t = wgcloth::render::DEFAULT_SIZE)]
+    size: u32,
+    /// With --out: draw the cloth's triangle edges.
+    #[arg(long)]
+    wireframe: bool,
+    /// With --out: leave out the green contact-force segments.
+    #[arg(long)]
+    no_forces: bool,
+    /// With --out: also write each frame's geometry (`obj`: frame_NNNN.obj,
+    /// objects `cloth` and `body`, for Blender).
+    #[arg(long, value_name = "FORMAT")]
+    export: Option<Export>,
+    /// With --out: replace frames already in DIR.
+    #[arg(long)]
+    force: bool,
+    /// If the run diverges, write the state before the diverging step
+    /// here (OBJ, objects `cloth` and `body`).
+    #[arg(long, value_name = "FILE.obj")]
+    last_good: Option<PathBuf>,
+    /// Write a CSV row every --monitor-every steps: energy, fastest
+    /// vertex, resident memory and GPU allocator bytes (for soaks).
+    #[arg(long, value_name = "FILE.csv")]
+    monitor: Option<PathBuf>,
+    /// With --monitor: a row every K steps (and one of the start).
+    #[arg(long, value_name = "K", default_value_t = 1000)]
+    monitor_every: u64,
+}
+
+/// Geometry formats `run --export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Export {
+    Obj,
+}
+
+#[derive(Args)]
+struct ValidateArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Allowed GPU–CPU position difference beyond the scene's own
+    /// sensitivity to rounding (see the printed `sensitivity`), m.
+    #[arg(
+        long,
+        value_name = "M",
+        default_value_t = 1e-4,
+        allow_negative_numbers = true
+    )]
+    tolerance: f32,
+}
+
+/// The flags that define a scene and its run.
+#[derive(Args)]
+struct SceneArgs {
+    /// sphere: a rigid body moving through the hanging cloth; hang: cloth alone.
+    #[arg(long, value_parser = choice(&SceneKind::ALL, SceneKind::name))]
+    scene: Option<SceneKind>,
+    /// Collision model [default: friction-net, the shipped distilled network].
+    #[arg(long, value_parser = choice(&ModelKind::ALL, ModelKind::name))]
+    model: Option<ModelKind>,
+    /// N×N particles.
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    grid: Option<u32>,
+    #[arg(long, value_name = "K", allow_negative_numbers = true)]
+    steps: Option<u64>,
+    /// Time step in seconds.
+    #[arg(long, value_name = "H", allow_negative_numbers = true)]
+    dt: Option<f32>,
+    /// Maximum PCG iterations per step.
+    #[arg(long, value_name = "I", allow_negative_numbers = true)]
+    cg_iters: Option<u32>,
+    /// PCG relative tolerance; 0 runs every iteration.
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    cg_tol: Option<f32>,
+    /// Speed (m/s) beyond which a vertex stops the run as diverging.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    max_speed: Option<f32>,
+    /// TOML configuration; flags override its values.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+    /// OBJ mesh for the rigid body.
+    #[arg(long, value_name = "FILE.obj")]
+    mesh: Option<PathBuf>,
+    /// Weights of the network model [default: the built-in copy of
+    /// weights/friction_mlp_small.safetensors for friction-net,
+    /// weights/naive_mlp.safetensors for naive-net].
+    #[arg(long, value_name = "FILE.safetensors")]
+    weights: Option<PathBuf>,
+}
+
+impl SceneArgs {
+    fn config(&self) -> Result<Config> {
+        let mut c = match &self.config {
+            Some(path) => Config::load(path)?,
+            None => Config::default(),
+        };
+        if let Some(s) = self.scene {
+            c.scene = s;
+        }
+        if let Some(m) = self.model {
+            c.model = m;
+        }
+        if let Some(n) = self.grid {
+            c.cloth.grid = [n, n];
+        }
+        if let Some(k) = self.steps {
+            c.solver.steps = k;
+        }
+        if let Some(h) = self.dt {
+            c.solver.dt = h;
+        }
+        if let Some(i) = self.cg_iters {
+            c.solver.cg_iters = i;
+        }
+        if let Some(t) = self.cg_tol {
+            c.solver.cg_tol = t;
+        }
+        if let Some(m) = self.max_speed {
+            c.solver.max_speed = m;
+        }
+        if let Some(w) = &self.weights {
+            c.contact.weights = Some(w.clone());
+        }
+        if let Some(mesh) = &self.mesh {
+            if c.scene == SceneKind::Hang {
+                return Err(Error::config(
+                    "--mesh",
+                    "scene `hang` has no rigid body; use --scene sphere",
+                ));
+            }
+            c.rigid.shape = Shape::Obj;
+            c.rigid.mesh = Some(mesh.clone());
+        }
+        Ok(c)
+    }
+}
+
+fn progress_bar(steps: u64) -> ProgressBar {
+    ProgressBar::new(steps).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {per_sec}, {eta} left")
+            .expect("static template"),
+    )
+}
+
+fn run(args: &RunArgs) -> Result<()> {
+    let config = args.scene.config()?;
+    for path in args
+        .report
+        .iter()
+        .chain(&args.last_good)
+        .chain(&args.monitor)
+    {
+        writable(path)?;
+    }
+    if args.monitor_every == 0 {
+        return Err(Error::config("--monitor-every", "must be at least 1"));
+    }
+    let scene = Scene::new(&config)?;
+    // Kept to write the last good state.
+    let run_scene = scene.clone();
+    let (chosen, notice) = choose_backend(args.backend)?;
+    if let Some(n) = notice {
+        eprintln!("{n}");
+    }
+    let steps = config.solver.steps;
+    let options = args
+        .out
+        .as_ref()
+        .map(|dir| wgcloth_cli::frames::RecordOptions {
+            dir: dir.clone(),
+            size: args.size,
+            every: args.every,
+            style: wgcloth::render::Style {
+                wireframe: args.wireframe,
+                forces: !args.no_forces,
+            },
+            obj: args.export == Some(Export::Obj),
+            force: args.force,
+        });
+    // The directory first: its errors need no GPU.
+    let writer = match &options {
+        Some(o) => Some(o.prepare(&scene, steps)?),
+        None => None,
+    };
+    // Frames need a GPU even for a CPU run: the CPU path uploads its state.
+    // Without any adapter the run goes on without frames, as the main job
+    // goes on without a GPU.
+    let own_context;
+    let render_context = match (&writer, &chosen) {
+        (None, _) => None,
+        (Some(_), Chosen::Gpu { ctx, .. }) => Some(&**ctx),
+        (Some(_), Chosen::Cpu) => match GpuContext::headless() {
+            Ok(ctx) => {
+                own_context = ctx;
+                Some(&own_context)
+            }
+            Err(e) => {
+                eprintln!(
+                    "notice: no GPU adapter to render frames ({e}); lavapipe renders them on the CPU (Debian: mesa-vulkan-drivers). Running without frames."
+                );
+                None
+            }
+        },
+    };
+    let mut recording = match (options, writer, render_context) {
+        (Some(options), Some(writer), Some(ctx)) => Some(wgcloth_cli::frames::Recording::new(
+            ctx,
+            &scene,
+            steps,
+            (&options, writer),
+        )?),
+        _ => None,
+    };
+    let mut monitor = match &args.monitor {
+        Some(path) => Some(wgcloth_cli::monitor::Monitor::create(
+            path,
+            args.monitor_every,
+        )?),
+        None => None,
+    };
+    let bar = progress_bar(steps);
+    let report = run::run(
+        &chosen,
+        scene,
+        run::Steps::all(steps),
+        run::Observers {
+            progress: Some(&mut |k| bar.set_position(k)),
+            notice: Some(&mut |line| bar.suspend(|| eprintln!("{line}"))),
+            recording: recording.as_mut(),
+            monitor: monitor.as_mut(),
+        },
+    )?;
+    bar.finish_and_clear();
+    println!("{}", report.summary());
+    if let Some(monitor) = &monitor {
+        println!("{}", monitor.summary());
+    }
+    if let Some(recording) = recording {
+        let (frames, gif) = recording.finish();
+        println!(
+            "frames       {frames} in {}",
+            gif.parent().unwrap_or(&gif).display()
+        );
+        println!("animation    {}", gif.display());
+    }
+    if let Some(path) = &args.report {
+        write_json(path, &report)?;
+        println!("report       {}", path.display());
+    }
+    if let (Some(path), Some(good)) = (&args.last_good, &report.last_good) {
+        wgcloth_cli::frames::obj::write_obj(path, &run_scene, &good.x, good.time as f32)?;
+        println!("last good    step {} in {}", good.step, path.display());
+    }
+    check_diverged(&report)
+}
+
+fn bench(args: &BenchArgs) -> Result<()> {
+    // Fail before minutes of measuring, not after.
+    for path in args.report.iter().chain(&args.plot) {
+        writable(path)?;
+    }
+    if let Some(plot) = &args.plot {
+        wgcloth_cli::plot::check_png(plot)?;
+    }
+    let options = match args.quick {
+        true => wgcloth_cli::bench::BenchOptions::quick(),
+        false => wgcloth_cli::bench::BenchOptions::full(),
+    };
+    let spinner = ProgressBar::new_spinner();
+    spinner.enable_steady_tick(std::time::Duration::from_millis(200));
+    let report = wgcloth_cli::bench::bench(&options, |what| spinner.set_message(what.to_string()))?;
+    spinner.finish_and_clear();
+    print!("{}", report.table());
+    if let Some(path) = &args.report {
+        write_json(path, &report)?;
+        println!("report: {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        wgcloth_cli::bench::plot::write(&report, path)?;
+        println!("plot: {}", path.display());
+    }
+    Ok(())
+}
+
+fn gen_data(args: &GenDataArgs) -> Result<()> {
+    refuse_existing(&args.out, args.force)?;
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("{msg} {bar:40} {percent}%").expect("static template"),
+    );
+    let data = wgcloth_learn::dataset::generate(
+        args.model,
+        args.recorded,
+        args.uniform,
+        args.seed,
+        |what, f| {
+            bar.set_message(what.to_string());
+            bar.set_position((f * 1000.0) as u64);
+        },
+    )?;
+    bar.finish_and_clear();
+    let meta = [
+        ("seed".to_string(), args.seed.to_string()),
+        ("recorded".to_string(), args.recorded.to_string()),
+        ("uniform".to_string(), args.uniform.to_string()),
+    ]
+    .into();
+    data.write(&args.out, meta, args.force)?;
+    println!(
+        "{}: {} {} samples ({} recorded, {} uniform), seed {}",
+        args.out.display(),
+        data.len(),
+        args.model.name(),
+        args.recorded,
+        args.uniform,
+        args.seed
+    );
+    Ok(())
+}
+
+fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<()> {
+    let json = serde_json::to_string_pretty(value).expect("reports serialise");
+    std::fs::write(path, json + "\n").map_err(|e| Error::io(path, e))
+}
+
+/// Fails early when `path` cannot be written, leaving an existing file's
+/// contents alone and no new file behind.
+fn writable(path: &std::path::Path) -> Result<()> {
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    if !existed {
+        let _ = std::fs::remove_file(path);
+    }
+    Ok(())
+}
+
+fn refuse_existing(path: &std::path::Path, force: bool) -> Result<()> {
+    match path.exists() && !force {
+        true => Err(Error::file(
+            path,
+            "already exists; pass --force to replace it",
+        )),
+        false => Ok(()),
+    }
+}
+
+fn train(args: &TrainArgs) -> Result<()> {
+    if let Some(out) = &args.out {
+        refuse_existing(out, args.force)?;
+    }
+    if let Some(plot) = &args.plot {
+        wgcloth_cli::plot::check_png(plot)?;
+        writable(plot)?;
+    }
+    let data = wgcloth_learn::dataset::Dataset::read(&args.data)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("weights/{}_mlp.safetensors", data.kind.name())));
+    refuse_existing(&out, args.force)?;
+    let opts = wgcloth_learn::train::TrainOptions {
+        hidden: (args.hidden.clone()).unwrap_or_else(|| thesis_hidden(data.kind)),
+        epochs: args.epochs,
+        batch: args.batch,
+        learning_rate: args.lr,
+        patience: args.patience,
+        seed: args.seed,
+        checkpoint: Some(out.with_extension("checkpoint.safetensors")),
+        init: args
+            .init
+            .as_deref()
+            .map(wgcloth::nn::weights::WeightsFile::read)
+            .transpose()?,
+        contact_frame: args.contact_frame,
+        ..Default::default()
+    };
+    let bar = progress_bar(opts.epochs as u64).with_style(
+        ProgressStyle::with_template("{bar:40} epoch {pos}/{len} {msg} {eta} left")
+            .expect("static template"),
+    );
+    let trained = wgcloth_learn::train::train(&data, &opts, |epoch, t, v| {
+        bar.set_position(epoch as u64);
+        bar.set_message(format!("train {t:.3e} validation {v:.3e}"));
+        eprintln!("epoch {epoch}: train {t:.4e}, validation {v:.4e}");
+    })?;
+    bar.finish_and_clear();
+    trained.weights.write(&out, args.force)?;
+    let _ = std::fs::remove_file(out.with_extension("checkpoint.safetensors"));
+    if let Some(plot) = &args.plot {
+        wgcloth_cli::loss_plot::loss_curve(&trained.curve, plot)?;
+    }
+    println!(
+        "{}: best validation MSE {:.4e} (standardised) after {} epochs, {:.0} s, {} samples",
+        out.display(),
+        trained.best_validation,
+        trained.curve.len(),
+        trained.seconds,
+        data.len()
+    );
+    Ok(())
+}
+
+fn eval_net(args: &EvalNetArgs) -> Result<()> {
+    if args.samples == 0 {
+        return Err(Error::config("--samples", "must be at least 1"));
+    }
+    let file = wgcloth::nn::weights::WeightsFile::read(&args.file)?;
+    let held_out = args
+        .data
+        .as_deref()
+        .map(wgcloth_learn::dataset::Dataset::read)
+        .transpose()?;
+    if let (Some(d), Some(path)) = (&held_out, &args.data)
+        && d.kind != file.kind.data()
+    {
+        return Err(Error::file(
+            path,
+            format!(
+                "holds {} data; {} is a {} network",
+                d.kind.name(),
+                args.file.display(),
+                file.kind.name()
+            ),
+        ));
+    }
+    let e = wgcloth_learn::eval::evaluate(&file, held_out.as_ref(), args.samples, args.seed);
+    let net = file.network();
+    println!(
+        "eval-net: {} ({}, {} layers, {} multiply-adds per contact)",
+        args.file.display(),
+        file.kind.name(),
+        net.mlp.layers.len(),
+        net.multiply_adds()
+    );
+    if let Some(m) = e.held_out_mse {
+        println!("held-out     standardised MSE {m:.4e}");
+    }
+    println!(
+        "uniform      standardised MSE {:.4e} ({} fresh samples of the declared domain)",
+        e.uniform_mse, e.uniform_samples
+    );
+    println!(
+        "jacobian     median relative error of the position Jacobian {:.3e}",
+        e.jacobian_median_relative_error
+    );
+    Ok(())
+}
+
+/// Exit code 1: the GPU and CPU disagree (the check ran, and failed).
+struct Mismatch(String);
+
+fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
+    let config = args.scene.config()?;
+    if !args.tolerance.is_finite() || args.tolerance <= 0.0 {
+        return Err(Error::config(
+            "--tolerance",
+            format!("must be > 0, got {}", args.tolerance),
+        ));
+    }
+    let scene = Scene::new(&config)?;
+    let ctx = GpuContext::headless()?;
+    let steps = config.solver.steps;
+    let bar = progress_bar(steps);
+    let v = run::validate(&ctx, scene, steps, |k| bar.set_position(k))?;
+    bar.finish_and_clear();
+    // Contact amplifies rounding differences; the GPU may differ from the
+    // CPU as much as the CPU differs from itself under a nudge of a few ulps.
+    let allowed = args.tolerance + 4.0 * v.sensitivity;
+    println!(
+        "validate: scene {:?}, model {:?}, grid {}x{}, {steps} steps\n\
+         gpu          {}\n\
+         deviation    {:.3e} m largest |x_gpu − x_cpu|\n\
+         sensitivity  {:.3e} m largest |x_cpu − x_cpu'| with x_cpu' nudged {:.0e} m at the start\n\
+         allowed      {:.3e} m = --tolerance {:.1e} + 4 × sensitivity\n\
+         contacts     {} on the GPU, {} on the CPU",
+        config.scene,
+        config.model,
+        config.cloth.grid[0],
+        config.cloth.grid[1],
+        v.adapter,
+        v.max_deviation,
+        v.sensitivity,
+        run::PERTURBATION,
+        allowed,
+        args.tolerance,
+        v.gpu_contacts,
+        v.cpu_contacts
+    );
+    if v.max_deviation <= allowed {
+        Ok(Ok(()))
+    } else {
+        Ok(Err(Mismatch(format!(
+            "GPU and CPU differ by {:.3e} m, more than the {allowed:.3e} m allowed",
+            v.max_deviation
+        ))))
+    }
+}
+
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Run(args) => run(args).map(Ok),
+        Command::Validate(args) => validate(args),
+        Command::GenData(args) => gen_data(args).map(Ok),
+        Command::Train(args) => train(args).map(Ok),
+        Command::EvalNet(args) => eval_net(args).map(Ok),
+        Command::Bench(args) => bench(args).map(Ok),
+    };
+    match result {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(Mismatch(why))) => {
+            eprintln!("validation failed: {why}");
+            ExitCode::from(1)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! Samples of a run taken every K steps (`run --monitor FILE.csv`): the
+//! state's energy and fastest vertex, the process's resident memory and
+//! the GPU allocator's bytes. A soak reads them to show the run stays
+//! finite, its energy bounded and its memory flat.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use wgcloth::cpu;
+use wgcloth::error::{Error, Result};
+use wgcloth::scene::Scene;
+
+/// One row of the monitor file.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Sample {
+    pub step: u64,
+    /// Wall time since the monitor was created, s.
+    pub seconds: f64,
+    /// Which path computed the state: "cpu" or "gpu".
+    pub backend: &'static str,
+    /// Kinetic + gravitational + elastic energy of the cloth, J.
+    pub energy: f64,
+    pub kinetic: f64,
+    /// The fastest vertex's speed, m/s.
+    pub max_speed: f32,
+    pub finite: bool,
+    /// Resident set size of this process (Linux `VmRSS`), bytes.
+    pub rss_bytes: Option<u64>,
+    /// Device memory the GPU allocator has handed out and has reserved
+    /// from the driver, bytes (backends with an allocator report).
+    pub gpu_allocated_bytes: Option<u64>,
+    pub gpu_reserved_bytes: Option<u64>,
+}
+
+const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,finite,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
+
+impl Sample {
+    fn csv(&self) -> String {
+        let opt = |v: Option<u64>| v.map(|b| b.to_string()).unwrap_or_default();
+        format!(
+            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{},{},{},{}",
+            self.step,
+            self.seconds,
+            self.backend,
+            self.energy,
+            self.kinetic,
+            self.max_speed,
+            self.finite,
+            opt(self.rss_bytes),
+            opt(self.gpu_allocated_bytes),
+            opt(self.gpu_reserved_bytes)
+        )
+    }
+}
+
+/// Writes a [`Sample`] every `every` steps, one CSV line each, flushed at
+/// once so a run that is killed keeps what it measured.
+pub struct Monitor {
+    every: u64,
+    path: PathBuf,
+    out: BufWriter<File>,
+    start: Instant,
+    pub samples: Vec<Sample>,
+}
+
+impl Monitor {
+    /// Creates (or replaces) `path` and writes the header.
+    pub fn create(path: &Path, every: u64) -> Result<Monitor> {
+        if every == 0 {
+            return Err(Error::config("--monitor-every", "must be at least 1"));
+        }
+        let file = File::create(path).map_err(|e| Error::io(path, e))?;
+        let mut monitor = Monitor {
+            every,
+            path: path.to_path_buf(),
+            out: BufWriter::new(file),
+            start: Instant::now(),
+            samples: Vec::new(),
+        };
+        monitor.line(HEADER)?;
+        Ok(monitor)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Whether the state after `step` steps is sampled.
+    pub fn due(&self, step: u64) -> bool {
+        step.is_multiple_of(self.every)
+    }
+
+    fn line(&mut self, text: &str) -> Result<()> {
+        writeln!(self.out, "{text}")
+            .and_then(|_| self.out.flush())
+            .map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// Samples the state `x`, `v` after `step` steps; `device` adds the GPU
+    /// allocator's figures.
+    pub fn record(
+        &mut self,
+        step: u64,
+        scene: &Scene,
+        x: &[Vec3],
+        v: &[Vec3],
+        device: Option<&wgpu::Device>,
+    ) -> Result<()> {
+        let energy = cpu::energy(scene, x, v);
+        let allocator = device.and_then(|d| d.generate_allocator_report());
+        let sample = Sample {
+            step,
+            seconds: self.start.elapsed().as_secs_f64(),
+            backend: if device.is_some() { "gpu" } else { "cpu" },
+            energy: energy.total(),
+            kinetic: energy.kinetic,
+            max_speed: v.iter().map(|v| v.length()).fold(0.0, f32::max),
+            finite: x.iter().chain(v).all(|p| p.is_finite()),
+            rss_bytes: resident_bytes(),
+            gpu_allocated_bytes: allocator.as_ref().map(|r| r.total_allocated_bytes),
+            gpu_reserved_bytes: allocator.as_ref().map(|r| r.total_reserved_bytes),
+        };
+        self.line(&sample.csv())?;
+        self.samples.push(sample);
+        Ok(())
+    }
+
+    /// Energy range and memory at the first and last sample, for the run
+    /// summary.
+    pub fn summary(&self) -> String {
+        let (Some(first), Some(last)) = (self.samples.first(), self.samples.last()) else {
+            return format!("monitor      no samples in {}", self.path.display());
+        };
+        let (lo, hi) = self
+            .samples
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
+                (lo.min(s.energy), hi.max(s.energy))
+            });
+        let mib = |b: Option<u64>| {
+            b.map(|b| format!("{:.1} MiB", b as f64 / (1 << 20) as f64))
+                .unwrap_or_else(|| "n/a".into())
+        };
+        let max_rss = self.samples.iter().filter_map(|s| s.rss_bytes).max();
+        format!(
+            "monitor      {} samples in {}: energy {lo:.4} to {hi:.4} J, {}\n\
+             memory       resident {} at step {} → {} at step {} (max {}); GPU allocated {} → {}",
+            self.samples.len(),
+            self.path.display(),
+            if self.samples.iter().all(|s| s.finite) {
+                "all finite"
+            } else {
+                "NOT all finite"
+            },
+            mib(first.rss_bytes),
+            first.step,
+            mib(last.rss_bytes),
+            last.step,
+            mib(max_rss),
+            mib(first.gpu_allocated_bytes),
+            mib(last.gpu_allocated_bytes),
+        )
+    }
+}
+
+/// This process's resident set size (`VmRSS` of /proc/self/status);
+/// `None` where there is no procfs.
+pub fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}

@@ -1,0 +1,706 @@
+//! Running a scene for a number of steps on a backend and summarising it:
+//! the `--report` JSON of DESIGN.md and the one-screen summary.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use crate::frames::Recording;
+use crate::monitor::Monitor;
+use wgcloth::config::{ModelKind, SceneKind};
+use wgcloth::cpu::{self, CpuSim, State, integrate};
+use wgcloth::error::{Error, Result};
+use wgcloth::gpu::mlp::NetworkKernel;
+use wgcloth::gpu::{GpuContext, GpuSim, Kernels, context::describe};
+use wgcloth::health::{self, Divergence, FailedStep};
+use wgcloth::scene::Scene;
+use wgcloth::stage::Stage;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    Gpu,
+    Cpu,
+    /// The GPU when an adapter exists, else the CPU (with a notice).
+    Auto,
+}
+
+/// The backend a run uses.
+pub enum Chosen {
+    Cpu,
+    /// With `cpu_fallback` (what `auto` picks), a device fault moves the
+    /// run to the CPU, from the last state copied to the host, with a
+    /// notice; without it the fault ends the run with an error.
+    Gpu {
+        ctx: Box<GpuContext>,
+        cpu_fallback: bool,
+    },
+}
+
+impl Chosen {
+    /// The GPU, a fault ending the run.
+    pub fn gpu(ctx: GpuContext) -> Chosen {
+        Chosen::Gpu {
+            ctx: Box::new(ctx),
+            cpu_fallback: false,
+        }
+    }
+
+    pub fn context(&self) -> Option<&GpuContext> {
+        match self {
+            Chosen::Gpu { ctx, .. } => Some(ctx),
+            Chosen::Cpu => None,
+        }
+    }
+}
+
+/// Resolves `auto`, and says why when it falls back to the CPU (no
+/// adapter, or only a software one).
+pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
+    match requested {
+        Backend::Cpu => Ok((Chosen::Cpu, None)),
+        Backend::Gpu => Ok((Chosen::gpu(GpuContext::headless()?), None)),
+        Backend::Auto => Ok(match GpuContext::headless() {
+            // A software rasteriser (lavapipe) runs the kernels on the same
+            // CPU cores, several times slower than the reference path.
+            Ok(ctx) if ctx.adapter.device_type == wgpu::DeviceType::Cpu => (
+                Chosen::Cpu,
+                Some(format!(
+                    "notice: the only GPU adapter is a software one ({}); running on the faster CPU reference path (--backend gpu forces it)",
+                    describe(&ctx.adapter)
+                )),
+            ),
+            Ok(ctx) => (
+                Chosen::Gpu {
+                    ctx: Box::new(ctx),
+                    cpu_fallback: true,
+                },
+                None,
+            ),
+            Err(e) => (
+                Chosen::Cpu,
+                Some(format!(
+                    "notice: {e}\nnotice: running on the CPU reference path"
+                )),
+            ),
+        }),
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub backend: String,
+    pub adapter: String,
+    pub model: ModelKind,
+    /// A network model's weights file, layer widths, multiply-adds per
+    /// evaluation, and on the GPU the kernel that runs it.
+    pub network: Option<String>,
+    pub scene: SceneKind,
+    pub grid: [u32; 2],
+    pub steps: u64,
+    pub dt: f32,
+    /// Median wall time of a step, ms.
+    pub ms_per_step: f64,
+    /// Median time of each stage per step, ms (GPU: timestamp queries,
+    /// absent where the adapter has none).
+    pub stage_ms: BTreeMap<String, f64>,
+    /// Compute dispatches one step records (GPU only).
+    pub dispatches_per_step: Option<u32>,
+    /// Deepest any cloth vertex got inside the rigid surface, m (≥ 0).
+    pub max_penetration: f32,
+    pub finite: bool,
+    /// The step that diverged, the vertex it started at and why
+    /// (`health::diagnose`); the run stopped there.
+    pub divergence: Option<Divergence>,
+    /// The state before the diverging step.
+    #[serde(skip)]
+    pub last_good: Option<State>,
+    /// A GPU fault the run survived by finishing on the CPU (`auto`); the
+    /// statistics then cover the CPU's steps.
+    pub device_fault: Option<DeviceFault>,
+    pub cg_iterations_mean: f64,
+    pub cg_residual_max: f32,
+    pub cg_breakdowns: u64,
+    pub contacts_mean: f64,
+    /// Total energy (kinetic + gravitational + elastic) at the end, J.
+    pub energy_final: f64,
+}
+
+pub fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    let m = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[m]
+    } else {
+        0.5 * (values[m - 1] + values[m])
+    }
+}
+
+/// Per-step wall and stage times, summarised as medians.
+#[derive(Default)]
+struct Timings {
+    wall_ms: Series,
+    stage_ms: BTreeMap<String, Series>,
+}
+
+/// The most values a [`Series`] holds.
+const SERIES_CAP: usize = 8192;
+
+/// A series of step times in bounded memory, so a soak of any length
+/// stays flat: up to [`SERIES_CAP`] steps every value is kept; beyond, every
+/// other one is dropped and then only every `stride`-th step kept, an
+/// evenly spaced sample of the whole run.
+#[derive(Default)]
+struct Series {
+    values: Vec<f64>,
+    stride: u64,
+    seen: u64,
+}
+
+impl Series {
+    fn push(&mut self, value: f64) {
+        self.stride = self.stride.max(1);
+        if self.seen.is_multiple_of(self.stride) {
+            self.values.push(value);
+            if self.values.len() == SERIES_CAP {
+                let kept: Vec<f64> = self.values.iter().copied().step_by(2).collect();
+                self.values = kept;
+                self.stride *= 2;
+            }
+        }
+        self.seen += 1;
+    }
+}
+
+impl Timings {
+    fn push(&mut self, wall_ms: f64, stages: impl IntoIterator<Item = (&'static str, f64)>) {
+        self.wall_ms.push(wall_ms);
+        for (name, ms) in stages {
+            self.stage_ms.entry(name.to_string()).or_default().push(ms);
+        }
+    }
+
+    fn medians(mut self) -> (f64, BTreeMap<String, f64>) {
+        let stages = self
+            .stage_ms
+            .iter_mut()
+            .map(|(k, v)| (k.clone(), median(&mut v.values)))
+            .collect();
+        (median(&mut self.wall_ms.values), stages)
+    }
+}
+
+/// How many steps a run takes, and how many of the first are left out of
+/// the timings (pipelines warming up, the body not yet in contact).
+#[derive(Clone, Copy, Debug)]
+pub struct Steps {
+    pub total: u64,
+    pub untimed: u64,
+}
+
+impl Steps {
+    pub fn all(total: u64) -> Steps {
+        Steps { total, untimed: 0 }
+    }
+}
+
+/// What a run feeds as it goes; every part is optional.
+#[derive(Default)]
+pub struct Observers<'a, 'r> {
+    /// Told the number of steps done after each step.
+    pub progress: Option<&'a mut dyn FnMut(u64)>,
+    /// Told, in one line, of a GPU fault the run survives on the CPU.
+    pub notice: Option<&'a mut dyn FnMut(&str)>,
+    /// Frames of the initial state and of every `--every` steps.
+    pub recording: Option<&'a mut Recording<'r>>,
+    /// Samples every K steps (`run --monitor`).
+    pub monitor: Option<&'a mut Monitor>,
+}
+
+impl Observers<'_, '_> {
+    fn progress(&mut self, done: u64) {
+        if let Some(p) = self.progress.as_mut() {
+            p(done)
+        }
+    }
+
+    fn notice(&mut self, line: &str) {
+        if let Some(n) = self.notice.as_mut() {
+            n(line)
+        }
+    }
+}
+
+/// A GPU fault that `--backend auto` survived by finishing on the CPU.
+#[derive(Clone, Debug, Serialize)]
+pub struct DeviceFault {
+    pub error: String,
+    /// The step the GPU had reached when it failed.
+    pub failed_at: u64,
+    /// The checkpoint the CPU resumed from (≤ `failed_at`).
+    pub resumed_from: u64,
+}
+
+/// How often a GPU run that may fall back copies its state to the host:
+/// often enough to lose little on a fault, rarely enough to cost nothing.
+const CHECKPOINT_INTERVAL: Duration = Duration::from_secs(2);
+
+/// The host's copy of a GPU run's state, where the CPU resumes after a
+/// device fault.
+struct Checkpoint {
+    state: State,
+    reached: u64,
+    taken: Instant,
+}
+
+/// Runs `scene` for `steps.total` steps on `chosen`.
+pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> Result<Report> {
+    let (ctx, cpu_fallback) = match chosen {
+        Chosen::Cpu => return run_cpu(CpuSim::new(scene), steps, &mut obs),
+        Chosen::Gpu { ctx, cpu_fallback } => (ctx, *cpu_fallback),
+    };
+    if !cpu_fallback {
+        return run_gpu(ctx, &scene, steps, &mut obs, None);
+    }
+    let mut checkpoint = Checkpoint {
+        state: State::initial(&scene),
+        reached: 0,
+        taken: Instant::now(),
+    };
+    let error = match run_gpu(ctx, &scene, steps, &mut obs, Some(&mut checkpoint)) {
+        Err(Error::Gpu(what)) => what,
+        done => return done,
+    };
+    let resumed_from = checkpoint.state.step;
+    // Frames need the device that failed.
+    let frames = match obs.recording.take() {
+        Some(_) => format!("; frames stop at step {}", checkpoint.reached),
+        None => String::new(),
+    };
+    obs.notice(&format!(
+        "notice: the GPU failed after {} steps ({error}); continuing on the CPU reference path from step {resumed_from}{frames}",
+        checkpoint.reached
+    ));
+    // Built only now: the CPU path's system matrix is large.
+    let mut sim = CpuSim::new(scene);
+    sim.state = checkpoint.state;
+    let mut report = run_cpu(sim, steps, &mut obs)?;
+    report.device_fault = Some(DeviceFault {
+        error,
+        failed_at: checkpoint.reached + 1,
+        resumed_from,
+    });
+    Ok(report)
+}
+
+/// Steps `sim` from where its state is to `steps.total`.
+fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report> {
+    let config = sim.scene.config.clone();
+    let has_body = sim.scene.rigid.is_some();
+    let first = sim.state.step;
+    if first == 0 {
+        if let Some(r) = obs.recording.as_deref_mut() {
+            r.cpu(0, &sim)?;
+        }
+        if let Some(m) = obs.monitor.as_deref_mut() {
+            m.record(0, &sim.scene, &sim.state.x, &sim.state.v, None)?;
+        }
+    }
+    let mut timings = Timings::default();
+    let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
+    let (mut cg_residual_max, mut max_penetration) = (0.0f32, 0.0f32);
+    let mut divergence = None;
+    let mut last_good = sim.state.clone();
+    let max_speed = config.solver.max_speed;
+    for k in first..steps.total {
+        keep(&mut last_good, &sim.state);
+        let start = Instant::now();
+        let s = sim.step();
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        if k >= steps.untimed {
+            timings.push(
+                wall,
+                Stage::ALL
+                    .iter()
+                    .filter(|stage| has_body || !stage.needs_body())
+                    .map(|stage| (stage.name(), s.stage_seconds[stage.index()] * 1e3)),
+            );
+        }
+        cg_iters += s.pcg.iterations as u64;
+        contacts += s.contacts as u64;
+        breakdowns += s.pcg.breakdown as u64;
+        cg_residual_max = cg_residual_max.max(s.pcg.relative_residual);
+        max_penetration = max_penetration.max(s.max_penetration);
+        let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
+        if health::failed(flags, s.pcg.breakdown) {
+            let (matrix, b) = sim.system();
+            divergence = Some(health::diagnose(&FailedStep {
+                step: k + 1,
+                flags,
+                breakdown: s.pcg.breakdown,
+                diag: &matrix.diag,
+                b,
+                x: &sim.state.x,
+                v: &sim.state.v,
+                max_speed,
+            }));
+            break;
+        }
+        if let Some(r) = obs.recording.as_deref_mut() {
+            r.cpu(k + 1, &sim)?;
+        }
+        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(k + 1)) {
+            m.record(k + 1, &sim.scene, &sim.state.x, &sim.state.v, None)?;
+        }
+        obs.progress(k + 1);
+    }
+    let done = (sim.state.step - first).max(1) as f64;
+    let (ms_per_step, stage_ms) = timings.medians();
+    Ok(Report {
+        backend: "cpu".into(),
+        adapter: format!(
+            "CPU reference path ({} threads)",
+            rayon::current_num_threads()
+        ),
+        model: config.model,
+        network: describe_network(&sim.scene, None),
+        scene: config.scene,
+        grid: config.cloth.grid,
+        steps: sim.state.step,
+        dt: config.solver.dt,
+        ms_per_step,
+        stage_ms,
+        dispatches_per_step: None,
+        max_penetration,
+        finite: sim.is_finite(),
+        last_good: divergence.is_some().then_some(last_good),
+        divergence,
+        device_fault: None,
+        cg_iterations_mean: cg_iters as f64 / done,
+        cg_residual_max,
+        cg_breakdowns: breakdowns,
+        contacts_mean: contacts as f64 / done,
+        energy_final: sim.energy().total(),
+    })
+}
+
+/// "FILE: KIND 10-256-…-3, N multiply-adds per contact[, KERNEL kernel]"
+/// for a network model.
+fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<String> {
+    let (net, path) = (scene.network.as_ref()?, scene.config.weights_path()?);
+    let built_in = match scene.config.contact.weights {
+        None => " (built in)",
+        Some(_) => "",
+    };
+    let mut widths = vec![net.mlp.inputs().to_string()];
+    widths.extend(net.mlp.layers.iter().map(|l| l.outputs.to_string()));
+    let kernel = kernel
+        .map(|k| format!(", {} kernel", k.name()))
+        .unwrap_or_default();
+    Some(format!(
+        "{}{built_in}: {} {}, {} multiply-adds per contact{kernel}",
+        path.display(),
+        net.kind.name(),
+        widths.join("-"),
+        net.multiply_adds()
+    ))
+}
+
+/// Runs `scene` on the GPU. With a `checkpoint` the state is copied to
+/// it every [`CHECKPOINT_INTERVAL`] for the CPU to resume from.
+fn run_gpu(
+    ctx: &GpuContext,
+    scene: &Scene,
+    steps: Steps,
+    obs: &mut Observers,
+    mut checkpoint: Option<&mut Checkpoint>,
+) -> Result<Report> {
+    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene)?;
+    ctx.finish()?;
+    if let Some(r) = obs.recording.as_deref_mut() {
+        r.gpu(0, &sim, scene)?;
+    }
+    if let Some(m) = obs.monitor.as_deref_mut() {
+        let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+        m.record(0, scene, &x, &v, Some(&ctx.device))?;
+    }
+    let dt = scene.config.solver.dt as f64;
+    let mut timings = Timings::default();
+    let mut dispatches = 0;
+    let (mut divergence, mut last_good) = (None, None);
+    let mut breakdowns = 0;
+    for k in 0..steps.total {
+        let start = Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        sim.record_checkpoint(&mut encoder);
+        dispatches = sim.encode_step(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.finish()?;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        let stages = sim.read_stage_ms()?.unwrap_or_default();
+        if k >= steps.untimed {
+            timings.push(wall, stages);
+        }
+        let state = sim.read_state()?;
+        let breakdown = state.cg_breakdowns > breakdowns;
+        breakdowns = state.cg_breakdowns;
+        if health::failed(state.health, breakdown) {
+            let (diag, _, b) = sim.read_system()?;
+            let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
+            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+            divergence = Some(health::diagnose(&FailedStep {
+                step: k + 1,
+                flags: state.health,
+                breakdown,
+                diag: &diag,
+                b: &b,
+                x: &x,
+                v: &v,
+                max_speed: scene.config.solver.max_speed,
+            }));
+            let (x, v) = sim.read_kept()?;
+            last_good = Some(State {
+                x,
+                v,
+                time: k as f64 * dt,
+                step: k,
+            });
+            break;
+        }
+        if let Some(r) = obs.recording.as_deref_mut() {
+            r.gpu(k + 1, &sim, scene)?;
+        }
+        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(k + 1)) {
+            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+            m.record(k + 1, scene, &x, &v, Some(&ctx.device))?;
+        }
+        if let Some(c) = checkpoint.as_deref_mut() {
+            c.reached = k + 1;
+            if c.taken.elapsed() >= CHECKPOINT_INTERVAL {
+                let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+                c.state = State {
+                    x,
+                    v,
+                    time: (k + 1) as f64 * dt,
+                    step: k + 1,
+                };
+                c.taken = Instant::now();
+            }
+        }
+        obs.progress(k + 1);
+    }
+    let state = sim.read_state()?;
+    let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+    let finite = x.iter().chain(&v).all(|p| p.is_finite());
+    let done = state.steps.max(1) as f64;
+    let (ms_per_step, stage_ms) = timings.medians();
+    let config = &scene.config;
+    Ok(Report {
+        backend: "gpu".into(),
+        adapter: describe(&ctx.adapter),
+        model: config.model,
+        network: describe_network(scene, sim.network_kernel()),
+        scene: config.scene,
+        grid: config.cloth.grid,
+        steps: state.steps as u64,
+        dt: config.solver.dt,
+        ms_per_step,
+        stage_ms,
+        dispatches_per_step: Some(dispatches),
+        max_penetration: f32::from_bits(state.max_penetration_bits),
+        finite,
+        divergence,
+        last_good,
+        device_fault: None,
+        cg_iterations_mean: state.cg_iterations_total as f64 / done,
+        cg_residual_max: state.cg_residual_max,
+        cg_breakdowns: state.cg_breakdowns as u64,
+        contacts_mean: state.contacts_total as f64 / done,
+        energy_final: cpu::energy(scene, &x, &v).total(),
+    })
+}
+
+/// GPU against CPU on the same scene: the largest position deviation (m)
+/// after `steps` steps, and the contact totals of each.
+///
+/// Contact makes the dynamics discontinuous (a vertex entering the band
+/// gets k_d ḋ at once; friction switches between stick and slip), so
+/// rounding-level differences grow. `sensitivity` measures how much: the
+/// deviation between the CPU run and a CPU run whose free vertices start
+/// `PERTURBATION` m away. A GPU as faithful as f32 allows deviates by
+/// about that much.
+pub struct Validation {
+    pub max_deviation: f32,
+    pub sensitivity: f32,
+    pub cpu_contacts: u64,
+    pub gpu_contacts: u64,
+    pub adapter: String,
+}
+
+/// Initial offset of the sensitivity run, m: a few f32 ulps at 1 m.
+pub const PERTURBATION: f32 = 1e-7;
+
+fn max_deviation(a: &[glam::Vec3], b: &[glam::Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(
+            0.0f32,
+            |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
+        )
+}
+
+pub fn validate(
+    ctx: &GpuContext,
+    scene: Scene,
+    steps: u64,
+    mut progress: impl FnMut(u64),
+) -> Result<Validation> {
+    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)?;
+    let mut cpu = CpuSim::new(scene.clone());
+    let mut nudged = CpuSim::new(scene);
+    for (i, x) in nudged.state.x.iter_mut().enumerate() {
+        // A fixed, irregular direction per vertex.
+        let phase = i as f32 * 2.399_963;
+        *x += PERTURBATION
+            * glam::Vec3::new(phase.cos(), phase.sin(), (0.5 * phase).cos()).normalize();
+    }
+    let mut cpu_contacts = 0;
+    for k in 0..steps {
+        gpu.step();
+        cpu_contacts += cpu.step().contacts as u64;
+        nudged.step();
+        progress(k + 1);
+    }
+    ctx.finish()?;
+    let x = gpu.read_positions()?;
+    Ok(Validation {
+        max_deviation: max_deviation(&x, &cpu.state.x),
+        sensitivity: max_deviation(&nudged.state.x, &cpu.state.x),
+        cpu_contacts,
+        gpu_contacts: gpu.read_state()?.contacts_total as u64,
+        adapter: describe(&ctx.adapter),
+    })
+}
+
+impl Report {
+    /// The one-screen summary.
+    pub fn summary(&self) -> String {
+        let stages: Vec<String> = self
+            .stage_ms
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.3}"))
+            .collect();
+        let dispatches = self
+            .dispatches_per_step
+            .map(|d| format!(", {d} dispatches/step"))
+            .unwrap_or_default();
+        format!(
+            "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
+             backend      {} — {}\n\
+             {}\
+             ms/step      {:.3} (median{dispatches})\n\
+             stages (ms)  {}\n\
+             pcg          {:.1} iterations/step, worst relative residual {:.2e}, {} breakdowns\n\
+             contacts     {:.1} per step\n\
+             penetration  {:.4} m deepest (thickness not counted)\n\
+             state        {} (final energy {:.4} J)",
+            self.scene,
+            self.model.name(),
+            self.grid[0],
+            self.grid[1],
+            self.steps,
+            self.dt,
+            self.backend,
+            self.adapter,
+            self.network
+                .as_ref()
+                .map(|n| format!("network      {n}\n"))
+                .unwrap_or_default(),
+            self.ms_per_step,
+            if stages.is_empty() {
+                "(no timestamp queries on this adapter)".into()
+            } else {
+                stages.join(", ")
+            },
+            self.cg_iterations_mean,
+            self.cg_residual_max,
+            self.cg_breakdowns,
+            self.contacts_mean,
+            self.max_penetration,
+            if self.finite { "finite" } else { "NOT FINITE" },
+            self.energy_final,
+        ) + &self
+            .device_fault
+            .as_ref()
+            .map(|f| {
+                format!(
+                    "\nGPU fault    at step {} ({}); finished on the CPU from step {}",
+                    f.failed_at, f.error, f.resumed_from
+                )
+            })
+            .unwrap_or_default()
+            + &self
+                .divergence
+                .as_ref()
+                .map(|d| {
+                    format!(
+                        "\ndiverged     at step {}, vertex {}: {}",
+                        d.step, d.vertex, d.reason
+                    )
+                })
+                .unwrap_or_default()
+    }
+}
+
+/// Fails a run that diverged.
+pub fn check_diverged(report: &Report) -> Result<()> {
+    match &report.divergence {
+        Some(d) => Err(Error::Diverged {
+            step: d.step,
+            vertex: d.vertex,
+            reason: d.reason.clone(),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Copies `from` into `to` without allocating.
+fn keep(to: &mut State, from: &State) {
+    to.x.copy_from_slice(&from.x);
+    to.v.copy_from_slice(&from.v);
+    (to.time, to.step) = (from.time, from.step);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Past the cap a series keeps an evenly spaced sample of every step,
+    /// in bounded memory, with the median of the whole.
+    #[test]
+    fn a_long_series_keeps_an_even_sample() {
+        let mut series = Series::default();
+        let n = 5 * SERIES_CAP as u64 + 123;
+        for k in 0..n {
+            series.push(k as f64);
+        }
+        assert!(series.values.len() < SERIES_CAP);
+        assert_eq!(series.stride, 8);
+        for (i, v) in series.values.iter().enumerate() {
+            assert_eq!(*v, (i as u64 * series.stride) as f64);
+        }
+        let all_median = (n - 1) as f64 / 2.0;
+        let sampled = median(&mut series.values);
+        assert!(
+            (sampled - all_median).abs() <= series.stride as f64,
+            "{sampled} vs {all_median}"
+        );
+    }
+}

@@ -1,0 +1,212 @@
+//! `wgcloth bench` on a tiny table: every backend × model × grid gets a
+//! row with the steps it was asked to time and every stage's time, the
+//! growth exponents, traffic floors and period ratios divide the right
+//! rows, the network throughput is consistent with the work each kernel
+//! does, and the plot draws every series and stage. Speed itself is never
+//! asserted.
+
+use wgcloth::config::ModelKind;
+use wgcloth::nn::weights::SHIPPED;
+use wgcloth::stage::Stage;
+use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
+use wgcloth_cli::bench::{BenchOptions, VARIANTS, bench};
+use wgcloth_cli::run::Steps;
+
+fn tiny() -> BenchOptions {
+    BenchOptions {
+        quick: true,
+        grids: vec![6, 10],
+        hardware_gpu_grids: Vec::new(),
+        steps: Steps {
+            untimed: 2,
+            total: 5,
+        },
+        period_grid: 6,
+        period_steps: 3,
+        batch_sizes: vec![7, 40],
+        repeats: 2,
+    }
+}
+
+#[test]
+fn a_tiny_bench_has_every_row_and_consistent_figures() {
+    let opts = tiny();
+    let report = bench(&opts, |_| {}).expect("bench runs");
+    let gpu = !report.gpu.starts_with("no GPU rows");
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        assert!(gpu, "CI needs a GPU adapter: {}", report.gpu);
+    }
+    let backends: &[&str] = if gpu { &["cpu", "gpu"] } else { &["cpu"] };
+
+    let grids = &opts.grids;
+    assert_eq!(
+        report.rows.len(),
+        backends.len() * grids.len() * VARIANTS.len()
+    );
+    let expected = backends.iter().flat_map(|b| {
+        grids
+            .iter()
+            .flat_map(move |g| VARIANTS.iter().map(move |v| (*b, *g, *v)))
+    });
+    let stage_names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+    for (step, (backend, grid, v)) in report.rows.iter().zip(expected) {
+        let (row, model) = (&step.report, v.model);
+        let what = format!("{backend} {}", v.label());
+        assert_eq!(step.label, v.label());
+        assert_eq!(
+            (row.backend.as_str(), row.model),
+            (backend, model),
+            "{what}"
+        );
+        assert_eq!(row.grid, [grid, grid], "{what}");
+        assert_eq!(step.particles, (grid * grid) as usize, "{what}");
+        assert_eq!(row.steps, opts.steps.total, "{what}");
+        assert!(row.finite, "{what}");
+        assert!(
+            row.ms_per_step > 0.0 && row.ms_per_step.is_finite(),
+            "{what}"
+        );
+        assert_eq!(row.network.is_some(), model.is_network(), "{what}");
+        // Every stage is timed: CPU timers, GPU timestamp queries (which
+        // lavapipe has; an adapter without them reports none).
+        if backend == "cpu" || !row.stage_ms.is_empty() {
+            let keys: Vec<&str> = row.stage_ms.keys().map(|k| k.as_str()).collect();
+            let mut want = stage_names.clone();
+            want.sort();
+            assert_eq!(keys, want, "{what}");
+        }
+        let staged: f64 = row.stage_ms.values().sum();
+        assert!(
+            (step.stage_coverage - staged / row.ms_per_step).abs() < 1e-9,
+            "{what}"
+        );
+    }
+
+    assert_eq!(report.scaling.len(), backends.len() * VARIANTS.len());
+    for g in &report.scaling {
+        let ms = |grid: u32| {
+            report
+                .rows
+                .iter()
+                .find(|r| {
+                    r.report.backend == g.backend && r.label == g.label && r.report.grid[0] == grid
+                })
+                .expect("the row")
+                .report
+                .ms_per_step
+        };
+        assert_eq!((g.from_grid, g.to_grid), (6, 10), "{g:?}");
+        let exponent = (ms(10) / ms(6)).ln() / (100.0f64 / 36.0).ln();
+        assert!((g.exponent - exponent).abs() < 1e-9, "{g:?}");
+    }
+
+    assert_eq!(report.bandwidth.len(), backends.len());
+    assert!(report.bandwidth.iter().all(|b| b.gb_per_s > 0.0));
+    assert_eq!(report.cg_traffic.len(), backends.len() * grids.len());
+    for t in &report.cg_traffic {
+        let row = report
+            .rows
+            .iter()
+            .find(|r| {
+                r.report.backend == t.backend && r.report.grid[0] == t.grid && r.label == "friction"
+            })
+            .expect("the friction row");
+        let per_iteration = row.report.stage_ms["pcg"] / row.report.cg_iterations_mean;
+        assert!((t.measured_ms - per_iteration).abs() < 1e-9, "{t:?}");
+        // At least every vector of the 13 a vertex's iteration touches.
+        assert!(
+            t.bytes_per_iteration >= 13 * 12 * row.particles as u64,
+            "{t:?}"
+        );
+        assert!(
+            (t.times_floor - t.measured_ms / t.floor_ms).abs() < 1e-9,
+            "{t:?}"
+        );
+    }
+
+    assert_eq!(report.periods.len(), backends.len() * VARIANTS.len());
+    for p in &report.periods {
+        assert!(p.seconds > 0.0, "{p:?}");
+        let analytic = match p.model {
+            ModelKind::FrictionNet => Some(ModelKind::Friction),
+            ModelKind::NaiveNet => Some(ModelKind::Naive),
+            _ => None,
+        };
+        match (analytic, p.ratio_to_analytic) {
+            (None, None) => {}
+            (Some(a), Some(ratio)) => {
+                let base = report
+                    .periods
+                    .iter()
+                    .find(|q| q.backend == p.backend && q.model == a)
+                    .expect("the analytic row");
+                assert!(
+                    (ratio - p.seconds / base.seconds).abs() < 1e-9 * ratio,
+                    "{p:?}"
+                );
+            }
+            other => panic!("{p:?}: ratio {other:?}"),
+        }
+    }
+
+    for shipped in SHIPPED {
+        let net = shipped.read().expect("shipped network").network();
+        // The forward pass and one reverse pass per output, per evaluation.
+        let reverse =
+            2 * net.mlp.multiply_adds() * (1 + net.mlp.outputs()) * net.kind.evaluations();
+        for &n in &opts.batch_sizes {
+            let rows: Vec<_> = report
+                .networks
+                .iter()
+                .filter(|r| r.network == shipped.path && r.contacts == n)
+                .collect();
+            assert_eq!(rows.len(), backends.len(), "{} × {n}", shipped.path);
+            for r in rows {
+                if r.backend == "cpu" {
+                    assert_eq!(r.flop_per_contact, reverse);
+                }
+                assert!(r.flop_per_contact >= reverse, "{r:?}");
+                let gflops = n as f64 / (r.ms * 1e-3) * r.flop_per_contact as f64 * 1e-9;
+                assert!((r.gflop_per_s - gflops).abs() <= 1e-9 * gflops, "{r:?}");
+            }
+        }
+    }
+
+    let table = report.table();
+    for v in VARIANTS {
+        assert!(table.contains(&v.label()), "{table}");
+    }
+
+    // Every series of the log-log panel and every stage of the breakdown
+    // is drawn from the rows: taking a series' rows, or a stage's times,
+    // out of the report takes pixels of its colour off the figure (the
+    // legend keeps its own).
+    let pixels = |report: &wgcloth_cli::bench::BenchReport, color| {
+        let canvas = figure(report).expect("a figure");
+        let (w, h) = (canvas.width() as u32, canvas.height() as u32);
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| canvas.pixel(x, y) == color)
+            .count()
+    };
+    for (v, color) in VARIANTS.iter().zip(VARIANT_COLORS) {
+        let mut without = report.clone();
+        without.rows.retain(|r| r.label != v.label());
+        assert!(
+            pixels(&without, color) < pixels(&report, color),
+            "{} not drawn",
+            v.label()
+        );
+    }
+    for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS) {
+        let mut without = report.clone();
+        for r in &mut without.rows {
+            r.report.stage_ms.remove(stage.name());
+        }
+        assert!(
+            pixels(&without, color) < pixels(&report, color),
+            "{} not drawn",
+            stage.name()
+        );
+    }
+}

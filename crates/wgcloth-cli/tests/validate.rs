@@ -1,0 +1,44 @@
+//! `wgcloth validate`: whole GPU runs against the CPU on lavapipe (or any
+//! adapter). Without an adapter these tests fail under CI=true and skip
+//! elsewhere.
+
+#[path = "../../wgcloth/tests/common/mod.rs"]
+mod common;
+
+use wgcloth::config::ModelKind;
+use wgcloth::{Config, Scene};
+
+fn sphere(grid: u32, model: ModelKind) -> Scene {
+    let mut c = Config {
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    Scene::new(&c).unwrap()
+}
+
+/// The network models over 100 steps of the thesis scene pass `wgcloth
+/// validate`: the GPU stays within the scene's own sensitivity of the CPU
+/// (a network's kinks amplify rounding as contact does).
+#[test]
+fn thesis_scene_with_either_network_validates_against_the_cpu() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
+        let v = wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_| {}).unwrap();
+        eprintln!(
+            "{model:?}: deviation {:.3e} m, sensitivity {:.3e} m, contacts {} vs {}",
+            v.max_deviation, v.sensitivity, v.gpu_contacts, v.cpu_contacts
+        );
+        assert!(v.cpu_contacts > 500, "the sphere must hit the cloth");
+        assert!(
+            v.max_deviation <= 1e-4 + 4.0 * v.sensitivity,
+            "{model:?}: {} m apart, sensitivity {} m",
+            v.max_deviation,
+            v.sensitivity
+        );
+        let ratio = v.gpu_contacts as f64 / v.cpu_contacts as f64;
+        assert!((ratio - 1.0).abs() < 0.05, "{model:?}: contacts {ratio}");
+    }
+}

@@ -1,0 +1,139 @@
+//! Accuracy of a network (`wgcloth eval-net`): the thesis's measure,
+//! standardised MSE (prediction and target divided by the file's output
+//! std), on held-out data and on fresh uniform samples of the declared
+//! domain, and the error of its position Jacobian against the analytic one.
+//! Friction networks are scored on g in the world frame whatever frame
+//! they compute in.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::dataset::Dataset;
+use wgcloth::cpu::contact::{Coefficients, ContactFrame, friction};
+use wgcloth::nn::domain::{Rng, uniform_sample};
+use wgcloth::nn::weights::{NetKind, Network, WeightsFile};
+
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    pub held_out_mse: Option<f64>,
+    pub uniform_mse: f64,
+    pub uniform_samples: usize,
+    /// Median over in-contact uniform samples of |(J_net − J) n| / |J n|,
+    /// with J = ∂g/∂c for the friction networks (the position Jacobian
+    /// (J n) nᵀ that enters K_c) and ∂f/∂p in the local frame (n = +z) for
+    /// the naive one.
+    pub jacobian_median_relative_error: f64,
+}
+
+fn coefficients(x: &[f32]) -> Coefficients {
+    Coefficients {
+        kn: x[6],
+        kd: x[7],
+        kt: x[8],
+        mu: x[9],
+    }
+}
+
+fn matrix(j: &[f32]) -> Mat3 {
+    Mat3::from_cols(
+        Vec3::new(j[0], j[3], j[6]),
+        Vec3::new(j[1], j[4], j[7]),
+        Vec3::new(j[2], j[5], j[8]),
+    )
+}
+
+/// The network's output for each sample of `data` in the data's frame,
+/// with its Jacobian along c (friction) or p (naive).
+fn predict(net: &Network, data: &Dataset) -> Vec<(Vec3, Mat3)> {
+    let along = match net.kind {
+        NetKind::Naive => 4..7,
+        _ => 0..3,
+    };
+    if net.kind != NetKind::FrictionContact {
+        let (y, j) = net.mlp.forward_jacobian_parallel(&data.inputs, along);
+        return (0..data.len())
+            .map(|i| (Vec3::from_slice(&y[3 * i..]), matrix(&j[9 * i..])))
+            .collect();
+    }
+    (0..data.len())
+        .into_par_iter()
+        .map(|i| {
+            let x = data.input(i);
+            let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
+            let Some(frame) = ContactFrame::new(c, v) else {
+                return (Vec3::ZERO, Mat3::ZERO);
+            };
+            let (y, j) = net
+                .mlp
+                .forward_jacobian(&frame.inputs(&coefficients(x)), net.kind.wrt());
+            let fj = frame.force([&y[..2], &y[2..]], [&j[..6], &j[6..]]);
+            (fj.force, fj.d_c)
+        })
+        .collect()
+}
+
+/// The std each world output is divided by: the file's, or for the
+/// contact-frame network the one it shares across components.
+fn world_std(file: &WeightsFile) -> [f32; 3] {
+    match file.kind {
+        NetKind::FrictionContact => [file.output_std[0]; 3],
+        _ => [0, 1, 2].map(|o| file.output_std[o]),
+    }
+}
+
+fn standardised_mse(predicted: &[(Vec3, Mat3)], std: [f32; 3], data: &Dataset) -> f64 {
+    let sum: f64 = predicted
+        .iter()
+        .zip(&data.targets)
+        .map(|((p, _), y)| {
+            (0..3)
+                .map(|o| (((p[o] - y[o]) / std[o]) as f64).powi(2))
+                .sum::<f64>()
+        })
+        .sum();
+    sum / (3 * data.len()) as f64
+}
+
+/// (network, analytic) position Jacobian along the contact normal at
+/// inputs x, from the network's Jacobian `network`; None out of contact.
+fn normal_jacobians(kind: NetKind, x: &[f32], network: Mat3) -> Option<(Vec3, Vec3)> {
+    match kind {
+        NetKind::Naive => Some((network * Vec3::Z, -Vec3::Z)),
+        // f = −pz e_z: ∂f/∂p e_z = −e_z.
+        NetKind::Friction | NetKind::FrictionContact => {
+            let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
+            let exact = friction(c, v, &coefficients(x));
+            let n = -c.normalize_or_zero();
+            (exact.force != Vec3::ZERO).then(|| (network * n, exact.d_c * n))
+        }
+    }
+}
+
+pub fn evaluate(
+    file: &WeightsFile,
+    held_out: Option<&Dataset>,
+    samples: usize,
+    seed: u64,
+) -> Evaluation {
+    let net = file.network();
+    let mut rng = Rng::new(seed);
+    let mut uniform = Dataset::new(file.kind.data());
+    for _ in 0..samples {
+        uniform.push(uniform_sample(file.kind, &mut rng));
+    }
+    let predicted = predict(&net, &uniform);
+    let mut errors: Vec<f64> = predicted
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, j))| normal_jacobians(file.kind, uniform.input(i), *j))
+        .map(|(got, want)| ((got - want).length() / want.length().max(1e-12)) as f64)
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    let std = world_std(file);
+    Evaluation {
+        held_out_mse: held_out.map(|d| standardised_mse(&predict(&net, d), std, d)),
+        uniform_mse: standardised_mse(&predicted, std, &uniform),
+        uniform_samples: samples,
+        jacobian_median_relative_error: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
+    }
+}

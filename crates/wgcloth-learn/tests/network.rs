@@ -1,0 +1,386 @@
+//! The learned friction model: data generation, training, and the network
+//! inside the contact model.
+
+#[path = "../../wgcloth/tests/common/mod.rs"]
+mod common;
+
+use std::path::Path;
+
+use common::{Rng, assert_close};
+use glam::{Mat3, Quat, Vec3};
+use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_contact_net, friction_net};
+use wgcloth::nn::weights::{NetKind, WeightsFile};
+use wgcloth::nn::{Layer, Mlp};
+use wgcloth_learn::dataset::{Dataset, generate};
+use wgcloth_learn::eval::evaluate;
+use wgcloth_learn::train::{TrainOptions, train};
+
+fn random_net(sizes: &[usize], seed: u64) -> Mlp {
+    let mut rng = Rng(seed);
+    Mlp {
+        layers: sizes
+            .windows(2)
+            .map(|w| Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| rng.range(-1.0, 1.0) / (w[0] as f32).sqrt())
+                    .collect(),
+                bias: (0..w[1]).map(|_| rng.range(-0.2, 0.2)).collect(),
+            })
+            .collect(),
+        negative_slope: 0.01,
+    }
+}
+
+/// A random network whose first-layer weights are divided by each input's
+/// range, as folding the min-max scaler does.
+fn scaled_random_net(sizes: &[usize], ranges: &[f32], seed: u64) -> Mlp {
+    let mut net = random_net(sizes, seed);
+    let first = &mut net.layers[0];
+    for o in 0..first.outputs {
+        for (i, r) in ranges.iter().enumerate() {
+            first.weight[o * first.inputs + i] /= r;
+        }
+    }
+    net
+}
+
+const K: Coefficients = Coefficients {
+    kn: 500.0,
+    kd: 3.0,
+    kt: 200.0,
+    mu: 0.4,
+};
+
+/// A network force's Jacobians at (c, v) against finite differences. The
+/// force is piecewise smooth: near a LeakyReLU kink the central difference
+/// mixes two pieces, but one one-sided difference is right.
+fn assert_jacobians_match_differences(
+    force: impl Fn(Vec3, Vec3) -> ForceJacobian,
+    c: Vec3,
+    v: Vec3,
+) {
+    let fj = force(c, v);
+    for (m, x, h, what) in [(fj.d_c, c, 1e-4, "∂g/∂c"), (fj.d_v, v, 1e-3, "∂g/∂v")] {
+        let g = |y: Vec3| if what == "∂g/∂c" { force(y, v) } else { force(c, y) }.force;
+        for col in 0..3 {
+            let mut e = Vec3::ZERO;
+            e[col] = h;
+            let (f0, fp, fm) = (g(x), g(x + e), g(x - e));
+            let candidates = [(fp - fm) / (2.0 * h), (fp - f0) / h, (f0 - fm) / h];
+            let got = m.col(col);
+            let best = candidates
+                .iter()
+                .map(|d| (*d - got).length())
+                .fold(f32::INFINITY, f32::min);
+            assert!(
+                best <= 1e-2 * got.length().max(0.1),
+                "{what} column {col} at c {c}, v {v}: {got} vs {candidates:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn network_force_jacobians_match_finite_differences() {
+    // c spans 0.1, v 4, the coefficients up to 1000.
+    let ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    let net = scaled_random_net(&[10, 24, 24, 3], &ranges, 8);
+    let mut rng = Rng(4);
+    for _ in 0..20 {
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        assert_jacobians_match_differences(|c, v| friction_net(&net, c, v, &K), c, v);
+    }
+}
+
+/// The contact-frame network's input ranges: depth, approach, slide, the
+/// coefficients.
+const CONTACT_RANGES: [f32; 7] = [0.05, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+
+/// The contact-frame network: its chain rule back to the world (the
+/// frame turning with c and v) against finite differences.
+#[test]
+fn contact_frame_network_jacobians_match_finite_differences() {
+    let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 9);
+    let mut rng = Rng(5);
+    for _ in 0..40 {
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        assert_jacobians_match_differences(|c, v| friction_contact_net(&net, c, v, &K), c, v);
+    }
+}
+
+/// What the contact frame guarantees for any weights: the force turns with
+/// the contact (g(Rc, Rv) = R g(c, v)), friction vanishes as the sliding
+/// stops, and the Jacobians stay finite there and approach their limit.
+#[test]
+fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
+    let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
+    let g = |c: Vec3, v: Vec3| friction_contact_net(&net, c, v, &K);
+    let mut rng = Rng(6);
+    for _ in 0..20 {
+        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+        let r = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
+        let (a, b) = (g(c, v), g(r * c, r * v));
+        assert!(
+            (r * a.force - b.force).length() <= 1e-4 * a.force.length().max(1e-3),
+            "{} vs {}",
+            r * a.force,
+            b.force
+        );
+        let rotated = Mat3::from_quat(r);
+        assert_close(
+            rotated * a.d_v * rotated.transpose(),
+            b.d_v,
+            1e-3,
+            1e-3,
+            "rotated ∂g/∂v",
+        );
+
+        // v along c: no sliding, no friction, finite Jacobians; and sliding
+        // at 1 µm/s is within rounding of it.
+        let n = c.normalize();
+        let rest = g(c, 0.3 * n);
+        assert!(rest.force.cross(n).length() <= 1e-6 * rest.force.length().max(1.0));
+        assert!(rest.d_c.is_finite() && rest.d_v.is_finite());
+        let creeping = g(c, 0.3 * n + 2e-6 * n.any_orthonormal_vector());
+        assert!(creeping.force.cross(n).length() <= 1e-3 * rest.force.length().max(1.0));
+        assert_close(creeping.d_v, rest.d_v, 1e-2, 1e-2, "∂g/∂v as sliding stops");
+    }
+}
+
+#[test]
+fn gen_data_is_deterministic_for_a_seed() {
+    let a = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
+    let b = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
+    let c = generate(NetKind::Friction, 300, 700, 8, |_, _| {}).unwrap();
+    assert_eq!(a.len(), 1000);
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    // Every sample lies in the declared domain.
+    for x in a.inputs.chunks_exact(10) {
+        assert!(Vec3::new(x[0], x[1], x[2]).length() <= 0.05 + 1e-6);
+        assert!(Vec3::new(x[3], x[4], x[5]).length() <= 2.0 + 1e-6);
+        assert!((10.0..=1000.0).contains(&x[6]) && (0.0..=10.0).contains(&x[7]));
+        assert!((1.0..=1000.0).contains(&x[8]) && (0.0..=1.0).contains(&x[9]));
+    }
+}
+
+#[test]
+fn naive_data_is_deterministic_local_frame_geometry() {
+    let a = generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap();
+    assert_eq!(a, generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap());
+    assert_eq!((a.len(), a.width()), (1000, 7));
+    for (x, y) in a.inputs.chunks_exact(7).zip(&a.targets) {
+        // b on +x, c above the x axis in the xy-plane, the point at most
+        // 5 cm deep, and the naive force (0, 0, −pz).
+        assert!(x[0] > 0.0 && x[2] > 0.0 && x[3] == 0.0, "{x:?}");
+        assert!((-0.05..=0.0).contains(&x[6]), "{x:?}");
+        assert_eq!(*y, [0.0, 0.0, -x[6]]);
+    }
+}
+
+#[test]
+fn a_tiny_training_run_lowers_the_loss_tenfold() {
+    let data = generate(NetKind::Friction, 500, 11500, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![64, 64],
+        epochs: 50,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 40,
+        ..Default::default()
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+    // The naive network of thesis 2.4 (7 → 16 ×5 → 3) on its own data.
+    let data = generate(NetKind::Naive, 300, 1700, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![16; 5],
+        epochs: 40,
+        ..opts
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "naive: validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert_eq!(trained.weights.kind, NetKind::Naive);
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+}
+
+/// The contact-frame network trains on friction data and is scored on g in
+/// the world frame, where its error matches its validation figure.
+#[test]
+fn a_contact_frame_network_learns_and_scores_in_the_world_frame() {
+    let data = generate(NetKind::Friction, 0, 12000, 3, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![32, 32],
+        epochs: 20,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 20,
+        contact_frame: true,
+        ..Default::default()
+    };
+    let trained = train(&data, &opts, |_, _, _| {}).unwrap();
+    eprintln!(
+        "contact frame: validation MSE {:.3e} → {:.3e}",
+        trained.initial_validation, trained.best_validation
+    );
+    assert_eq!(trained.weights.kind, NetKind::FrictionContact);
+    assert!(trained.best_validation * 10.0 <= trained.initial_validation);
+    let bytes = trained.weights.to_bytes();
+    let file = WeightsFile::parse(&bytes, Path::new("trained")).unwrap();
+    assert_eq!(file, trained.weights);
+    let e = evaluate(&file, None, 20_000, 9);
+    let ratio = e.uniform_mse / trained.best_validation;
+    assert!(
+        (0.5..2.0).contains(&ratio),
+        "uniform {} vs validation {}",
+        e.uniform_mse,
+        trained.best_validation
+    );
+    // Naive data has no contact frame.
+    let naive = generate(NetKind::Naive, 0, 100, 3, |_, _| {}).unwrap();
+    let err = train(&naive, &opts, |_, _, _| {}).unwrap_err().to_string();
+    assert!(err.contains("--contact-frame"), "{err}");
+}
+
+#[test]
+fn training_refuses_empty_or_mismatched_data() {
+    let dir = std::env::temp_dir().join(format!("wgcloth-data-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.st");
+    Dataset::new(NetKind::Friction)
+        .write(&empty, Default::default(), true)
+        .unwrap();
+    let err = Dataset::read(&empty).unwrap_err().to_string();
+    assert!(err.contains("no samples"), "{err}");
+    let tiny = Dataset {
+        kind: NetKind::Friction,
+        inputs: vec![0.0; 10 * 5],
+        targets: vec![[0.0; 3]; 5],
+    };
+    let err = train(&tiny, &TrainOptions::default(), |_, _, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("too few"), "{err}");
+    // Inputs and targets of different lengths.
+    let mut bytes = Dataset {
+        kind: NetKind::Friction,
+        inputs: vec![0.0; 10 * 4],
+        targets: vec![[0.0; 3]; 4],
+    }
+    .to_bytes(Default::default());
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let y = [0u8; 3 * 4 * 3];
+    let views = vec![
+        ("inputs".to_string(), st.tensor("inputs").unwrap()),
+        (
+            "targets".to_string(),
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![3, 3], &y).unwrap(),
+        ),
+    ];
+    bytes = safetensors::serialize(views, header.metadata().clone()).unwrap();
+    let mismatched = dir.join("mismatched.st");
+    std::fs::write(&mismatched, bytes).unwrap();
+    let err = Dataset::read(Path::new(&mismatched))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("4 inputs but 3 targets"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_shipped_networks_keep_the_thesis_scene_stable_and_out_of_the_sphere() {
+    use wgcloth::config::ModelKind;
+    use wgcloth::cpu::CpuSim;
+    use wgcloth::cpu::contact::naive;
+    use wgcloth::nn::weights::FRICTION_THESIS;
+    use wgcloth::{Config, Scene};
+    let thesis = Path::new(env!("CARGO_MANIFEST_DIR")).join(FRICTION_THESIS.path);
+    // No `contact.weights`: the built-in copy of the model's shipped file.
+    for (model, weights) in [
+        (ModelKind::FrictionNet, None),
+        (ModelKind::FrictionNet, Some(thesis)),
+        (ModelKind::NaiveNet, None),
+    ] {
+        let mut c = Config {
+            model,
+            ..Default::default()
+        };
+        c.cloth.grid = [16, 16];
+        c.contact.weights = weights;
+        let mut sim = CpuSim::new(Scene::new(&c).expect("the shipped weights load"));
+        let (mut deepest, mut contacts, mut worst) = (0.0f32, 0, 0.0f32);
+        for _ in 0..200 {
+            let s = sim.step();
+            assert!(sim.is_finite(), "{}", model.name());
+            deepest = deepest.max(s.max_penetration);
+            contacts += s.contacts;
+            if model == ModelKind::NaiveNet {
+                // The naive network against the naive force on the same contacts.
+                for (contact, r) in sim.contacts().iter().zip(sim.responses()) {
+                    let exact = naive(contact.collision_vector(), c.contact.naive_stiffness).force;
+                    worst = worst.max((r.force - exact).length());
+                }
+            }
+        }
+        assert!(
+            contacts > 500,
+            "{}: the sphere must hit the cloth",
+            model.name()
+        );
+        assert!(
+            deepest < 0.01,
+            "{}: a vertex went {deepest} m inside the sphere",
+            model.name()
+        );
+        // The naive force reaches c·|d̃| = 1000 N/m × 0.05 m; 1% of that.
+        assert!(worst < 0.5, "naive-net force off by {worst} N");
+    }
+}
+
+#[test]
+fn a_warm_start_begins_where_the_given_weights_left_off() {
+    let data = generate(NetKind::Friction, 200, 1800, 5, |_, _| {}).unwrap();
+    let opts = TrainOptions {
+        hidden: vec![32, 32],
+        epochs: 15,
+        batch: 128,
+        learning_rate: 3e-3,
+        patience: 15,
+        ..Default::default()
+    };
+    let first = train(&data, &opts, |_, _, _| {}).unwrap();
+    let again = TrainOptions {
+        init: Some(first.weights.clone()),
+        epochs: 1,
+        ..opts.clone()
+    };
+    let warm = train(&data, &again, |_, _, _| {}).unwrap();
+    eprintln!(
+        "cold start {:.3e}, trained {:.3e}, warm start {:.3e}",
+        first.initial_validation, first.best_validation, warm.initial_validation
+    );
+    assert!(
+        (warm.initial_validation - first.best_validation).abs()
+            <= 1e-6 * first.best_validation.max(1.0)
+    );
+    let wrong = TrainOptions {
+        hidden: vec![16, 32],
+        ..again
+    };
+    assert!(
+        train(&data, &wrong, |_, _, _| {})
+            .unwrap_err()
+            .to_string()
+            .contains("--init")
+    );
+}

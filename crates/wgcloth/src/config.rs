@@ -1,0 +1,587 @@
+//! Run configuration: the thesis scene by default, overridden by a TOML
+//! file and then by command-line flags, and validated field by field so a
+//! bad value is reported by its dotted name before anything runs.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::nn::weights::{self, NetKind, Shipped, WeightsFile};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneKind {
+    /// Cloth pinned at its top corners, a rigid body moving through it.
+    Sphere,
+    /// The cloth alone, hanging under gravity.
+    Hang,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// Penalty force f = −c d̃ n (thesis eq. 6).
+    Naive,
+    /// Contact and Coulomb friction force (thesis eqs. 8–9).
+    Friction,
+    /// The friction force predicted by the trained network (thesis 2.6–2.7),
+    /// its input Jacobian as the contact stiffness.
+    FrictionNet,
+    /// The naive force predicted by the small network of thesis 2.4 from
+    /// the contact's triangle and point in a local frame.
+    NaiveNet,
+}
+
+impl SceneKind {
+    pub const ALL: [SceneKind; 2] = [SceneKind::Sphere, SceneKind::Hang];
+
+    /// The name on the command line and in config files.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneKind::Sphere => "sphere",
+            SceneKind::Hang => "hang",
+        }
+    }
+}
+
+impl ModelKind {
+    pub const ALL: [ModelKind; 4] = [
+        ModelKind::Naive,
+        ModelKind::Friction,
+        ModelKind::FrictionNet,
+        ModelKind::NaiveNet,
+    ];
+
+    /// Whether the model evaluates a network.
+    pub fn is_network(self) -> bool {
+        self.default_weights().is_some()
+    }
+
+    /// The name on the command line and in config files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Naive => "naive",
+            ModelKind::Friction => "friction",
+            ModelKind::FrictionNet => "friction-net",
+            ModelKind::NaiveNet => "naive-net",
+        }
+    }
+
+    /// The shipped weights a network model reads unless told otherwise.
+    pub fn default_weights(self) -> Option<&'static str> {
+        self.shipped_weights().map(|s| s.path)
+    }
+
+    /// The shipped network a network model reads unless told otherwise.
+    pub fn shipped_weights(self) -> Option<Shipped> {
+        match self {
+            ModelKind::FrictionNet => Some(weights::FRICTION_SMALL),
+            ModelKind::NaiveNet => Some(weights::NAIVE),
+            ModelKind::Naive | ModelKind::Friction => None,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Pins {
+    TopCorners,
+    TopEdge,
+    None,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shape {
+    Sphere,
+    Box,
+    Plane,
+    Obj,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MotionKind {
+    Static,
+    Linear,
+    Sinusoid,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Rotation {
+    pub axis: [f32; 3],
+    pub degrees: f32,
+}
+
+impl Default for Rotation {
+    fn default() -> Self {
+        Rotation {
+            axis: [0.0, 1.0, 0.0],
+            degrees: 0.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClothConfig {
+    /// Particles along the cloth's width and height.
+    pub grid: [u32; 2],
+    /// Width and height in m.
+    pub size: [f32; 2],
+    /// Total mass in kg.
+    pub mass: f32,
+    /// Spring stiffness E in N/m (thesis eq. 4).
+    pub stiffness: f32,
+    /// Rayleigh damping D = −α M + β K: α in 1/s.
+    pub damping_mass: f32,
+    /// β in s.
+    pub damping_stiffness: f32,
+    pub pins: Pins,
+    /// World position of the cloth's centre.
+    pub center: [f32; 3],
+    /// Orientation of the cloth, which lies in its local x–y plane.
+    pub rotation: Rotation,
+}
+
+impl Default for ClothConfig {
+    fn default() -> Self {
+        ClothConfig {
+            grid: [32, 32],
+            size: [1.0, 1.0],
+            mass: 0.2,
+            stiffness: 5000.0,
+            damping_mass: 0.01,
+            damping_stiffness: 5e-4,
+            pins: Pins::TopCorners,
+            center: [0.0, 0.0, 0.0],
+            rotation: Rotation::default(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionConfig {
+    pub kind: MotionKind,
+    /// Sinusoid: direction of travel.
+    pub axis: [f32; 3],
+    /// Sinusoid: m.
+    pub amplitude: f32,
+    /// Sinusoid: s.
+    pub period: f32,
+    /// Sinusoid: phase in degrees.
+    pub phase_deg: f32,
+    /// Linear: m/s.
+    pub velocity: [f32; 3],
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        // With the default position: starts behind the cloth (z = −0.35),
+        // pushes it forward to z = +0.15 and returns within one 2 s period;
+        // peak speed 0.79 m/s.
+        MotionConfig {
+            kind: MotionKind::Sinusoid,
+            axis: [0.0, 0.0, 1.0],
+            amplitude: 0.25,
+            period: 2.0,
+            phase_deg: -90.0,
+            velocity: [0.0, 0.0, 0.0],
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RigidConfig {
+    pub shape: Shape,
+    /// Sphere: m.
+    pub radius: f32,
+    /// Sphere: icosahedron subdivisions; box and plane: segments per edge.
+    pub subdivisions: u32,
+    /// Box: m.
+    pub half_extents: [f32; 3],
+    /// Plane: width and depth in m (normal +y in body space).
+    pub plane_size: [f32; 2],
+    /// Obj: the mesh file.
+    pub mesh: Option<PathBuf>,
+    /// Obj: uniform scale applied to the file's coordinates.
+    pub scale: f32,
+    /// World position of the body origin at t = 0 (before the motion).
+    pub position: [f32; 3],
+    pub rotation: Rotation,
+    pub motion: MotionConfig,
+}
+
+impl Default for RigidConfig {
+    fn default() -> Self {
+        RigidConfig {
+            shape: Shape::Sphere,
+            radius: 0.2,
+            subdivisions: 3,
+            half_extents: [0.2, 0.2, 0.2],
+            plane_size: [2.0, 2.0],
+            mesh: None,
+            scale: 1.0,
+            position: [0.0, -0.15, -0.1],
+            rotation: Rotation::default(),
+            motion: MotionConfig::default(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactConfig {
+    /// ε: contact starts this far outside a surface (thesis 2.3 "force field"), m.
+    pub thickness: f32,
+    /// Points deeper than this below a surface are not its contacts, m.
+    /// The default keeps |c| = |d̃| ≤ 0.05, the network's declared domain;
+    /// deeper matches are mostly false (a rigid vertex against cloth
+    /// draped further round the body).
+    pub max_depth: f32,
+    /// c of the naive model (thesis eq. 6), N/m.
+    pub naive_stiffness: f32,
+    /// s of the friction model (thesis eqs. 8–9).
+    pub force_scale: f32,
+    /// Contact stiffness k_n.
+    pub kn: f32,
+    /// Contact damping k_d.
+    pub kd: f32,
+    /// Friction stiffness k_t.
+    pub kt: f32,
+    /// Coulomb coefficient μ.
+    pub mu: f32,
+    /// The network of a network model (a `wgcloth-mlp/1` file); by default
+    /// the model's shipped one under `weights/`.
+    pub weights: Option<PathBuf>,
+}
+
+impl Default for ContactConfig {
+    fn default() -> Self {
+        ContactConfig {
+            thickness: 0.025,
+            max_depth: 0.025,
+            naive_stiffness: 1000.0,
+            force_scale: 1.0,
+            kn: 1000.0,
+            kd: 1.0,
+            kt: 100.0,
+            mu: 0.5,
+            weights: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverConfig {
+    /// Time step h in s.
+    pub dt: f32,
+    pub steps: u64,
+    /// Maximum PCG iterations (thesis: 25).
+    pub cg_iters: u32,
+    /// Relative residual at which PCG stops (thesis: 1e-6); 0 runs every iteration.
+    pub cg_tol: f32,
+    /// m/s².
+    pub gravity: [f32; 3],
+    /// m/s: a vertex faster than this stops the run as diverging (the
+    /// sphere moves at about 1 m/s).
+    pub max_speed: f32,
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            dt: 0.01,
+            steps: 200,
+            cg_iters: 25,
+            cg_tol: 1e-6,
+            gravity: [0.0, -9.81, 0.0],
+            max_speed: 100.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub scene: SceneKind,
+    pub model: ModelKind,
+    pub cloth: ClothConfig,
+    pub rigid: RigidConfig,
+    pub contact: ContactConfig,
+    pub solver: SolverConfig,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            scene: SceneKind::Sphere,
+            model: ModelKind::FrictionNet,
+            cloth: ClothConfig::default(),
+            rigid: RigidConfig::default(),
+            contact: ContactConfig::default(),
+            solver: SolverConfig::default(),
+        }
+    }
+}
+
+impl Config {
+    /// The weights file a network model reads: `contact.weights`, else the
+    /// model's shipped file (built in). None for the analytic models.
+    pub fn weights_path(&self) -> Option<PathBuf> {
+        let shipped = self.model.default_weights()?;
+        Some(
+            self.contact
+                .weights
+                .clone()
+                .unwrap_or_else(|| shipped.into()),
+        )
+    }
+
+    /// The network model's weights: `contact.weights` read from disk, else
+    /// the built-in copy of the shipped file. None for the analytic models;
+    /// an error for a network of the other model.
+    pub fn read_weights(&self) -> Result<Option<WeightsFile>> {
+        let Some(shipped) = self.model.shipped_weights() else {
+            return Ok(None);
+        };
+        let (file, path) = match &self.contact.weights {
+            Some(path) => (WeightsFile::read(path)?, path.as_path()),
+            None => (shipped.read()?, Path::new(shipped.path)),
+        };
+        let wanted = match self.model {
+            ModelKind::NaiveNet => NetKind::Naive,
+            _ => NetKind::Friction,
+        };
+        if file.kind.data() != wanted {
+            return Err(Error::file(
+                path,
+                format!(
+                    "is a {} network; model {} needs a {} one",
+                    file.kind.name(),
+                    self.model.name(),
+                    wanted.name()
+                ),
+            ));
+        }
+        Ok(Some(file))
+    }
+
+    /// Parses a TOML document; unknown or mistyped fields are errors naming
+    /// the file and line. Needs the crate's `toml` feature.
+    #[cfg(feature = "toml")]
+    pub fn from_toml(text: &str, path: &Path) -> Result<Config> {
+        toml::from_str(text).map_err(|mut e| {
+            let line = e
+                .span()
+                .map(|s| format!("line {}: ", text[..s.start].matches('\n').count() + 1))
+                .unwrap_or_default();
+            // Without the input, the error's display names the dotted key.
+            e.set_input(None);
+            let shown = e.to_string();
+            let key = shown
+                .lines()
+                .find_map(|l| l.strip_prefix("in `")?.strip_suffix('`'))
+                .map(|k| format!("`{k}`: "))
+                .unwrap_or_default();
+            Error::file(path, format!("{line}{key}{}", e.message().trim()))
+        })
+    }
+
+    /// [`Config::from_toml`] on a file. Needs the crate's `toml` feature.
+    #[cfg(feature = "toml")]
+    pub fn load(path: &Path) -> Result<Config> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Config::from_toml(&text, path)
+    }
+
+    /// Checks every field; the first bad one is reported by its dotted name.
+    pub fn validate(&self) -> Result<()> {
+        let c = &self.cloth;
+        if c.grid.iter().any(|&n| n < 2) {
+            return Err(Error::config(
+                "cloth.grid",
+                format!("needs at least 2 particles per side, got {:?}", c.grid),
+            ));
+        }
+        if (c.grid[0] as u64) * (c.grid[1] as u64) > (1 << 26) {
+            return Err(Error::config(
+                "cloth.grid",
+                format!("{:?} is more than 2^26 particles", c.grid),
+            ));
+        }
+        positive("cloth.size", &c.size)?;
+        positive("cloth.mass", &[c.mass])?;
+        positive("cloth.stiffness", &[c.stiffness])?;
+        non_negative("cloth.damping_mass", &[c.damping_mass])?;
+        non_negative("cloth.damping_stiffness", &[c.damping_stiffness])?;
+        finite("cloth.center", &c.center)?;
+        rotation("cloth.rotation", &c.rotation)?;
+
+        if self.scene == SceneKind::Sphere {
+            let r = &self.rigid;
+            match r.shape {
+                Shape::Sphere => {
+                    positive("rigid.radius", &[r.radius])?;
+                    if r.subdivisions > 7 {
+                        return Err(Error::config(
+                            "rigid.subdivisions",
+                            format!("at most 7 for a sphere, got {}", r.subdivisions),
+                        ));
+                    }
+                }
+                Shape::Box => positive("rigid.half_extents", &r.half_extents)?,
+                Shape::Plane => positive("rigid.plane_size", &r.plane_size)?,
+                Shape::Obj => {
+                    if r.mesh.is_none() {
+                        return Err(Error::config("rigid.mesh", "shape `obj` needs a mesh file"));
+                    }
+                    positive("rigid.scale", &[r.scale])?;
+                }
+            }
+            if matches!(r.shape, Shape::Box | Shape::Plane) && !(1..=1024).contains(&r.subdivisions)
+            {
+                return Err(Error::config(
+                    "rigid.subdivisions",
+                    format!(
+                        "segments per edge must be in 1..=1024, got {}",
+                        r.subdivisions
+                    ),
+                ));
+            }
+            finite("rigid.position", &r.position)?;
+            rotation("rigid.rotation", &r.rotation)?;
+            let m = &r.motion;
+            match m.kind {
+                MotionKind::Static => {}
+                MotionKind::Linear => finite("rigid.motion.velocity", &m.velocity)?,
+                MotionKind::Sinusoid => {
+                    direction("rigid.motion.axis", &m.axis)?;
+                    finite("rigid.motion.amplitude", &[m.amplitude])?;
+                    positive("rigid.motion.period", &[m.period])?;
+                    finite("rigid.motion.phase_deg", &[m.phase_deg])?;
+                }
+            }
+        }
+
+        let k = &self.contact;
+        positive("contact.thickness", &[k.thickness])?;
+        positive("contact.max_depth", &[k.max_depth])?;
+        match self.model {
+            ModelKind::Naive | ModelKind::NaiveNet => {
+                positive("contact.naive_stiffness", &[k.naive_stiffness])?
+            }
+            ModelKind::Friction | ModelKind::FrictionNet => {
+                positive("contact.force_scale", &[k.force_scale])?;
+                positive("contact.kn", &[k.kn])?;
+                non_negative("contact.kd", &[k.kd])?;
+                positive("contact.kt", &[k.kt])?;
+                non_negative("contact.mu", &[k.mu])?;
+            }
+        }
+
+        let s = &self.solver;
+        positive("solver.dt", &[s.dt])?;
+        if s.cg_iters == 0 {
+            return Err(Error::config("solver.cg_iters", "must be at least 1"));
+        }
+        non_negative("solver.cg_tol", &[s.cg_tol])?;
+        finite("solver.gravity", &s.gravity)?;
+        positive("solver.max_speed", &[s.max_speed])?;
+        if let (Some(path), false) = (&self.contact.weights, self.model.is_network()) {
+            return Err(Error::config(
+                "contact.weights",
+                format!(
+                    "model `{}` uses no network, so {} would be ignored; use friction-net or naive-net",
+                    self.model.name(),
+                    path.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn finite(field: &str, values: &[f32]) -> Result<()> {
+    match values.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(Error::config(field, format!("must be finite, got {v}"))),
+        None => Ok(()),
+    }
+}
+
+fn positive(field: &str, values: &[f32]) -> Result<()> {
+    finite(field, values)?;
+    match values.iter().find(|&&v| v <= 0.0) {
+        Some(v) => Err(Error::config(field, format!("must be > 0, got {v}"))),
+        None => Ok(()),
+    }
+}
+
+fn non_negative(field: &str, values: &[f32]) -> Result<()> {
+    finite(field, values)?;
+    match values.iter().find(|&&v| v < 0.0) {
+        Some(v) => Err(Error::config(field, format!("must be ≥ 0, got {v}"))),
+        None => Ok(()),
+    }
+}
+
+fn direction(field: &str, v: &[f32; 3]) -> Result<()> {
+    finite(field, v)?;
+    if glam::Vec3::from_array(*v).length() < 1e-6 {
+        return Err(Error::config(field, "must be a non-zero vector"));
+    }
+    Ok(())
+}
+
+fn rotation(field: &str, r: &Rotation) -> Result<()> {
+    direction(&format!("{field}.axis"), &r.axis)?;
+    finite(&format!("{field}.degrees"), &[r.degrees])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(feature = "toml")]
+    #[test]
+    fn defaults_are_valid_and_round_trip_through_toml() {
+        let c = Config::default();
+        c.validate().unwrap();
+        let text = toml::to_string(&c).unwrap();
+        assert_eq!(Config::from_toml(&text, Path::new("x.toml")).unwrap(), c);
+    }
+
+    #[cfg(feature = "toml")]
+    #[test]
+    fn partial_toml_keeps_defaults() {
+        let c = Config::from_toml("[cloth]\nmass = 0.5\n", Path::new("x.toml")).unwrap();
+        assert_eq!(c.cloth.mass, 0.5);
+        assert_eq!(c.cloth.grid, ClothConfig::default().grid);
+    }
+
+    #[cfg(feature = "toml")]
+    #[test]
+    fn errors_name_the_field() {
+        let e = Config::from_toml("[cloth]\nmas = 0.5\n", Path::new("x.toml")).unwrap_err();
+        assert!(
+            e.to_string().contains("mas") && e.to_string().contains("line 2"),
+            "{e}"
+        );
+        let mut c = Config::default();
+        c.solver.dt = f32::NAN;
+        assert!(c.validate().unwrap_err().to_string().contains("solver.dt"));
+        let mut c = Config::default();
+        c.rigid.motion.period = 0.0;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("rigid.motion.period")
+        );
+    }
+}

@@ -1,0 +1,63 @@
+//! Constants the host and the kernels share, written here once: every
+//! stage is compiled with [`prelude`] in front of it, and no WGSL file
+//! declares one of these itself (a test checks both directions).
+
+use crate::health;
+
+/// Invocations per workgroup of the per-element kernels.
+pub const WORKGROUP: u32 = 256;
+/// Face–vertex contacts one cloth triangle holds.
+pub const MAX_TRIANGLE_CONTACTS: u32 = 8;
+/// "No triangle here" in a triangle index.
+pub const NO_TRIANGLE: u32 = u32::MAX;
+/// Cloth grid cells per tile edge, and tiles per super-tile edge (the
+/// face–vertex broad phase).
+pub const TILE: u32 = 8;
+/// The widest layer and the most layers the `per_contact` network kernel holds.
+pub const MLP_MAX_WIDTH: u32 = 256;
+pub const MLP_MAX_LAYERS: u32 = 16;
+
+/// `Params::model`: which contact model the kernels evaluate.
+pub mod model {
+    pub const NAIVE: u32 = 0;
+    pub const FRICTION: u32 = 1;
+    pub const FRICTION_NET: u32 = 2;
+    pub const NAIVE_NET: u32 = 3;
+    /// friction-net with a contact-frame network (`NetKind::FrictionContact`).
+    pub const FRICTION_CONTACT_NET: u32 = 4;
+}
+
+/// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
+/// is the kernels' `else` branch, so they never name it).
+pub const SHARED: [(&str, u32); 13] = [
+    ("WORKGROUP", WORKGROUP),
+    ("MAX_TRIANGLE_CONTACTS", MAX_TRIANGLE_CONTACTS),
+    ("NO_TRIANGLE", NO_TRIANGLE),
+    ("TILE", TILE),
+    ("MLP_MAX_WIDTH", MLP_MAX_WIDTH),
+    ("MLP_MAX_LAYERS", MLP_MAX_LAYERS),
+    ("MODEL_NAIVE", model::NAIVE),
+    ("MODEL_FRICTION", model::FRICTION),
+    ("MODEL_FRICTION_NET", model::FRICTION_NET),
+    ("MODEL_FRICTION_CONTACT_NET", model::FRICTION_CONTACT_NET),
+    ("NOT_FINITE", health::NOT_FINITE),
+    ("TOO_FAST", health::TOO_FAST),
+    // Set per device (`Kernels::new`); this is the declared default.
+    ("MLP_THREADS", 16),
+];
+
+/// The WGSL declarations of [`SHARED`], with the network tile's threads
+/// per edge chosen for the device.
+pub fn prelude(mlp_threads: u32) -> String {
+    SHARED
+        .iter()
+        .map(|&(name, value)| {
+            let value = if name == "MLP_THREADS" {
+                mlp_threads
+            } else {
+                value
+            };
+            format!("const {name}: u32 = {value}u;\n")
+        })
+        .collect()
+}

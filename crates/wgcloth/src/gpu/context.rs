@@ -1,0 +1,190 @@
+//! Choosing an adapter and opening a device for headless use. Embedding
+//! apps skip this and hand their own device and queue to [`super::GpuSim`].
+
+use crate::error::{Error, Result};
+
+use bytemuck::Pod;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// A device and queue with what the simulator needs to know of them.
+#[derive(Clone, Debug)]
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: wgpu::AdapterInfo,
+    /// The first validation error or device loss, recorded instead of
+    /// panicking so a run can stop with one clear error.
+    fault: Arc<Mutex<Option<String>>>,
+}
+
+/// "name (backend, device type)" for logs and reports.
+pub fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+}
+
+impl GpuContext {
+    /// A device on [`GpuContext::pick_adapter`]'s adapter.
+    pub fn headless() -> Result<GpuContext> {
+        Self::from_adapter(&Self::pick_adapter()?)
+    }
+
+    /// Picks an adapter: `WGPU_BACKEND` limits the backends,
+    /// `WGPU_ADAPTER_NAME` (a case-insensitive substring) picks by name,
+    /// otherwise the high-performance default. Errors say which adapters
+    /// exist when none fits.
+    pub fn pick_adapter() -> Result<wgpu::Adapter> {
+        // GL has no usable compute path here and its probing only adds
+        // noise; WGPU_BACKEND can still ask for it.
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends,
+            ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+        });
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(wanted) => {
+                let adapters = pollster::block_on(instance.enumerate_adapters(backends));
+                let names: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
+                adapters
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()))
+                    .ok_or_else(|| {
+                        Error::Gpu(format!(
+                            "WGPU_ADAPTER_NAME={wanted:?} matches no adapter (found: {})",
+                            if names.is_empty() { "none".into() } else { names.join("; ") }
+                        ))
+                    })?
+            }
+            Err(_) => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            }))
+            .map_err(|e| {
+                Error::Gpu(format!(
+                    "no GPU adapter ({e}); on Debian `apt-get install mesa-vulkan-drivers` provides lavapipe"
+                ))
+            })?,
+        };
+        Ok(adapter)
+    }
+
+    /// Opens a device on `adapter` with its full limits and, where present,
+    /// timestamp queries.
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<GpuContext> {
+        let wanted =
+            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("wgcloth"),
+            required_features: adapter.features() & wanted,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| {
+            Error::Gpu(format!(
+                "cannot open a device on {}: {e}",
+                describe(&adapter.get_info())
+            ))
+        })?;
+        let fault: Arc<Mutex<Option<String>>> = Arc::default();
+        let record = |fault: &Arc<Mutex<Option<String>>>, what: String| {
+            let mut slot = fault.lock().unwrap_or_else(|e| e.into_inner());
+            slot.get_or_insert(one_line(&what));
+        };
+        let f = fault.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| record(&f, e.to_string())));
+        let f = fault.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            record(
+                &f,
+                format!("device lost ({reason:?}) {msg}")
+                    .trim_end()
+                    .to_string(),
+            )
+        });
+        Ok(GpuContext {
+            device,
+            queue,
+            adapter: adapter.get_info(),
+            fault,
+        })
+    }
+
+    /// Waits for submitted work and reports any fault the device recorded.
+    pub fn finish(&self) -> Result<()> {
+        wait(&self.device)?;
+        match self
+            .fault
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
+            Some(what) => Err(Error::Gpu(what.clone())),
+            None => Ok(()),
+        }
+    }
+}
+
+/// wgpu's multi-line error ("Validation Error", "Caused by:", the cause
+/// indented) as one line: "Validation Error: cause: inner cause".
+pub fn one_line(error: &str) -> String {
+    error
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && *l != "Caused by:")
+        .collect::<Vec<_>>()
+        .join(": ")
+}
+
+/// The longest the host waits for submitted work: far beyond any step
+/// (a 256² step takes about a second on lavapipe), so reaching it means a
+/// hung or lost device, which then ends the run instead of hanging it.
+pub const WATCHDOG: Duration = Duration::from_secs(120);
+
+/// Waits for all submitted work, at most [`WATCHDOG`].
+pub fn wait(device: &wgpu::Device) -> Result<()> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: None,
+            timeout: Some(WATCHDOG),
+        })
+        .map(|_| ())
+        .map_err(|e| match e {
+            wgpu::PollError::Timeout => Error::Gpu(format!(
+                "the device did not finish its work within {} s (hung or lost)",
+                WATCHDOG.as_secs()
+            )),
+            e => Error::Gpu(format!("waiting for the device failed: {e}")),
+        })
+}
+
+/// Copies `buffer` back to the host (blocks until the GPU is done), as
+/// whole elements of `T` (small buffers are padded to 64 bytes).
+pub fn read_buffer<T: Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+) -> Result<Vec<T>> {
+    let size = buffer.size();
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    wait(device)?;
+    rx.recv()
+        .map_err(|_| Error::Gpu("readback never completed".into()))?
+        .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
+    let view = staging
+        .get_mapped_range(..)
+        .map_err(|e| Error::Gpu(format!("readback failed: {e}")))?;
+    let whole = view.len() / size_of::<T>() * size_of::<T>();
+    Ok(bytemuck::pod_collect_to_vec(&view[..whole]))
+}

@@ -1,0 +1,602 @@
+//! The GPU stages against their CPU twins on lavapipe (or any adapter).
+//! Without an adapter these tests fail under CI=true and skip elsewhere.
+
+mod common;
+
+use std::sync::Arc;
+
+use glam::{Mat3, Vec3};
+use wgcloth::config::{ModelKind, SceneKind};
+use wgcloth::cpu::{CpuSim, springs};
+use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::{Config, Scene};
+
+fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
+    let ctx = common::gpu_context()?;
+    let kernels = Arc::new(Kernels::new(&ctx.device).expect("kernels build"));
+    Some((ctx, kernels))
+}
+
+fn max_dev(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f32::max)
+}
+
+fn max_norm(a: &[Vec3]) -> f32 {
+    a.iter().map(|p| p.length()).fold(0.0, f32::max)
+}
+
+fn mat_dev(a: &[Mat3], b: &[Mat3]) -> (f32, f32) {
+    let fro = |m: Mat3| m.to_cols_array().iter().map(|e| e * e).sum::<f32>().sqrt();
+    let dev = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| fro(*p - *q))
+        .fold(0.0, f32::max);
+    (dev, a.iter().map(|m| fro(*m)).fold(0.0, f32::max))
+}
+
+fn hang(grid: u32) -> Scene {
+    let mut c = Config {
+        scene: SceneKind::Hang,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    Scene::new(&c).unwrap()
+}
+
+/// A CPU simulator advanced `steps` steps, so springs are stretched and moving.
+fn cpu_after(scene: &Scene, steps: usize) -> CpuSim {
+    let mut cpu = CpuSim::new(scene.clone());
+    for _ in 0..steps {
+        cpu.step();
+    }
+    cpu
+}
+
+#[test]
+fn springs_and_assembly_match_the_cpu_on_the_same_state() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = hang(12);
+    let mut cpu = cpu_after(&scene, 7);
+    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+    gpu.step();
+    cpu.step();
+
+    let (gf, gk) = gpu.read_springs().unwrap();
+    let mut cf = vec![Vec3::ZERO; scene.cloth.springs.len()];
+    let mut ck = vec![Mat3::ZERO; scene.cloth.springs.len()];
+    // The CPU's state before its step: recompute from the uploaded one.
+    let before = cpu_after(&scene, 7);
+    springs::evaluate(&scene.cloth, &before.state.x, &mut cf, &mut ck);
+    let gk: Vec<Mat3> = gk.iter().map(|m| m.to_mat3()).collect();
+    assert!(
+        max_dev(&gf, &cf) <= 1e-4 * max_norm(&cf),
+        "spring forces {} vs {}",
+        max_dev(&gf, &cf),
+        max_norm(&cf)
+    );
+    let (dev, norm) = mat_dev(&gk, &ck);
+    assert!(dev <= 1e-5 * norm, "spring blocks {dev} vs {norm}");
+
+    let (gd, go, gb) = gpu.read_system().unwrap();
+    let (a, b) = cpu.system();
+    let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
+    assert!(dev <= 1e-5 * norm, "A diagonal {dev} vs {norm}");
+    let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
+    assert!(dev <= 1e-5 * norm, "A off-diagonal {dev} vs {norm}");
+    assert!(
+        max_dev(&gb, b) <= 1e-5 * max_norm(b),
+        "b {} vs {}",
+        max_dev(&gb, b),
+        max_norm(b)
+    );
+}
+
+#[test]
+fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = hang(16);
+    let cpu = cpu_after(&scene, 60);
+    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    for _ in 0..60 {
+        gpu.step();
+    }
+    let x = gpu.read_positions().unwrap();
+    let dev = max_dev(&x, &cpu.state.x);
+    let state = gpu.read_state().unwrap();
+    eprintln!("60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}");
+    assert_eq!(state.steps, 60);
+    assert_eq!(state.cg_iterations_total, 60 * 25);
+    assert!((state.time - 0.6).abs() < 1e-5);
+    assert!(dev < 1e-4, "GPU and CPU drifted {dev} m apart");
+    for (i, p) in scene.cloth.pinned.iter().enumerate() {
+        if *p {
+            assert_eq!(x[i], scene.cloth.rest_positions[i]);
+        }
+    }
+}
+
+fn sphere(grid: u32, model: ModelKind) -> Scene {
+    let mut c = Config {
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    Scene::new(&c).unwrap()
+}
+
+/// Steps at which the default sphere is pushing into the cloth.
+const IN_CONTACT: usize = 70;
+
+#[test]
+fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    // friction-net twice: its default network works in the contact frame,
+    // the thesis-size one in the world frame.
+    let models = [
+        (ModelKind::Friction, None),
+        (ModelKind::Naive, None),
+        (ModelKind::FrictionNet, None),
+        (
+            ModelKind::FrictionNet,
+            Some("weights/friction_mlp.safetensors"),
+        ),
+        (ModelKind::NaiveNet, None),
+    ];
+    for (model, weights) in models {
+        let mut scene = sphere(20, model);
+        if let Some(path) = weights {
+            scene.config.contact.weights = Some(path.into());
+            scene = Scene::new(&scene.config).unwrap();
+        }
+        let mut cpu = cpu_after(&scene, IN_CONTACT);
+        let gpu = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+        let speed = max_norm(&cpu.state.v);
+        gpu.step();
+        cpu.step();
+
+        let (vf, fv) = gpu.read_contacts().unwrap();
+        let gpu_vf: Vec<_> = vf.iter().filter(|(c, _)| c.valid != 0).collect();
+        let gpu_fv: Vec<_> = fv.iter().filter(|(c, _)| c.valid != 0).collect();
+        let cpu_vf: Vec<_> = cpu
+            .contacts()
+            .iter()
+            .filter(|c| c.cloth_triangle.is_none())
+            .collect();
+        let cpu_fv: Vec<_> = cpu
+            .contacts()
+            .iter()
+            .filter(|c| c.cloth_triangle.is_some())
+            .collect();
+        assert!(
+            cpu_vf.len() > 10 && cpu_fv.len() > 10,
+            "{model:?}: the state must be in contact"
+        );
+        assert_eq!(
+            gpu_vf.len(),
+            cpu_vf.len(),
+            "{model:?}: vertex–face contact count"
+        );
+        assert_eq!(
+            gpu_fv.len(),
+            cpu_fv.len(),
+            "{model:?}: face–vertex contact count"
+        );
+        let responses = cpu.responses();
+        let mut kinks = 0;
+        let mut kink_dev = 0.0f32;
+        let mut force_dev = 0.0f32;
+        let mut force_max = 0.0f32;
+        for (k, c) in cpu.contacts().iter().enumerate() {
+            let (g, r) = match c.cloth_triangle {
+                None => vf[c.vertices[0] as usize],
+                Some(t) => {
+                    let g = fv[c.rigid_feature as usize];
+                    assert_eq!(
+                        g.0.triangle, t,
+                        "{model:?}: rigid vertex {} hit another triangle",
+                        c.rigid_feature
+                    );
+                    g
+                }
+            };
+            assert!(
+                (g.distance - c.distance).abs() < 1e-5,
+                "{model:?}: distance {} vs {}",
+                g.distance,
+                c.distance
+            );
+            force_dev = force_dev.max((Vec3::from(r.force) - responses[k].force).length());
+            force_max = force_max.max(responses[k].force.length());
+            let (dev, norm) = mat_dev(&[r.damping.to_mat3()], &[responses[k].damping]);
+            if dev > 1e-3 * norm + 1e-4 {
+                // A network is piecewise linear: where a unit's input is
+                // within rounding of 0 the two sides may take different
+                // pieces and the Jacobian jumps by that unit's share.
+                kinks += 1;
+                kink_dev += dev;
+                assert!(
+                    model.is_network() && dev <= 2e-2 * norm,
+                    "{model:?}: contact damping {dev} vs {norm}"
+                );
+            }
+        }
+        assert!(
+            force_dev <= 1e-4 * force_max,
+            "{model:?}: contact forces {force_dev} vs {force_max}"
+        );
+        assert!(
+            kinks * 50 <= cpu.contacts().len(),
+            "{model:?}: {kinks} of {} contacts differ",
+            cpu.contacts().len()
+        );
+
+        let (gd, go, gb) = gpu.read_system().unwrap();
+        let (a, b) = cpu.system();
+        // A kink's damping enters blocks scaled by h β_k β_l ≤ 1.
+        let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
+        assert!(
+            dev <= 1e-4 * norm + kink_dev,
+            "{model:?}: A diagonal {dev} vs {norm}"
+        );
+        let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
+        assert!(
+            dev <= 1e-4 * norm + kink_dev,
+            "{model:?}: A off-diagonal {dev} vs {norm}"
+        );
+        // ... and b as h D v_rel, with |v_rel| ≤ |v| + the sphere's ≤ 1 m/s.
+        let h = scene.config.solver.dt;
+        assert!(
+            max_dev(&gb, b) <= 1e-4 * max_norm(b) + kink_dev * h * (speed + 1.0),
+            "{model:?}: b {} vs {}",
+            max_dev(&gb, b),
+            max_norm(b)
+        );
+    }
+}
+
+#[test]
+fn thesis_scene_runs_like_the_cpu_with_both_models() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    for model in [ModelKind::Friction, ModelKind::Naive] {
+        let scene = sphere(16, model);
+        let steps = 100;
+        let mut cpu = CpuSim::new(scene.clone());
+        let mut cpu_contacts = 0;
+        let mut cpu_deepest = 0.0f32;
+        for _ in 0..steps {
+            let s = cpu.step();
+            cpu_contacts += s.contacts;
+            cpu_deepest = cpu_deepest.max(s.max_penetration);
+        }
+        let gpu = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        for _ in 0..steps {
+            gpu.step();
+        }
+        let x = gpu.read_positions().unwrap();
+        let state = gpu.read_state().unwrap();
+        let dev = max_dev(&x, &cpu.state.x);
+        let deepest = f32::from_bits(state.max_penetration_bits);
+        eprintln!(
+            "{model:?}, {steps} steps: position deviation {dev:.3e} m; contacts {} vs {cpu_contacts}; deepest {deepest:.4} vs {cpu_deepest:.4}",
+            state.contacts_total
+        );
+        assert!(cpu_contacts > 500, "the sphere must hit the cloth");
+        assert!(dev < 1e-3, "{model:?}: GPU and CPU drifted {dev} m apart");
+        let ratio = state.contacts_total as f64 / cpu_contacts as f64;
+        assert!(
+            (ratio - 1.0).abs() < 0.02,
+            "{model:?}: contact totals {} vs {cpu_contacts}",
+            state.contacts_total
+        );
+        assert!((deepest - cpu_deepest).abs() < 1e-3);
+    }
+}
+
+#[test]
+fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = sphere(16, ModelKind::Friction);
+    let mut cpu = cpu_after(&scene, IN_CONTACT);
+    let center = {
+        let body = scene.rigid.as_ref().unwrap();
+        body.translation((cpu.state.time + scene.config.solver.dt as f64) as f32)
+    };
+    // Ten vertices 5 cm inside the sphere (radius 0.2): deeper than the
+    // contact band, so no force pushes them out during the step.
+    for (k, i) in (0..scene.cloth.vertex_count())
+        .step_by(23)
+        .take(10)
+        .enumerate()
+    {
+        let dir = (cpu.state.x[i] - center).normalize_or(Vec3::Z);
+        cpu.state.x[i] = center + dir * (0.15 - 0.002 * k as f32);
+        cpu.state.v[i] = Vec3::ZERO;
+    }
+    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
+    gpu.step();
+    let stats = cpu.step();
+    let deepest = f32::from_bits(gpu.read_state().unwrap().max_penetration_bits);
+    eprintln!(
+        "deepest: GPU {deepest:.5} m, CPU {:.5} m",
+        stats.max_penetration
+    );
+    // Springs pull them partly out within the step; still beyond the band.
+    let band = scene.config.contact.max_depth;
+    assert!(
+        stats.max_penetration > band,
+        "the test must put vertices deeper than the contact band"
+    );
+    assert!((deepest - stats.max_penetration).abs() < 1e-4);
+}
+
+#[test]
+fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = sphere(12, ModelKind::Friction);
+    let separate = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+    for _ in 0..50 {
+        separate.step();
+    }
+    // An embedding app: its own encoder, many steps, one submission; the
+    // clock and the rigid body's motion live on the GPU.
+    let embedded = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
+    ctx.queue.submit([encoder.finish()]);
+    ctx.finish().unwrap();
+    assert_eq!(dispatches, 50 * (15 + 3 * 25), "dispatches per step");
+    assert_eq!(
+        embedded.read_positions().unwrap(),
+        separate.read_positions().unwrap()
+    );
+    assert_eq!(embedded.read_state().unwrap().steps, 50);
+    assert!(
+        embedded
+            .positions()
+            .usage()
+            .contains(wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE)
+    );
+    assert!(
+        embedded
+            .indices()
+            .usage()
+            .contains(wgpu::BufferUsages::INDEX)
+    );
+    assert_eq!(
+        embedded.index_count() as usize,
+        3 * scene.cloth.triangles.len()
+    );
+}
+
+#[test]
+fn a_lost_device_is_an_error_not_a_panic_or_a_hang() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &hang(8)).unwrap();
+    sim.step();
+    ctx.finish().unwrap();
+    ctx.device.destroy();
+    sim.step();
+    let err = ctx
+        .finish()
+        .expect_err("a destroyed device must report an error");
+    eprintln!("{err}");
+    assert!(err.to_string().starts_with("GPU:"), "{err}");
+}
+
+#[test]
+fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let mut c = Config {
+        scene: SceneKind::Hang,
+        ..Default::default()
+    };
+    c.cloth.grid = [16, 16];
+    (c.solver.cg_iters, c.solver.cg_tol) = (300, 1e-4);
+    let scene = Scene::new(&c).unwrap();
+    let mut cpu = CpuSim::new(scene.clone());
+    let cpu_iters: u32 = (0..20).map(|_| cpu.step().pcg.iterations).sum();
+    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    for _ in 0..20 {
+        gpu.step();
+    }
+    let gpu_iters = gpu.read_state().unwrap().cg_iterations_total;
+    eprintln!("PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} (cap 6000)");
+    assert!(
+        cpu_iters < 20 * 150,
+        "the CPU solve should converge well before the cap"
+    );
+    // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
+    assert!((gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0);
+}
+
+/// A random network with the given layer sizes (deterministic).
+fn random_mlp(sizes: &[usize], seed: u64) -> wgcloth::nn::Mlp {
+    let mut s = seed;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    wgcloth::nn::Mlp {
+        layers: sizes
+            .windows(2)
+            .map(|w| wgcloth::nn::Layer {
+                inputs: w[0],
+                outputs: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| next() * 1.5 / (w[0] as f32).sqrt())
+                    .collect(),
+                bias: (0..w[1]).map(|_| 0.1 * next()).collect(),
+            })
+            .collect(),
+        negative_slope: 0.01,
+    }
+}
+
+/// Runs `net` on the GPU over `inputs` (one row per contact) and returns
+/// the outputs, [contact × (1 + |wrt|) × outputs].
+fn gpu_batch(
+    ctx: &GpuContext,
+    kernels: &Arc<Kernels>,
+    net: &wgcloth::nn::Mlp,
+    wrt: std::ops::Range<usize>,
+    inputs: &[Vec<f32>],
+    shape: wgcloth::gpu::mlp::BatchShape,
+) -> wgcloth::Result<Vec<f32>> {
+    let batch =
+        wgcloth::gpu::mlp::NetworkBatch::new(kernels.clone(), &ctx.device, net, wrt, shape)?;
+    let flat: Vec<f32> = inputs.iter().flatten().copied().collect();
+    batch.upload(&ctx.queue, &flat)?;
+    batch.run(&ctx.device, &ctx.queue);
+    batch.read_outputs(&ctx.device, &ctx.queue)
+}
+
+#[test]
+fn network_kernels_match_the_cpu_network_and_its_jacobian() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    // Layer sizes that do and do not divide the tiles; batches smaller and
+    // larger than a tile, in one chunk and in several.
+    // Three outputs (the world-frame networks) and two (the contact frame's).
+    let cases: [(&[usize], std::ops::Range<usize>, usize, usize); 9] = [
+        (&[10, 256, 256, 128, 128, 3], 0..6, 300, usize::MAX),
+        (&[10, 128, 128, 64, 3], 0..6, 300, usize::MAX),
+        (&[10, 64, 64, 48, 3], 0..6, 300, usize::MAX),
+        (&[7, 48, 48, 2], 0..3, 300, usize::MAX),
+        (&[7, 33, 2], 0..3, 70, 20),
+        (&[7, 16, 16, 16, 16, 16, 3], 4..7, 130, usize::MAX),
+        (&[10, 37, 70, 5, 3], 0..6, 1, usize::MAX),
+        (&[10, 65, 3], 0..6, 200, 47),
+        (&[3, 1, 3], 0..3, 64, 10),
+    ];
+    for (k, (sizes, wrt, n, max_chunk)) in cases.into_iter().enumerate() {
+        let net = random_mlp(sizes, 7 + k as u64);
+        let mut s = 99 + k as u64;
+        let inputs: Vec<Vec<f32>> = (0..n)
+            .map(|_| {
+                (0..sizes[0])
+                    .map(|_| {
+                        s = s
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+                    })
+                    .collect()
+            })
+            .collect();
+        use wgcloth::gpu::mlp::{BatchShape, NetworkKernel};
+        for kernel in [NetworkKernel::Tiled, NetworkKernel::PerContact] {
+            let shape = BatchShape {
+                capacity: n,
+                max_chunk,
+                kernel,
+            };
+            let what = format!("{kernel:?} {sizes:?}");
+            match gpu_batch(&ctx, &kernels, &net, wrt.clone(), &inputs, shape) {
+                Ok(got) => check_batch(&net, &wrt, &inputs, &got, &what),
+                // Too much work per invocation for lavapipe's loop limit.
+                Err(e) => assert!(
+                    kernel == NetworkKernel::PerContact
+                        && kernels.software()
+                        && e.to_string().contains("loop iterations"),
+                    "{what}: {e}"
+                ),
+            }
+        }
+    }
+}
+
+/// GPU batch outputs against the CPU network and its Jacobian.
+fn check_batch(
+    net: &wgcloth::nn::Mlp,
+    wrt: &std::ops::Range<usize>,
+    inputs: &[Vec<f32>],
+    got: &[f32],
+    what: &str,
+) {
+    let (rows, outputs) = (1 + wrt.len(), net.outputs());
+    assert_eq!(
+        got.len(),
+        inputs.len() * rows * outputs,
+        "{what}: output size"
+    );
+    let (mut worst, mut scale) = (0.0f32, 0.0f32);
+    for (c, x) in inputs.iter().enumerate() {
+        let (y, j) = net.forward_jacobian(x, wrt.clone());
+        for o in 0..outputs {
+            worst = worst.max((got[outputs * c * rows + o] - y[o]).abs());
+            scale = scale.max(y[o].abs());
+            for t in 0..wrt.len() {
+                let gpu_d = got[outputs * (c * rows + 1 + t) + o];
+                worst = worst.max((gpu_d - j[o * wrt.len() + t]).abs());
+                scale = scale.max(j[o * wrt.len() + t].abs());
+            }
+        }
+    }
+    eprintln!(
+        "{what}, {} contacts: largest difference {worst:.2e} of {scale:.2e}",
+        inputs.len()
+    );
+    assert!(worst <= 1e-4 * scale, "{what}: {worst} vs {scale}");
+}
+
+#[test]
+fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
+    let Some((ctx, _)) = gpu() else { return };
+    drop(ctx);
+    // A device that binds at most 1 MiB per storage buffer.
+    let adapter = GpuContext::pick_adapter().unwrap();
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        ..adapter.limits()
+    };
+    let (device, _queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .unwrap();
+    let kernels = Arc::new(Kernels::new(&device).unwrap());
+    let buffer = |size| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        })
+    };
+    let (inputs, count, outputs) = (buffer(64), buffer(64), buffer(1 << 12));
+    let io = || wgcloth::gpu::mlp::BatchBuffers {
+        inputs: &inputs,
+        count: &count,
+        outputs: &outputs,
+    };
+    // 10 × 30000 weights: 1.2 MB.
+    let wide = random_mlp(&[10, 30000, 3], 1);
+    let shape = wgcloth::gpu::mlp::BatchShape {
+        kernel: wgcloth::gpu::mlp::NetworkKernel::Tiled,
+        ..wgcloth::gpu::mlp::BatchShape::new(4)
+    };
+    let err = wgcloth::gpu::GpuMlp::new(kernels.clone(), &device, &wide, 0..6, shape, io())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("weights") && err.contains("bytes"), "{err}");
+    // Weights that fit (0.5 MB), activations of one contact that do not:
+    // 7 rows × 40000 floats = 1.1 MB.
+    let one_wide = random_mlp(&[6, 1, 40000, 1, 3], 2);
+    let err = wgcloth::gpu::GpuMlp::new(kernels, &device, &one_wide, 0..6, shape, io())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("activations") && err.contains("bytes"),
+        "{err}"
+    );
+}

@@ -1,0 +1,117 @@
+// Stage "assemble": the linearised backward Euler system (thesis eqs. 1–3
+// with the velocity Jacobian D), gathered per vertex and per spring:
+//   A_ii = (1 + hα) m I + (h² + hβ) Σ K_s + Σ β_k² C,   C = −(h D_c + h² K_c)
+//   A_ij = −(h² + hβ) K_s + Σ β_k β_l C                 (per spring)
+//   b_i  = m v_i + h (m g + Σ ±f_s) + Σ β_k h (f − D_c (v_rel − u))
+// CPU twin: src/cpu/assemble.rs (which scatters the contacts instead).
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> v: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> spring_terms: array<SpringTerm>;
+// Contact slots and their responses: one per cloth vertex (vertex–face),
+// then one per rigid vertex (face–vertex).
+@group(0) @binding(3) var<storage, read> contacts: array<Contact>;
+@group(0) @binding(4) var<storage, read> responses: array<Response>;
+// Per cloth triangle its face–vertex contact count, then
+// MAX_TRIANGLE_CONTACTS slots per triangle.
+@group(0) @binding(5) var<storage, read> triangle_contacts: array<u32>;
+// A: its diagonal blocks (one per vertex), then one block per spring.
+@group(0) @binding(6) var<storage, read_write> matrix: array<Sym3>;
+@group(0) @binding(7) var<storage, read_write> b: array<vec4<f32>>;
+
+fn stiffness_scale() -> f32 {
+    return params.dt * params.dt + params.dt * params.damping_stiffness;
+}
+
+// The face–vertex contacts on triangle t, in rigid-vertex order so the
+// sums do not depend on the order the detection appended them.
+fn sorted_triangle_contacts(t: u32, out: ptr<function, array<u32, MAX_TRIANGLE_CONTACTS>>) -> u32 {
+    let count = min(triangle_contacts[t], MAX_TRIANGLE_CONTACTS);
+    for (var j = 0u; j < count; j++) {
+        var k = triangle_contacts[params.n_triangles + t * MAX_TRIANGLE_CONTACTS + j];
+        var m = j;
+        while m > 0u && (*out)[m - 1u] > k {
+            (*out)[m] = (*out)[m - 1u];
+            m--;
+        }
+        (*out)[m] = k;
+    }
+    return count;
+}
+
+// Σ β_k v_k (a vertex–face contact has β = (1, 0, 0)).
+fn cloth_velocity(c: Contact) -> vec3<f32> {
+    return c.beta.x * v[c.vertices.x].xyz + c.beta.y * v[c.vertices.y].xyz
+        + c.beta.z * v[c.vertices.z].xyz;
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.n_vertices {
+        return;
+    }
+    let h = params.dt;
+    let m = params.vertex_mass;
+    var k_sum = sym_zero();
+    var f = m * params.gravity;
+    for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
+        let s = adjacent_spring(k);
+        k_sum = sym_add(k_sum, spring_terms[s].block);
+        // spring_terms[s].force acts on the spring's first vertex.
+        let sign = select(-1.0, 1.0, spring_ends(s).x == i);
+        f += sign * spring_terms[s].force.xyz;
+    }
+    var diag = sym_add(sym_diagonal((1.0 + h * params.damping_mass) * m), sym_scale(k_sum, stiffness_scale()));
+    var rhs = m * v[i].xyz + h * f;
+    if params.has_rigid != 0u {
+        let c = contacts[i];
+        if c.valid != 0u {
+            let r = responses[i];
+            diag = sym_add(diag, contact_block(r, c.normal));
+            rhs += h * (r.force - sym_mul(r.damping, v[i].xyz));
+        }
+        for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
+            let t = vertex_triangle(q) / 3u;
+            let corner = vertex_triangle(q) % 3u;
+            var list: array<u32, MAX_TRIANGLE_CONTACTS>;
+            let count = sorted_triangle_contacts(t, &list);
+            for (var j = 0u; j < count; j++) {
+                let c = contacts[params.n_vertices + list[j]];
+                let r = responses[params.n_vertices + list[j]];
+                let beta = c.beta[corner];
+                diag = sym_add(diag, sym_scale(contact_block(r, c.normal), beta * beta));
+                rhs += beta * h * (r.force - sym_mul(r.damping, cloth_velocity(c)));
+            }
+        }
+    }
+    matrix[i] = diag;
+    b[i] = vec4<f32>(rhs, 0.0);
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if s >= params.n_springs {
+        return;
+    }
+    var off = sym_scale(spring_terms[s].block, -stiffness_scale());
+    if params.has_rigid != 0u {
+        let along = spring_triangles(s);
+        for (var side = 0u; side < 2u; side++) {
+            let t = select(along.z, along.x, side == 0u);
+            let edge = select(along.w, along.y, side == 0u);
+            if t == NO_TRIANGLE {
+                continue;
+            }
+            var list: array<u32, MAX_TRIANGLE_CONTACTS>;
+            let count = sorted_triangle_contacts(t, &list);
+            for (var j = 0u; j < count; j++) {
+                let c = contacts[params.n_vertices + list[j]];
+                let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
+                off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + list[j]], c.normal), weight));
+            }
+        }
+    }
+    matrix[params.n_vertices + s] = off;
+}

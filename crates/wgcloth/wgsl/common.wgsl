@@ -1,0 +1,212 @@
+// Shared by every stage: the run parameters, symmetric 3×3 blocks, and the
+// workgroup reduction. Prepended to each stage file when it is compiled.
+
+// Constant over a run. Mirrors `gpu::layout::Params`.
+struct Params {
+    n_vertices: u32, n_springs: u32, n_triangles: u32, n_rigid_vertices: u32,
+    n_rigid_triangles: u32, model: u32, has_rigid: u32, cg_max_iters: u32,
+    dt: f32, vertex_mass: f32, stiffness: f32, cg_tol: f32,
+    damping_mass: f32, damping_stiffness: f32, thickness: f32, max_depth: f32,
+    gravity: vec3<f32>, naive_stiffness: f32,
+    force_scale: f32, kn: f32, kd: f32, kt: f32,
+    mu: f32, motion_kind: u32, motion_period: f32, motion_phase: f32,
+    rigid_position: vec3<f32>, motion_amplitude: f32,
+    rigid_rotation: vec4<f32>,
+    motion_vector: vec3<f32>, cells_x: u32,
+    cells_y: u32, tiles_x: u32, tiles_y: u32, supertiles_x: u32,
+    supertiles_y: u32, net_width: u32, net_rows: u32, net_outputs: u32,
+    max_speed: f32, springs_at: u32, adjacency_at: u32, pinned_at: u32,
+    vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
+}
+
+// Time and run statistics, on the GPU so a step needs no host writes.
+// Mirrors `gpu::layout::StepState`.
+struct StepState {
+    time: f32,
+    steps: u32,
+    cg_iterations_total: u32,
+    cg_breakdowns: u32,
+    cg_residual_max: f32,
+    contacts_total: u32,
+    contacts_last: atomic<u32>,
+    // Bit pattern of a non-negative f32: integer order is float order.
+    max_penetration_bits: atomic<u32>,
+    last_iterations: u32,
+    last_residual: f32,
+    // NOT_FINITE | TOO_FAST of wgsl/integrate.wgsl, sticky.
+    health: atomic<u32>,
+    pad: u32,
+}
+
+// A symmetric 3×3 block: a = (xx, yy, zz, xy), b = (xz, yz, 0, 0).
+// Every block of the system matrix is symmetric, so 8 floats instead of 9
+// padded to 12 keep the SpMV's memory traffic down.
+struct Sym3 {
+    a: vec4<f32>,
+    b: vec4<f32>,
+}
+
+fn sym_zero() -> Sym3 {
+    return Sym3(vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+fn sym_diagonal(s: f32) -> Sym3 {
+    return Sym3(vec4<f32>(s, s, s, 0.0), vec4<f32>(0.0));
+}
+
+fn sym_outer(d: vec3<f32>) -> Sym3 {
+    return Sym3(vec4<f32>(d.x * d.x, d.y * d.y, d.z * d.z, d.x * d.y),
+                vec4<f32>(d.x * d.z, d.y * d.z, 0.0, 0.0));
+}
+
+fn sym_add(m: Sym3, n: Sym3) -> Sym3 {
+    return Sym3(m.a + n.a, m.b + n.b);
+}
+
+fn sym_scale(m: Sym3, s: f32) -> Sym3 {
+    return Sym3(m.a * s, m.b * s);
+}
+
+fn sym_mul(m: Sym3, v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(
+        m.a.x * v.x + m.a.w * v.y + m.b.x * v.z,
+        m.a.w * v.x + m.a.y * v.y + m.b.y * v.z,
+        m.b.x * v.x + m.b.y * v.y + m.a.z * v.z,
+    );
+}
+
+fn sym_diag(m: Sym3) -> vec3<f32> {
+    return m.a.xyz;
+}
+
+var<workgroup> scratch: array<f32, WORKGROUP>;
+
+// Sum of `value` over the workgroup, in a fixed order (deterministic), as
+// a uniform value the workgroup may branch on. Every invocation must call it.
+fn workgroup_sum(lid: u32, value: f32) -> f32 {
+    scratch[lid] = value;
+    workgroupBarrier();
+    for (var s = WORKGROUP / 2u; s > 0u; s = s >> 1u) {
+        if lid < s {
+            scratch[lid] += scratch[lid + s];
+        }
+        workgroupBarrier();
+    }
+    let total = workgroupUniformLoad(&scratch[0]);
+    workgroupBarrier();
+    return total;
+}
+
+// Contacts live in fixed slots: one per cloth vertex (vertex–face) and one
+// per rigid vertex (face–vertex). Mirrors `cpu::collide::Contact`: the
+// force on cloth vertex k is β_k f and v_rel = Σ β_k v_k + offset.
+struct Contact {
+    normal: vec3<f32>,
+    depth: f32,
+    beta: vec3<f32>,
+    distance: f32,
+    offset: vec3<f32>,
+    valid: u32,
+    vertices: vec3<u32>,
+    // The cloth triangle (face–vertex) or the rigid triangle (vertex–face).
+    triangle: u32,
+}
+
+// What a contact adds to the system (mirrors `cpu::contact::Response`):
+// force on the penetrating point, K_c = normal_stiffness n nᵀ, and D_c.
+// A spring's force on its first vertex and its stiffness block.
+struct SpringTerm {
+    force: vec4<f32>,
+    block: Sym3,
+}
+
+struct Response {
+    force: vec3<f32>,
+    normal_stiffness: f32,
+    damping: Sym3,
+}
+
+
+// −(h D_c + h² K_c): the contact's block of A before the β weights.
+fn contact_block(r: Response, n: vec3<f32>) -> Sym3 {
+    let h = params.dt;
+    return sym_scale(sym_add(sym_scale(r.damping, h), sym_scale(sym_outer(n), h * h * r.normal_stiffness)), -1.0);
+}
+
+// The rigid body at the end of the step (written by stage "rigid").
+struct RigidFrame {
+    rotation: vec4<f32>,
+    translation: vec3<f32>,
+    pad0: f32,
+    velocity: vec3<f32>,
+    pad1: f32,
+}
+
+// A node of the rigid body's BVH (see src/bvh.rs): a leaf holds `count`
+// primitives from `first` in the order array; an internal node has
+// count = 0 and children `first`, `first + 1`.
+struct BvhNode {
+    lo: vec3<f32>,
+    first: u32,
+    hi: vec3<f32>,
+    count: u32,
+}
+
+struct Bounds {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+}
+
+// q v q⁻¹ for a unit quaternion (x, y, z, w).
+fn rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    let t = 2.0 * cross(q.xyz, v);
+    return v + q.w * t + cross(q.xyz, t);
+}
+
+fn inverse_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    return rotate(vec4<f32>(-q.xyz, q.w), v);
+}
+
+fn box_near(lo: vec3<f32>, hi: vec3<f32>, p: vec3<f32>, r: f32) -> bool {
+    return all(p + r >= lo) && all(p - r <= hi);
+}
+
+// The proximity test of thesis 2.3 (mirrors cpu::collide::point_triangle):
+// returns (d, w0, w1, w2) when p projects inside triangle (a, b, c) and
+// −max_depth < d < thickness; w0 = 2 (impossible weight) otherwise.
+fn point_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, n: vec3<f32>,
+                  thickness: f32, max_depth: f32) -> vec4<f32> {
+    let none = vec4<f32>(0.0, 2.0, 0.0, 0.0);
+    let d = dot(p - a, n);
+    if !(d > -max_depth && d < thickness) {
+        return none;
+    }
+    let e0 = b - a;
+    let e1 = c - a;
+    let ep = p - a;
+    let d00 = dot(e0, e0);
+    let d01 = dot(e0, e1);
+    let d11 = dot(e1, e1);
+    let d20 = dot(ep, e0);
+    let d21 = dot(ep, e1);
+    let denom = d00 * d11 - d01 * d01;
+    if denom <= 1.1920929e-7 * d00 * d11 {
+        return none;
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    let u = 1.0 - v - w;
+    if min(u, min(v, w)) < 0.0 || max(u, max(v, w)) > 1.0 {
+        return none;
+    }
+    return vec4<f32>(d, u, v, w);
+}
+
+fn found(hit: vec4<f32>) -> bool {
+    return hit.y <= 1.0;
+}
+
+// Larger d wins, then the lower triangle index (as on the CPU).
+fn better(d: f32, t: u32, best_d: f32, best_t: u32) -> bool {
+    return best_t == NO_TRIANGLE || d > best_d || (d == best_d && t < best_t);
+}

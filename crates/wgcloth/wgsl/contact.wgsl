@@ -1,0 +1,427 @@
+// Stage "contact": each contact's force and Jacobian blocks from the
+// selected model. CPU twin: src/cpu/contact.rs (same equations, same
+// branch structure). The network models gather the step's contacts into a
+// batch (`gather`), run the network over it (stages "batch" and "mlp") and
+// read its outputs back into responses (`respond_batch`).
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> v: array<vec4<f32>>;
+// Contact slots and their responses: one per cloth vertex (vertex–face),
+// then one per rigid vertex (face–vertex).
+@group(0) @binding(2) var<storage, read> contacts: array<Contact>;
+@group(0) @binding(3) var<storage, read_write> responses: array<Response>;
+// The naive network's geometry: cloth positions and the placed rigid body
+// (vertices, then normals); the triangles are in `topology`.
+@group(0) @binding(4) var<storage, read> x: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> rigid: array<vec4<f32>>;
+// The batch: its size, then each entry's contact slot; the network inputs
+// [entry × width] and outputs [entry × R × net_outputs]: row 0 the output,
+// row 1 + t its derivative along input wrt_start + t. The contact-frame
+// network has two entries per contact, at +slide and −slide.
+@group(0) @binding(6) var<storage, read_write> net_batch: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> net_inputs: array<f32>;
+@group(0) @binding(8) var<storage, read> net_outputs: array<f32>;
+
+// A force with its Jacobians ∂f/∂c and ∂f/∂v_rel.
+struct ForceJacobian {
+    force: vec3<f32>,
+    d_c: mat3x3<f32>,
+    d_v: mat3x3<f32>,
+}
+
+const IDENTITY: mat3x3<f32> = mat3x3<f32>(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+const ZERO3: mat3x3<f32> = mat3x3<f32>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+
+// a bᵀ
+fn outer(a: vec3<f32>, b: vec3<f32>) -> mat3x3<f32> {
+    return mat3x3<f32>(a * b.x, a * b.y, a * b.z);
+}
+
+// Naive penalty (thesis eq. 6): f = −c_n d̃ n = −c_n c.
+fn naive(c: vec3<f32>) -> ForceJacobian {
+    let k = params.naive_stiffness;
+    return ForceJacobian(-k * c, -k * IDENTITY, ZERO3);
+}
+
+// Friction model (thesis eqs. 8–9), unscaled g; see cpu::contact::friction.
+fn friction(c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
+    let none = ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    let r = length(c);
+    if r == 0.0 {
+        return none;
+    }
+    let c_hat = c / r;
+    let n = -c_hat;
+    let p = IDENTITY - outer(c_hat, c_hat);
+    let approach = dot(v, c_hat);
+    let f_c = params.kn * r + params.kd * approach;
+    if f_c <= 0.0 {
+        return none;
+    }
+    let dfc_dc = params.kn * c_hat + params.kd * (p * v) / r;
+    let dfc_dv = params.kd * c_hat;
+    var force = f_c * n;
+    var d_c = -1.0 * outer(c_hat, dfc_dc) - (f_c / r) * p;
+    var d_v = -1.0 * outer(c_hat, dfc_dv);
+    let t_dot = p * v;
+    let dt_dc = (-1.0 / r) * (approach * p + outer(c_hat, p * v));
+    let speed = length(t_dot);
+    if params.kt * speed <= params.mu * f_c {
+        force -= params.kt * t_dot;
+        d_c -= params.kt * dt_dc;
+        d_v -= params.kt * p;
+    } else {
+        let t_hat = t_dot / speed;
+        let turn = (IDENTITY - outer(t_hat, t_hat)) * (1.0 / speed);
+        force -= params.mu * f_c * t_hat;
+        d_c -= params.mu * (outer(t_hat, dfc_dc) + f_c * turn * dt_dc);
+        d_v -= params.mu * (outer(t_hat, dfc_dv) + f_c * turn * p);
+    }
+    return ForceJacobian(force, d_c, d_v);
+}
+
+fn evaluate(c: vec3<f32>, v_rel: vec3<f32>) -> ForceJacobian {
+    if params.model == MODEL_NAIVE {
+        return naive(c);
+    }
+    let g = friction(c, v_rel);
+    let s = params.force_scale;
+    return ForceJacobian(s * g.force, s * g.d_c, s * g.d_v);
+}
+
+fn symmetric_part(m: mat3x3<f32>) -> mat3x3<f32> {
+    return 0.5 * (m + transpose(m));
+}
+
+// Nearest symmetric NSD matrix: cyclic Jacobi eigen-decomposition, positive
+// eigenvalues clamped to zero (mirrors math::project_nsd).
+fn project_nsd(m: mat3x3<f32>) -> Sym3 {
+    var a = symmetric_part(m);
+    var q = IDENTITY;
+    for (var sweep = 0u; sweep < 8u; sweep++) {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if off <= 1e-14 * diag || off == 0.0 {
+            break;
+        }
+        for (var pair = 0u; pair < 3u; pair++) {
+            let pi = select(select(1u, 0u, pair < 2u), 0u, pair == 0u);
+            let qi = select(2u, 1u, pair == 0u);
+            let apq = a[pi][qi];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[qi][qi] - a[pi][pi]) / (2.0 * apq);
+            let t = sign(theta) / (abs(theta) + sqrt(theta * theta + 1.0));
+            let tt = select(t, 1.0, theta == 0.0);
+            let cs = 1.0 / sqrt(tt * tt + 1.0);
+            let sn = tt * cs;
+            // A ← Jᵀ A J; Q ← Q J.
+            for (var k = 0u; k < 3u; k++) {
+                let akp = a[k][pi];
+                let akq = a[k][qi];
+                a[k][pi] = cs * akp - sn * akq;
+                a[k][qi] = sn * akp + cs * akq;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let apk = a[pi][k];
+                let aqk = a[qi][k];
+                a[pi][k] = cs * apk - sn * aqk;
+                a[qi][k] = sn * apk + cs * aqk;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let vp = q[pi][k];
+                let vq = q[qi][k];
+                q[pi][k] = cs * vp - sn * vq;
+                q[qi][k] = sn * vp + cs * vq;
+            }
+        }
+    }
+    // Column j of q is eigenvector j.
+    var out = ZERO3;
+    for (var j = 0u; j < 3u; j++) {
+        out += min(a[j][j], 0.0) * outer(q[j], q[j]);
+    }
+    return Sym3(vec4<f32>(out[0][0], out[1][1], out[2][2], 0.5 * (out[0][1] + out[1][0])),
+                vec4<f32>(0.5 * (out[0][2] + out[2][0]), 0.5 * (out[1][2] + out[2][1]), 0.0, 0.0));
+}
+
+// The chain rule into the system with the three safety moves of
+// cpu::contact::response: n–t cross terms dropped, the secant floor on
+// sliding friction's damping, and the NSD projection.
+fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>) -> Response {
+    let nn = outer(n, n);
+    let tangent_plane = IDENTITY - nn;
+    let normal_stiffness = min(dot(n, fj.d_c * n), 0.0);
+    var damping = dot(n, fj.d_v * n) * nn + tangent_plane * symmetric_part(fj.d_v) * tangent_plane;
+    let t_dot = tangent_plane * v_rel;
+    let speed = length(t_dot);
+    if speed > 0.0 {
+        let t_hat = t_dot / speed;
+        let secant = -dot(fj.force, t_hat) / speed;
+        let deficit = secant + dot(t_hat, damping * t_hat);
+        if deficit > 0.0 {
+            damping -= deficit * outer(t_hat, t_hat);
+        }
+    }
+    return Response(fj.force, normal_stiffness, project_nsd(damping));
+}
+
+fn relative_velocity(c: Contact) -> vec3<f32> {
+    return c.offset + c.beta.x * v[c.vertices.x].xyz + c.beta.y * v[c.vertices.y].xyz
+        + c.beta.z * v[c.vertices.z].xyz;
+}
+
+fn respond(c: Contact) -> Response {
+    let v_rel = relative_velocity(c);
+    return response(evaluate(c.normal * c.depth, v_rel), c.normal, v_rel);
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn vertex_face(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i < params.n_vertices && contacts[i].valid != 0u {
+        responses[i] = respond(contacts[i]);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn face_vertex(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = id.x;
+    if k < params.n_rigid_vertices && contacts[params.n_vertices + k].valid != 0u {
+        responses[params.n_vertices + k] = respond(contacts[params.n_vertices + k]);
+    }
+}
+
+// --- The network models (thesis 2.4, 2.7). ---
+
+fn slot_contact(s: u32) -> Contact {
+    return contacts[s];
+}
+
+// The naive network's local frame (mirrors cpu::contact::local_frame): the
+// contact's triangle wound along its normal, a at the origin, b on +x, the
+// triangle in the xy-plane; the point moved by ε against the normal.
+struct LocalFrame {
+    rotation: mat3x3<f32>,
+    b: vec3<f32>,
+    c: vec3<f32>,
+    p: vec3<f32>,
+    valid: bool,
+}
+
+fn local_frame(s: u32, k: Contact) -> LocalFrame {
+    var tri: array<vec3<f32>, 3>;
+    var point: vec3<f32>;
+    if s < params.n_vertices {
+        for (var i = 0u; i < 3u; i++) {
+            tri[i] = rigid[body_index(3u * k.triangle + i)].xyz;
+        }
+        point = x[s].xyz;
+    } else {
+        for (var i = 0u; i < 3u; i++) {
+            tri[i] = x[cloth_index(3u * k.triangle + i)].xyz;
+        }
+        point = rigid[s - params.n_vertices].xyz;
+    }
+    var a = tri[0];
+    var b = tri[1];
+    var c = tri[2];
+    if dot(cross(b - a, c - a), k.normal) < 0.0 {
+        b = tri[2];
+        c = tri[1];
+    }
+    point -= (k.distance - k.depth) * k.normal;
+    let ab = b - a;
+    let normal = cross(ab, c - a);
+    var f: LocalFrame;
+    f.valid = dot(ab, ab) > 0.0 && dot(normal, normal) > 0.0;
+    if !f.valid {
+        return f;
+    }
+    let e1 = normalize(ab);
+    let e3 = normalize(normal);
+    f.rotation = transpose(mat3x3<f32>(e1, cross(e3, e1), e3));
+    f.b = f.rotation * ab;
+    f.c = f.rotation * (c - a);
+    f.p = f.rotation * (point - a);
+    return f;
+}
+
+// Below this slide speed ṫ has no direction (cpu::contact::SLIDE_AT_REST).
+const SLIDE_AT_REST: f32 = 1e-6;
+
+// A contact in its own frame (mirrors cpu::contact::ContactFrame); depth 0
+// has no frame.
+struct ContactFrame {
+    c_hat: vec3<f32>,
+    t_hat: vec3<f32>,
+    t_dot: vec3<f32>,
+    depth: f32,
+    approach: f32,
+    slide: f32,
+}
+
+fn contact_frame(c: vec3<f32>, v: vec3<f32>) -> ContactFrame {
+    var f: ContactFrame;
+    f.depth = length(c);
+    if f.depth == 0.0 {
+        return f;
+    }
+    f.c_hat = c / f.depth;
+    f.approach = dot(v, f.c_hat);
+    f.t_dot = v - f.approach * f.c_hat;
+    f.slide = length(f.t_dot);
+    if f.slide > SLIDE_AT_REST {
+        f.t_hat = f.t_dot / f.slide;
+    }
+    return f;
+}
+
+// Gradients wrt c and v of a function of (depth, approach, slide) with
+// partial derivatives d.
+fn frame_grad_c(f: ContactFrame, d: vec3<f32>) -> vec3<f32> {
+    return d.x * f.c_hat + (d.y / f.depth) * f.t_dot - (d.z * f.approach / f.depth) * f.t_hat;
+}
+
+fn frame_grad_v(f: ContactFrame, d: vec3<f32>) -> vec3<f32> {
+    return d.y * f.c_hat + d.z * f.t_hat;
+}
+
+@compute @workgroup_size(1)
+fn reset_batch() {
+    atomicStore(&net_batch[0], 0u);
+}
+
+// Appends every valid contact to the batch with its network inputs.
+@compute @workgroup_size(WORKGROUP)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if s >= params.n_vertices + params.n_rigid_vertices {
+        return;
+    }
+    let k = slot_contact(s);
+    if k.valid == 0u {
+        return;
+    }
+    if params.model == MODEL_FRICTION_CONTACT_NET {
+        let entry = atomicAdd(&net_batch[0], 2u);
+        atomicStore(&net_batch[1u + entry], s);
+        atomicStore(&net_batch[1u + entry + 1u], s);
+        let f = contact_frame(k.normal * k.depth, relative_velocity(k));
+        let row = array<f32, 7>(f.depth, f.approach, f.slide, params.kn, params.kd, params.kt, params.mu);
+        for (var i = 0u; i < 7u; i++) {
+            net_inputs[entry * 7u + i] = row[i];
+            net_inputs[entry * 7u + 7u + i] = select(row[i], -row[i], i == 2u);
+        }
+        return;
+    }
+    let entry = atomicAdd(&net_batch[0], 1u);
+    atomicStore(&net_batch[1u + entry], s);
+    let base = entry * params.net_width;
+    if params.model == MODEL_FRICTION_NET {
+        let c = k.normal * k.depth;
+        let v_rel = relative_velocity(k);
+        let row = array<f32, 10>(c.x, c.y, c.z, v_rel.x, v_rel.y, v_rel.z,
+                                 params.kn, params.kd, params.kt, params.mu);
+        for (var i = 0u; i < 10u; i++) {
+            net_inputs[base + i] = row[i];
+        }
+    } else {
+        let f = local_frame(s, k);
+        let row = array<f32, 7>(f.b.x, f.c.x, f.c.y, 0.0, f.p.x, f.p.y, f.p.z);
+        for (var i = 0u; i < 7u; i++) {
+            net_inputs[base + i] = row[i];
+        }
+    }
+}
+
+// Row `row` of a batch entry's outputs (three of them).
+fn output_row(entry: u32, row: u32) -> vec3<f32> {
+    let o = params.net_outputs * (entry * params.net_rows + row);
+    return vec3<f32>(net_outputs[o], net_outputs[o + 1u], net_outputs[o + 2u]);
+}
+
+// Row `row` of a contact-frame entry's outputs (g_n, g_t).
+fn output_pair(entry: u32, row: u32) -> vec2<f32> {
+    let o = params.net_outputs * (entry * params.net_rows + row);
+    return vec2<f32>(net_outputs[o], net_outputs[o + 1u]);
+}
+
+// g and its Jacobians from the contact-frame network's entries `entry`
+// (+slide) and `entry + 1` (−slide): mirrors ContactFrame::force.
+fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
+    let f = contact_frame(c, v);
+    if f.depth == 0.0 {
+        return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    }
+    let y0 = output_pair(entry, 0u);
+    let y1 = output_pair(entry + 1u, 0u);
+    // Even part for g_n, odd for g_t; the mirror's slide derivative flips.
+    let g_n = 0.5 * (y0.x + y1.x);
+    let g_t = 0.5 * (y0.y - y1.y);
+    var d_gn: vec3<f32>;
+    var d_gt: vec3<f32>;
+    for (var t = 0u; t < 3u; t++) {
+        let a = output_pair(entry, 1u + t);
+        let b = select(1.0, -1.0, t == 2u) * output_pair(entry + 1u, 1u + t);
+        d_gn[t] = 0.5 * (a.x + b.x);
+        d_gt[t] = 0.5 * (a.y - b.y);
+    }
+    let p = IDENTITY - outer(f.c_hat, f.c_hat);
+    let n = -f.c_hat;
+    var ratio = d_gt.z;
+    if f.slide > SLIDE_AT_REST {
+        ratio = g_t / f.slide;
+    }
+    let turn = ratio * (IDENTITY - outer(f.t_hat, f.t_hat));
+    let dt_dc = (-1.0 / f.depth) * (f.approach * p + outer(f.c_hat, f.t_dot));
+    let sc = params.force_scale;
+    return ForceJacobian(
+        sc * (g_n * n + g_t * f.t_hat),
+        sc * (outer(n, frame_grad_c(f, d_gn)) - (g_n / f.depth) * p
+              + outer(f.t_hat, frame_grad_c(f, d_gt)) + turn * dt_dc),
+        sc * (outer(n, frame_grad_v(f, d_gn)) + outer(f.t_hat, frame_grad_v(f, d_gt)) + turn * p),
+    );
+}
+
+// The Jacobian whose column j is output row first + j.
+fn output_jacobian(entry: u32, first: u32) -> mat3x3<f32> {
+    return mat3x3<f32>(output_row(entry, first), output_row(entry, first + 1u),
+                       output_row(entry, first + 2u));
+}
+
+// The network's force and Jacobians for batch entry `entry` (mirrors
+// cpu::contact::friction_net and naive_net, scaled to force units).
+fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacobian {
+    if params.model == MODEL_FRICTION_CONTACT_NET {
+        return contact_net_force(entry, k.normal * k.depth, v_rel);
+    }
+    let g = output_row(entry, 0u);
+    if params.model == MODEL_FRICTION_NET {
+        let sc = params.force_scale;
+        return ForceJacobian(sc * g, sc * output_jacobian(entry, 1u), sc * output_jacobian(entry, 4u));
+    }
+    let f = local_frame(s, k);
+    if !f.valid {
+        return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    }
+    let back = transpose(f.rotation);
+    let st = params.naive_stiffness;
+    return ForceJacobian(st * (back * g), st * (back * output_jacobian(entry, 1u) * f.rotation), ZERO3);
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
+    let entry = id.x;
+    // A contact-frame contact's second entry is read with its first.
+    let second = params.model == MODEL_FRICTION_CONTACT_NET && entry % 2u == 1u;
+    if entry >= atomicLoad(&net_batch[0]) || second {
+        return;
+    }
+    let s = atomicLoad(&net_batch[1u + entry]);
+    let k = slot_contact(s);
+    let v_rel = relative_velocity(k);
+    let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel);
+    responses[s] = r;
+}

@@ -1,0 +1,59 @@
+// The static connectivity of the cloth and the body in one u32 buffer, so
+// no stage needs more than WebGPU's 8 storage buffers. Sections (their
+// starts in `params`, laid out by gpu::layout::Sections):
+//   cloth triangles (3 per triangle; first, so the buffer is the index
+//   buffer an app draws with), springs (2 each), adjacency (offsets per
+//   vertex, then (spring, other vertex) pairs), pinned flags, vertex
+//   triangles (offsets, then 3 t + corner), spring triangles ((triangle,
+//   edge) × 2 per spring), body triangles, the body BVH's primitive order.
+
+@group(0) @binding(40) var<storage, read> topology: array<u32>;
+
+fn cloth_index(k: u32) -> u32 {
+    return topology[k];
+}
+
+fn spring_ends(s: u32) -> vec2<u32> {
+    let at = params.springs_at + 2u * s;
+    return vec2<u32>(topology[at], topology[at + 1u]);
+}
+
+// Vertex i's springs are adjacency entries adjacency_begin(i) .. adjacency_begin(i + 1).
+fn adjacency_begin(i: u32) -> u32 {
+    return topology[params.adjacency_at + i];
+}
+
+fn adjacent_spring(k: u32) -> u32 {
+    return topology[params.adjacency_at + params.n_vertices + 1u + 2u * k];
+}
+
+fn adjacent_vertex(k: u32) -> u32 {
+    return topology[params.adjacency_at + params.n_vertices + 2u + 2u * k];
+}
+
+fn is_pinned(i: u32) -> bool {
+    return topology[params.pinned_at + i] != 0u;
+}
+
+fn vertex_triangles_begin(i: u32) -> u32 {
+    return topology[params.vertex_triangles_at + i];
+}
+
+// Triangle index × 3 + the vertex's corner in it.
+fn vertex_triangle(q: u32) -> u32 {
+    return topology[params.vertex_triangles_at + params.n_vertices + 1u + q];
+}
+
+// (triangle, edge) for the ≤ 2 triangles along spring s, NO_TRIANGLE if none.
+fn spring_triangles(s: u32) -> vec4<u32> {
+    let at = params.spring_triangles_at + 4u * s;
+    return vec4<u32>(topology[at], topology[at + 1u], topology[at + 2u], topology[at + 3u]);
+}
+
+fn body_index(k: u32) -> u32 {
+    return topology[params.body_triangles_at + k];
+}
+
+fn bvh_primitive(k: u32) -> u32 {
+    return topology[params.bvh_order_at + k];
+}
