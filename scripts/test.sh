@@ -19,14 +19,19 @@ for component in rustfmt clippy; do
   rustup component list --installed 2>/dev/null | grep -q "^$component" || rustup component add "$component"
 done
 
-cargo fmt --check
-cargo clippy --release --all-targets --features viewer -- -D warnings
-cargo test --release
+cargo fmt --all --check
+cargo clippy --release --workspace --all-targets --features wgcloth-cli/viewer -- -D warnings
+# The library alone, with its default features, as an app gets it: no CLI,
+# training, image or plotting crate in its tree, and it builds by itself.
+bash scripts/check-library.sh
+cargo test --release --workspace
+# The embedding example (the crate docs' example) on a default-limits device.
+cargo run --release -p wgcloth --example embed
 
 # The interactive viewer (examples/viewer.rs, feature `viewer`): without a
 # display it must fail with one clear line and exit code 2; with Xvfb here
 # it must run a few frames.
-cargo build --release --features viewer --example viewer
+cargo build --release -p wgcloth-cli --features viewer --example viewer
 set +e
 message=$(env -u DISPLAY -u WAYLAND_DISPLAY target/release/examples/viewer 2>&1)
 code=$?

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+// What the fuzz targets check (fuzz/), with the loaders they feed.
+#[cfg(all(feature = "obj", feature = "toml"))]
 pub mod loaders;
 
 use glam::{Mat3, Vec3};

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The library crate as an app depends on it (default features): it builds
+# on its own, its normal dependency tree stays within 90 crates, and none of
+# the crates that belong to the CLI or the training side is in it.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -p wgcloth
+tree=$(cargo tree -p wgcloth -e normal --prefix none | sort -u)
+count=$(wc -l <<<"$tree")
+echo "wgcloth's normal dependency tree: $count crates"
+if [ "$count" -gt 90 ]; then
+  echo "more than 90 crates"
+  exit 1
+fi
+for banned in candle-core candle-nn tokenizers clap image gif png indicatif tobj env_logger; do
+  if grep -q "^$banned v" <<<"$tree"; then
+    echo "the library's tree holds $banned"
+    exit 1
+  fi
+done
