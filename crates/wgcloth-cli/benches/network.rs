@@ -31,7 +31,7 @@ fn networks() -> Vec<(&'static str, Network)> {
     weights::SHIPPED
         .iter()
         .map(|shipped| {
-            let name = shipped.path.trim_start_matches("weights/");
+            let name = shipped.path.rsplit('/').next().unwrap_or(shipped.path);
             (
                 name.trim_end_matches(".safetensors"),
                 shipped.read().expect("shipped weights").network(),

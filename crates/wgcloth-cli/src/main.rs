@@ -92,7 +92,7 @@ struct TrainArgs {
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
     /// The weights file to write [default: the shipped file of the data's
-    /// network, weights/friction_mlp.safetensors or weights/naive_mlp.safetensors].
+    /// network, crates/wgcloth/weights/friction_mlp.safetensors or naive_mlp.safetensors].
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     /// Hidden layer widths [default: the thesis's, 256,256,128,128,128,128,128
@@ -236,8 +236,8 @@ struct SceneArgs {
     #[arg(long, value_name = "FILE.obj")]
     mesh: Option<PathBuf>,
     /// Weights of the network model [default: the built-in copy of
-    /// weights/friction_mlp_small.safetensors for friction-net,
-    /// weights/naive_mlp.safetensors for naive-net].
+    /// crates/wgcloth/weights/friction_mlp_small.safetensors for friction-net,
+    /// crates/wgcloth/weights/naive_mlp.safetensors for naive-net].
     #[arg(long, value_name = "FILE.safetensors")]
     weights: Option<PathBuf>,
 }
@@ -337,28 +337,33 @@ fn run(args: &RunArgs) -> Result<()> {
         None => None,
     };
     // Frames need a GPU even for a CPU run: the CPU path uploads its state.
-    // Without any adapter the run goes on without frames, as the main job
-    // goes on without a GPU.
+    // Without any adapter the run goes on without drawn frames (the OBJ
+    // frames of --export obj are still written), as the main job goes on
+    // without a GPU.
     let own_context;
     let render_context = match (&writer, &chosen) {
         (None, _) => None,
         (Some(_), Chosen::Gpu { ctx, .. }) => Some(&**ctx),
-        (Some(_), Chosen::Cpu) => match GpuContext::headless() {
+        (Some(w), Chosen::Cpu) => match GpuContext::headless() {
             Ok(ctx) => {
                 own_context = ctx;
                 Some(&own_context)
             }
             Err(e) => {
+                let instead = match w.wants_obj() {
+                    true => "Writing the OBJ frames only, no PNG or GIF.",
+                    false => "Running without frames; no image file is written.",
+                };
                 eprintln!(
-                    "notice: no GPU adapter to render frames ({e}); lavapipe renders them on the CPU (Debian: mesa-vulkan-drivers). Running without frames."
+                    "notice: no GPU adapter to draw frames ({e}); lavapipe draws them on the CPU (Debian: mesa-vulkan-drivers). {instead}"
                 );
                 None
             }
         },
     };
-    let mut recording = match (options, writer, render_context) {
-        (Some(options), Some(writer), Some(ctx)) => Some(wgcloth_cli::frames::Recording::new(
-            ctx,
+    let mut recording = match (options, writer) {
+        (Some(options), Some(writer)) => Some(wgcloth_cli::frames::Recording::new(
+            render_context,
             &scene,
             steps,
             (&options, writer),
@@ -390,12 +395,17 @@ fn run(args: &RunArgs) -> Result<()> {
         println!("{}", monitor.summary());
     }
     if let Some(recording) = recording {
-        let (frames, gif) = recording.finish();
-        println!(
-            "frames       {frames} in {}",
-            gif.parent().unwrap_or(&gif).display()
-        );
-        println!("animation    {}", gif.display());
+        let written = recording.finish();
+        let dir = written.dir.display();
+        if written.frames > 0 {
+            println!("frames       {} in {dir}", written.frames);
+        }
+        if written.objs > 0 {
+            println!("obj frames   {} in {dir}", written.objs);
+        }
+        if let Some(gif) = &written.gif {
+            println!("animation    {}", gif.display());
+        }
     }
     if let Some(path) = &args.report {
         write_json(path, &report)?;
@@ -510,10 +520,12 @@ fn train(args: &TrainArgs) -> Result<()> {
         writable(plot)?;
     }
     let data = wgcloth_learn::dataset::Dataset::read(&args.data)?;
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("weights/{}_mlp.safetensors", data.kind.name())));
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "crates/wgcloth/weights/{}_mlp.safetensors",
+            data.kind.name()
+        ))
+    });
     refuse_existing(&out, args.force)?;
     let opts = wgcloth_learn::train::TrainOptions {
         hidden: (args.hidden.clone()).unwrap_or_else(|| thesis_hidden(data.kind)),

@@ -217,12 +217,12 @@ fn max_speed_0_is_rejected() {
 
 #[test]
 fn weights_for_an_analytic_model_are_rejected_not_ignored() {
-    let case = "--model friction --weights weights/naive_mlp.safetensors";
+    let case = "--model friction --weights ../wgcloth/weights/naive_mlp.safetensors";
     let out = run_tiny(&[
         "--model",
         "friction",
         "--weights",
-        "weights/naive_mlp.safetensors",
+        "../wgcloth/weights/naive_mlp.safetensors",
     ]);
     expect_error(case, &out, &["contact.weights", "friction"], &[]);
 }
@@ -616,7 +616,7 @@ fn network_models_run_from_any_directory_on_their_built_in_weights() {
 
 #[test]
 fn a_network_model_with_the_other_kind_of_network_names_both() {
-    let shipped = |name: &str| format!("{}/weights/{name}", env!("CARGO_MANIFEST_DIR"));
+    let shipped = |name: &str| format!("{}/../wgcloth/weights/{name}", env!("CARGO_MANIFEST_DIR"));
     let friction = shipped("friction_mlp.safetensors");
     let out = run_tiny(&["--model", "naive-net", "--weights", &friction]);
     expect_error(
@@ -652,7 +652,7 @@ fn eval_net_with_data_of_the_other_network_names_both() {
     ]);
     assert!(out.status.success(), "{}", describe("gen-data", &out));
     let friction = format!(
-        "{}/weights/friction_mlp.safetensors",
+        "{}/../wgcloth/weights/friction_mlp.safetensors",
         env!("CARGO_MANIFEST_DIR")
     );
     let out = wgcloth(&["eval-net", &friction, "--data", s(&data), "--samples", "10"]);
@@ -794,7 +794,7 @@ const BAD_FIELDS: &[(&str, &str)] = &[
     ("model = \"friction\"\n[contact]\nkt = 0.0", "contact.kt"),
     ("[contact]\nmu = -0.5", "contact.mu"),
     (
-        "model = \"naive\"\n[contact]\nweights = \"weights/naive_mlp.safetensors\"",
+        "model = \"naive\"\n[contact]\nweights = \"../wgcloth/weights/naive_mlp.safetensors\"",
         "contact.weights",
     ),
     ("[solver]\ndt = inf", "solver.dt"),
@@ -875,7 +875,7 @@ fn gen_data_with_no_samples_is_rejected_and_writes_nothing() {
 fn eval_net_with_0_samples_is_rejected() {
     let out = wgcloth(&[
         "eval-net",
-        "weights/naive_mlp.safetensors",
+        "../wgcloth/weights/naive_mlp.safetensors",
         "--samples",
         "0",
     ]);

@@ -3,15 +3,15 @@
 //! the fuzz targets make, so a fixed loader bug stays fixed without a
 //! nightly toolchain.
 
-mod common;
-
-use common::loaders;
+// What the fuzz targets check (fuzz/), with the loaders they feed.
+#[path = "common/loaders.rs"]
+mod loaders;
 
 fn replay(target: &str, check: fn(&[u8])) {
     let mut count = 0;
     for dir in ["seeds", "regressions"] {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fuzz")
+            .join("../../fuzz")
             .join(dir)
             .join(target);
         // A target the fuzzer never crashed has no regressions folder.

@@ -45,7 +45,7 @@ impl Variant {
         match self.network {
             None => self.model.name().into(),
             Some(net) => {
-                let stem = net.path.trim_start_matches("weights/");
+                let stem = net.path.rsplit('/').next().unwrap_or(net.path);
                 format!(
                     "{} ({})",
                     self.model.name(),

@@ -50,54 +50,68 @@ impl RecordOptions {
     }
 }
 
-/// The frames of a run, rendered on `ctx` (for a CPU run too: the CPU
-/// path uploads its state) and written as they come.
+/// The frames of a run, rendered on a GPU context (for a CPU run too: the
+/// CPU path uploads its state) and written as they come; without one,
+/// only the OBJ frames of `--export obj`.
 pub struct Recording<'a> {
+    drawing: Option<Drawing<'a>>,
+    every: u64,
+    writer: output::FrameWriter,
+}
+
+/// What drawing frames needs.
+struct Drawing<'a> {
     ctx: &'a GpuContext,
     renderer: Renderer,
     camera: Camera,
     style: Style,
-    every: u64,
-    writer: output::FrameWriter,
     /// The CPU path's state on the GPU (unused by a GPU run).
     host: HostScene,
 }
 
+impl Drawing<'_> {
+    /// Renders `source` and writes the frame.
+    fn draw(&self, source: &Source, writer: &mut output::FrameWriter) -> Result<()> {
+        let frame = self.renderer.render(
+            &self.ctx.device,
+            &self.ctx.queue,
+            source,
+            &self.camera,
+            self.style,
+        )?;
+        self.ctx.finish()?;
+        writer.write(&frame)
+    }
+}
+
 impl<'a> Recording<'a> {
     /// Checks the frame size before any step runs; `writer` comes from
-    /// `options.prepare`.
+    /// `options.prepare`. With no context, frames are not drawn.
     pub fn new(
-        ctx: &'a GpuContext,
+        ctx: Option<&'a GpuContext>,
         scene: &Scene,
         steps: u64,
         (options, writer): (&RecordOptions, output::FrameWriter),
     ) -> Result<Recording<'a>> {
+        let drawing = match ctx {
+            Some(ctx) => Some(Drawing {
+                ctx,
+                renderer: Renderer::new(&ctx.device, options.size, options.size)?,
+                camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
+                style: options.style,
+                host: HostScene::new(&ctx.device, scene),
+            }),
+            None => None,
+        };
         Ok(Recording {
-            ctx,
-            renderer: Renderer::new(&ctx.device, options.size, options.size)?,
-            camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
-            style: options.style,
+            drawing,
             every: options.every,
             writer,
-            host: HostScene::new(&ctx.device, scene),
         })
     }
 
     fn due(&self, step: u64) -> bool {
         step.is_multiple_of(self.every)
-    }
-
-    /// Renders `source` and writes the frame.
-    fn draw(
-        ctx: &GpuContext,
-        renderer: &Renderer,
-        (camera, style): (&Camera, Style),
-        source: &Source,
-        writer: &mut output::FrameWriter,
-    ) -> Result<()> {
-        let frame = renderer.render(&ctx.device, &ctx.queue, source, camera, style)?;
-        ctx.finish()?;
-        writer.write(&frame)
     }
 
     /// After step `step` of a CPU run (0: the initial state).
@@ -107,16 +121,12 @@ impl<'a> Recording<'a> {
         }
         self.writer
             .write_obj(&sim.scene, &sim.state.x, sim.state.time as f32)?;
-        self.host
-            .upload_sim(&self.ctx.queue, sim, metres_per_force(&sim.scene));
-        let view = (&self.camera, self.style);
-        Self::draw(
-            self.ctx,
-            &self.renderer,
-            view,
-            &self.host.source(),
-            &mut self.writer,
-        )
+        let Some(d) = &self.drawing else {
+            return Ok(());
+        };
+        d.host
+            .upload_sim(&d.ctx.queue, sim, metres_per_force(&sim.scene));
+        d.draw(&d.host.source(), &mut self.writer)
     }
 
     /// After step `step` of a GPU run: draws from the simulator's buffers,
@@ -129,36 +139,26 @@ impl<'a> Recording<'a> {
         if step == 0 {
             self.writer
                 .write_obj(scene, &scene.cloth.rest_positions, 0.0)?;
-            let start = (&scene.cloth.rest_positions[..], 0.0);
-            self.host.upload(&self.ctx.queue, scene, start, &[]);
-            let view = (&self.camera, self.style);
-            return Self::draw(
-                self.ctx,
-                &self.renderer,
-                view,
-                &self.host.source(),
-                &mut self.writer,
-            );
-        }
-        if self.writer.wants_obj() {
+        } else if self.writer.wants_obj() {
             let time = step as f32 * scene.config.solver.dt;
             self.writer.write_obj(scene, &sim.read_positions()?, time)?;
         }
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        let Some(d) = &self.drawing else {
+            return Ok(());
+        };
+        if step == 0 {
+            let start = (&scene.cloth.rest_positions[..], 0.0);
+            d.host.upload(&d.ctx.queue, scene, start, &[]);
+            return d.draw(&d.host.source(), &mut self.writer);
+        }
+        let mut encoder = d.ctx.device.create_command_encoder(&Default::default());
         sim.record_force_lines(&mut encoder);
-        self.ctx.queue.submit([encoder.finish()]);
-        let view = (&self.camera, self.style);
-        Self::draw(
-            self.ctx,
-            &self.renderer,
-            view,
-            &Source::gpu(sim, scene),
-            &mut self.writer,
-        )
+        d.ctx.queue.submit([encoder.finish()]);
+        d.draw(&Source::gpu(sim, scene), &mut self.writer)
     }
 
-    /// The frames written and the GIF's path.
-    pub fn finish(self) -> (usize, std::path::PathBuf) {
-        (self.writer.written(), self.writer.finish())
+    /// What the run wrote.
+    pub fn finish(self) -> output::Written {
+        self.writer.finish()
     }
 }

@@ -27,11 +27,14 @@ pub fn frame_name(k: usize) -> String {
 
 pub struct FrameWriter {
     dir: PathBuf,
-    gif: GifEncoder<BufWriter<File>>,
+    /// Created with the first drawn frame, so a run that draws none (no
+    /// adapter) leaves no empty animation behind.
+    gif: Option<GifEncoder<BufWriter<File>>>,
     /// Display time of each GIF frame, ms (GIF counts in 10 ms).
     delay_ms: u32,
     written: usize,
     obj: bool,
+    objs: usize,
 }
 
 fn image_error(path: &Path, e: image::ImageError) -> Error {
@@ -66,28 +69,38 @@ impl FrameWriter {
                 "already exists; pass --force to replace the frames",
             ));
         }
-        let gif_path = dir.join(GIF_NAME);
-        let file = File::create(&gif_path).map_err(|e| Error::io(&gif_path, e))?;
-        // Speed 10 of 1–30: a good palette at a tenth of the slowest's time.
-        let mut gif = GifEncoder::new_with_speed(BufWriter::new(file), 10);
-        gif.set_repeat(Repeat::Infinite)
-            .map_err(|e| image_error(&gif_path, e))?;
         Ok(FrameWriter {
             dir: dir.to_path_buf(),
-            gif,
+            gif: None,
             delay_ms: delay_ms.next_multiple_of(10).max(20),
             written: 0,
             obj,
+            objs: 0,
         })
     }
 
     /// The next frame's geometry, when OBJ export is on: cloth at `x`, the
     /// body placed at `time`.
-    pub fn write_obj(&self, scene: &Scene, x: &[Vec3], time: f32) -> Result<()> {
-        match self.obj {
-            true => write_obj(&self.dir.join(obj_name(self.written)), scene, x, time),
-            false => Ok(()),
+    pub fn write_obj(&mut self, scene: &Scene, x: &[Vec3], time: f32) -> Result<()> {
+        if !self.obj {
+            return Ok(());
         }
+        write_obj(&self.dir.join(obj_name(self.objs)), scene, x, time)?;
+        self.objs += 1;
+        Ok(())
+    }
+
+    fn gif(&mut self) -> Result<&mut GifEncoder<BufWriter<File>>> {
+        if self.gif.is_none() {
+            let path = self.dir.join(GIF_NAME);
+            let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
+            // Speed 10 of 1–30: a good palette at a tenth of the slowest's time.
+            let mut gif = GifEncoder::new_with_speed(BufWriter::new(file), 10);
+            gif.set_repeat(Repeat::Infinite)
+                .map_err(|e| image_error(&path, e))?;
+            self.gif = Some(gif);
+        }
+        Ok(self.gif.as_mut().expect("created above"))
     }
 
     pub fn wants_obj(&self) -> bool {
@@ -100,22 +113,40 @@ impl FrameWriter {
             .ok_or_else(|| Error::file(&path, "frame size does not match its pixels"))?;
         image.save(&path).map_err(|e| image_error(&path, e))?;
         let delay = Delay::from_numer_denom_ms(self.delay_ms, 1);
-        self.gif
+        self.gif()?
             .encode_frame(image::Frame::from_parts(image, 0, 0, delay))
             .map_err(|e| image_error(&self.dir.join(GIF_NAME), e))?;
         self.written += 1;
         Ok(())
     }
 
-    /// Frames written so far.
+    /// Frames drawn so far.
     pub fn written(&self) -> usize {
         self.written
     }
 
-    /// Finishes the GIF (its trailer is written as the encoder drops) and
-    /// returns its path.
-    pub fn finish(self) -> PathBuf {
-        drop(self.gif);
-        self.dir.join(GIF_NAME)
+    /// What the run left: the frames drawn, the OBJ files, and the GIF's
+    /// path (none without a drawn frame). The GIF's trailer is written as
+    /// its encoder drops.
+    pub fn finish(self) -> Written {
+        let gif = self.gif.map(|gif| {
+            drop(gif);
+            self.dir.join(GIF_NAME)
+        });
+        Written {
+            dir: self.dir,
+            frames: self.written,
+            objs: self.objs,
+            gif,
+        }
     }
+}
+
+/// What a run wrote into its frame directory.
+#[derive(Clone, Debug)]
+pub struct Written {
+    pub dir: PathBuf,
+    pub frames: usize,
+    pub objs: usize,
+    pub gif: Option<PathBuf>,
 }

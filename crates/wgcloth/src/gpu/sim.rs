@@ -954,7 +954,9 @@ fn check_limits(
     params: &Params,
     topology: usize,
 ) -> Result<()> {
-    let bindable = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let bindable = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
     for (what, bytes) in Sizes::of(scene).bound(params, topology) {
         if bytes > bindable {
             let limit = if bytes > limits.max_buffer_size {

@@ -1,10 +1,6 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
-// What the fuzz targets check (fuzz/), with the loaders they feed.
-#[cfg(all(feature = "obj", feature = "toml"))]
-pub mod loaders;
-
 use glam::{Mat3, Vec3};
 
 /// Central finite-difference Jacobian of f: R³ → R³ at x.
