@@ -1,4 +1,4 @@
-//! The `wgcloth` command line (names fixed by DESIGN.md).
+//! The `wgcloth` command line (names fixed by docs/DESIGN.md).
 
 use std::path::PathBuf;
 use std::process::ExitCode;

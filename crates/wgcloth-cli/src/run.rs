@@ -1,5 +1,5 @@
 //! Running a scene for a number of steps on a backend and summarising it:
-//! the `--report` JSON of DESIGN.md and the one-screen summary.
+//! the `--report` JSON of docs/DESIGN.md and the one-screen summary.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;

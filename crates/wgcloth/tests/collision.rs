@@ -6,6 +6,7 @@ use common::Rng;
 use glam::{Quat, Vec3};
 use wgcloth::bvh::{Bvh, triangle_boxes};
 use wgcloth::cpu::collide::{self, Best, Tolerances, cloth_normal};
+use wgcloth::cpu::measure;
 use wgcloth::cpu::rigid::{RigidFrame, transform};
 use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
 
@@ -109,7 +110,7 @@ fn penetration_depth_is_exact_for_a_box_and_close_for_a_sphere() {
     for _ in 0..500 {
         let local = rng.vec3(-0.5, 0.5);
         let expected = (half - local.abs()).min_element().max(0.0);
-        let got = collide::penetration_depth(&boxed, &frame, rotation * local + offset);
+        let got = measure::penetration_depth(&boxed, &frame, rotation * local + offset);
         assert!(
             (got - expected).abs() < 1e-5,
             "box point {local}: {got} vs {expected}"
@@ -127,7 +128,7 @@ fn penetration_depth_is_exact_for_a_box_and_close_for_a_sphere() {
     for _ in 0..500 {
         let p = rng.vec3(-0.4, 0.4);
         let expected = (0.3 - p.length()).max(0.0);
-        let got = collide::penetration_depth(&sphere, &frame, p);
+        let got = measure::penetration_depth(&sphere, &frame, p);
         // Facets lie inside the true sphere by up to r (1 − cos θ) ≈ 3 mm.
         assert!(
             (got - expected).abs() < 4e-3,

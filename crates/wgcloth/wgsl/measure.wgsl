@@ -2,7 +2,7 @@
 // step (a ray-parity inside test, then the distance to the nearest face
 // plane containing the projection; no depth limit), folded into the run's
 // maximum, and the step's contact count into the total.
-// CPU twin: cpu::collide::max_penetration.
+// CPU twin: src/cpu/measure.rs.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> x: array<vec4<f32>>;

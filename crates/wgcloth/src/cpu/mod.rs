@@ -6,6 +6,7 @@ pub mod assemble;
 pub mod collide;
 pub mod contact;
 pub mod integrate;
+pub mod measure;
 pub mod pcg;
 pub mod rigid;
 pub mod springs;
@@ -227,7 +228,7 @@ impl CpuSim {
             Stage::Integrate => integrate::integrate(cloth, h, x, v),
             Stage::Measure => {
                 if let Some(body) = body {
-                    stats.max_penetration = collide::max_penetration(body, &self.frame, x);
+                    stats.max_penetration = measure::max_penetration(body, &self.frame, x);
                 }
             }
         }
