@@ -73,7 +73,7 @@ fn network(c: &mut Criterion) {
             }
             if let Some((ctx, kernels)) = gpu.as_ref().filter(|_| work <= gpu_budget) {
                 let on_gpu = NetworkBatch::new(
-                    kernels.clone(),
+                    kernels,
                     &ctx.device,
                     net,
                     wrt.clone(),

@@ -451,8 +451,7 @@ fn gpu_batch(
     inputs: &[Vec<f32>],
     shape: wgcloth::gpu::mlp::BatchShape,
 ) -> wgcloth::Result<Vec<f32>> {
-    let batch =
-        wgcloth::gpu::mlp::NetworkBatch::new(kernels.clone(), &ctx.device, net, wrt, shape)?;
+    let batch = wgcloth::gpu::mlp::NetworkBatch::new(kernels, &ctx.device, net, wrt, shape)?;
     let flat: Vec<f32> = inputs.iter().flatten().copied().collect();
     batch.upload(&ctx.queue, &flat)?;
     batch.run(&ctx.device, &ctx.queue);
@@ -583,7 +582,7 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
         kernel: wgcloth::gpu::mlp::NetworkKernel::Tiled,
         ..wgcloth::gpu::mlp::BatchShape::new(4)
     };
-    let err = wgcloth::gpu::GpuMlp::new(kernels.clone(), &device, &wide, 0..6, shape, io())
+    let err = wgcloth::gpu::GpuMlp::new(&kernels, &device, &wide, 0..6, shape, io())
         .err()
         .expect("refused")
         .to_string();
@@ -591,7 +590,7 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
     // Weights that fit (0.5 MB), activations of one contact that do not:
     // 7 rows × 40000 floats = 1.1 MB.
     let one_wide = random_mlp(&[6, 1, 40000, 1, 3], 2);
-    let err = wgcloth::gpu::GpuMlp::new(kernels, &device, &one_wide, 0..6, shape, io())
+    let err = wgcloth::gpu::GpuMlp::new(&kernels, &device, &one_wide, 0..6, shape, io())
         .err()
         .expect("refused")
         .to_string();

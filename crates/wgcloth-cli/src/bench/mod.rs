@@ -470,7 +470,7 @@ fn network_rows(
                 continue;
             }
             let on_gpu = NetworkBatch::new(
-                kernels.clone(),
+                kernels,
                 &ctx.device,
                 net,
                 wrt.clone(),

@@ -7,23 +7,132 @@ use std::collections::BTreeMap;
 use crate::error::{Error, Result};
 use crate::gpu::shaders::{self, Binding, STAGES};
 
+/// Every entry point of every stage: pipelines are found by this, never
+/// by name. Each names its WGSL file and the entry point in it; a test
+/// checks that the files have no other.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Entry {
+    Rigid,
+    CollideTiles,
+    CollideSupertiles,
+    CollideVertexFace,
+    CollideFaceVertex,
+    ContactVertexFace,
+    ContactFaceVertex,
+    ContactResetBatch,
+    ContactGather,
+    ContactRespondBatch,
+    Springs,
+    AssembleVertex,
+    AssembleSpring,
+    PcgInit,
+    PcgInitScalars,
+    PcgSpmv,
+    PcgUpdate,
+    PcgDirection,
+    PcgFinish,
+    Integrate,
+    Measure,
+    BatchPlan,
+    MlpLayer,
+    MlpPerContact,
+    ForceLines,
+}
+
+impl Entry {
+    pub const ALL: [Entry; 25] = [
+        Entry::Rigid,
+        Entry::CollideTiles,
+        Entry::CollideSupertiles,
+        Entry::CollideVertexFace,
+        Entry::CollideFaceVertex,
+        Entry::ContactVertexFace,
+        Entry::ContactFaceVertex,
+        Entry::ContactResetBatch,
+        Entry::ContactGather,
+        Entry::ContactRespondBatch,
+        Entry::Springs,
+        Entry::AssembleVertex,
+        Entry::AssembleSpring,
+        Entry::PcgInit,
+        Entry::PcgInitScalars,
+        Entry::PcgSpmv,
+        Entry::PcgUpdate,
+        Entry::PcgDirection,
+        Entry::PcgFinish,
+        Entry::Integrate,
+        Entry::Measure,
+        Entry::BatchPlan,
+        Entry::MlpLayer,
+        Entry::MlpPerContact,
+        Entry::ForceLines,
+    ];
+
+    /// The WGSL file (stage) and the entry point in it.
+    pub const fn wgsl(self) -> (&'static str, &'static str) {
+        match self {
+            Entry::Rigid => ("rigid", "main"),
+            Entry::CollideTiles => ("collide", "tiles"),
+            Entry::CollideSupertiles => ("collide", "supertiles"),
+            Entry::CollideVertexFace => ("collide", "vertex_face"),
+            Entry::CollideFaceVertex => ("collide", "face_vertex"),
+            Entry::ContactVertexFace => ("contact", "vertex_face"),
+            Entry::ContactFaceVertex => ("contact", "face_vertex"),
+            Entry::ContactResetBatch => ("contact", "reset_batch"),
+            Entry::ContactGather => ("contact", "gather"),
+            Entry::ContactRespondBatch => ("contact", "respond_batch"),
+            Entry::Springs => ("springs", "main"),
+            Entry::AssembleVertex => ("assemble", "vertex"),
+            Entry::AssembleSpring => ("assemble", "spring"),
+            Entry::PcgInit => ("pcg", "init"),
+            Entry::PcgInitScalars => ("pcg", "init_scalars"),
+            Entry::PcgSpmv => ("pcg", "spmv"),
+            Entry::PcgUpdate => ("pcg", "update"),
+            Entry::PcgDirection => ("pcg", "direction"),
+            Entry::PcgFinish => ("pcg", "finish"),
+            Entry::Integrate => ("integrate", "main"),
+            Entry::Measure => ("measure", "main"),
+            Entry::BatchPlan => ("batch", "plan"),
+            Entry::MlpLayer => ("mlp", "layer"),
+            Entry::MlpPerContact => ("mlp", "per_contact"),
+            Entry::ForceLines => ("lines", "force_lines"),
+        }
+    }
+}
+
 /// One entry point's pipeline, with a bind group layout of just the
 /// bindings it uses (so it fits WebGPU's per-stage limits).
 pub struct Kernel {
-    pub pipeline: wgpu::ComputePipeline,
+    pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     bindings: BTreeMap<String, Binding>,
-    label: String,
+    entry: Entry,
+}
+
+/// A kernel bound to one scene's buffers: ready to record.
+pub struct Bound {
+    pipeline: wgpu::ComputePipeline,
+    group: wgpu::BindGroup,
+}
+
+impl Bound {
+    /// Sets the pipeline and bind group, for a dispatch of the caller's.
+    pub fn set(&self, pass: &mut wgpu::ComputePass) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.group, &[]);
+    }
+
+    /// Records one invocation per `threads`, in workgroups of `workgroup`.
+    pub fn dispatch(&self, pass: &mut wgpu::ComputePass, threads: u32, workgroup: u32) {
+        self.set(pass);
+        pass.dispatch_workgroups(threads.div_ceil(workgroup), 1, 1);
+    }
 }
 
 impl Kernel {
-    /// A bind group from a stage's buffers by WGSL variable name: the ones
-    /// this entry point uses, each of which must be among them.
-    pub fn bind(
-        &self,
-        device: &wgpu::Device,
-        buffers: &[(&str, &wgpu::Buffer)],
-    ) -> wgpu::BindGroup {
+    /// Binds a stage's buffers, given by WGSL variable name: the ones this
+    /// entry point uses, each of which must be among them.
+    pub fn bind(&self, device: &wgpu::Device, buffers: &[(&str, &wgpu::Buffer)]) -> Bound {
         let entries: Vec<wgpu::BindGroupEntry> = self
             .bindings
             .iter()
@@ -31,7 +140,7 @@ impl Kernel {
                 let buffer = buffers
                     .iter()
                     .find(|(n, _)| n == name)
-                    .unwrap_or_else(|| panic!("{}: no buffer given for `{name}`", self.label))
+                    .unwrap_or_else(|| panic!("{:?}: no buffer given for `{name}`", self.entry))
                     .1;
                 wgpu::BindGroupEntry {
                     binding: b.binding,
@@ -39,16 +148,21 @@ impl Kernel {
                 }
             })
             .collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&self.label),
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.entry.wgsl().1),
             layout: &self.layout,
             entries: &entries,
-        })
+        });
+        Bound {
+            pipeline: self.pipeline.clone(),
+            group,
+        }
     }
 }
 
 pub struct Kernels {
-    kernels: BTreeMap<(&'static str, String), Kernel>,
+    /// Indexed by `Entry as usize` ([`Entry::ALL`]'s order).
+    kernels: Vec<Kernel>,
     mlp_threads: u32,
     software: bool,
 }
@@ -84,62 +198,79 @@ impl Kernels {
 
     fn compile(device: &wgpu::Device) -> Result<Kernels> {
         let mlp_threads = mlp_threads(&device.limits());
-        let mut kernels = BTreeMap::new();
+        let mut compiled = Vec::new();
         for (stage, _) in STAGES {
-            let entries = shaders::reflect(stage, mlp_threads)
+            let mut reflected = shaders::reflect(stage, mlp_threads)
                 .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl: {e}")))?;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(stage),
                 source: wgpu::ShaderSource::Wgsl(shaders::source(stage, mlp_threads).into()),
             });
-            for entry in entries {
-                let label = format!("{stage}::{}", entry.name);
-                let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = entry
-                    .bindings
-                    .values()
-                    .map(|b| wgpu::BindGroupLayoutEntry {
-                        binding: b.binding,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: b.ty,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    })
-                    .collect();
-                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some(&label),
-                    entries: &layout_entries,
-                });
-                let pipeline_layout =
-                    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some(&label),
-                        bind_group_layouts: &[Some(&layout)],
-                        immediate_size: 0,
-                    });
-                let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(&label),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(&entry.name),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
-                let kernel = Kernel {
-                    pipeline,
-                    layout,
-                    bindings: entry.bindings,
-                    label,
-                };
-                kernels.insert((stage, entry.name), kernel);
+            for entry in Entry::ALL.into_iter().filter(|e| e.wgsl().0 == stage) {
+                let name = entry.wgsl().1;
+                let at = reflected
+                    .iter()
+                    .position(|r| r.name == name)
+                    .ok_or_else(|| {
+                        Error::Gpu(format!("wgsl/{stage}.wgsl has no entry point `{name}`"))
+                    })?;
+                let bindings = reflected.swap_remove(at).bindings;
+                compiled.push((entry, Self::pipeline(device, &module, entry, bindings)));
             }
         }
+        compiled.sort_by_key(|(entry, _)| *entry as usize);
         Ok(Kernels {
-            kernels,
+            kernels: compiled.into_iter().map(|(_, k)| k).collect(),
             mlp_threads,
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
         })
+    }
+
+    /// One entry point's pipeline with a layout of the bindings it uses.
+    fn pipeline(
+        device: &wgpu::Device,
+        module: &wgpu::ShaderModule,
+        entry: Entry,
+        bindings: BTreeMap<String, Binding>,
+    ) -> Kernel {
+        let (stage, name) = entry.wgsl();
+        let label = format!("{stage}::{name}");
+        let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+            .values()
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b.binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: b.ty,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(&label),
+            entries: &layout_entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&label),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(&label),
+            layout: Some(&pipeline_layout),
+            module,
+            entry_point: Some(name),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Kernel {
+            pipeline,
+            layout,
+            bindings,
+            entry,
+        }
     }
 
     /// Whether the device is a CPU adapter (lavapipe).
@@ -152,12 +283,35 @@ impl Kernels {
         4 * self.mlp_threads
     }
 
-    /// The kernel of `stage`'s entry point `entry`.
-    pub fn kernel(&self, stage: &str, entry: &str) -> &Kernel {
-        self.kernels
-            .iter()
-            .find(|((s, e), _)| *s == stage && e == entry)
-            .map(|(_, k)| k)
-            .unwrap_or_else(|| panic!("no kernel {stage}::{entry}"))
+    /// The kernel of `entry`.
+    pub fn kernel(&self, entry: Entry) -> &Kernel {
+        &self.kernels[entry as usize]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entries_are_every_entry_point_of_every_stage_in_order() {
+        for (k, entry) in Entry::ALL.into_iter().enumerate() {
+            assert_eq!(entry as usize, k, "{entry:?} out of order");
+        }
+        for (stage, _) in STAGES {
+            let mut found: Vec<String> = shaders::reflect(stage, 16)
+                .unwrap()
+                .into_iter()
+                .map(|e| e.name)
+                .collect();
+            let mut listed: Vec<String> = Entry::ALL
+                .iter()
+                .filter(|e| e.wgsl().0 == stage)
+                .map(|e| e.wgsl().1.to_string())
+                .collect();
+            found.sort();
+            listed.sort();
+            assert_eq!(found, listed, "wgsl/{stage}.wgsl");
+        }
     }
 }

@@ -10,14 +10,13 @@
 //! run it about 3× faster than `layer` on small networks.
 
 use std::ops::Range;
-use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::error::{Error, Result};
 use crate::gpu::context::read_buffer;
-use crate::gpu::kernels::Kernels;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::nn::Mlp;
 
 /// Mirrors `LayerParams` in wgsl/mlp.wgsl.
@@ -154,13 +153,12 @@ pub fn output_bytes(net: &Mlp, capacity: usize, wrt: &Range<usize>) -> u64 {
 }
 
 pub struct GpuMlp {
-    kernels: Arc<Kernels>,
     /// Kept alive for the bind groups.
     _buffers: Vec<wgpu::Buffer>,
     dispatch: wgpu::Buffer,
-    plan: wgpu::BindGroup,
+    plan: Bound,
     /// Per chunk, per layer (tiled), or the one `per_contact` group.
-    layers: Vec<wgpu::BindGroup>,
+    layers: Vec<Bound>,
     kernel: NetworkKernel,
     entries: u32,
     chunks: u32,
@@ -174,7 +172,7 @@ impl GpuMlp {
     /// `wrt`. Fails with a clear error when the network or a chunk of one
     /// contact does not fit the device's limits.
     pub fn new(
-        kernels: Arc<Kernels>,
+        kernels: &Kernels,
         device: &wgpu::Device,
         net: &Mlp,
         wrt: Range<usize>,
@@ -297,7 +295,7 @@ impl GpuMlp {
                 pad: 0,
             }),
         );
-        let plan = kernels.kernel("batch", "plan").bind(
+        let plan = kernels.kernel(Entry::BatchPlan).bind(
             device,
             &[
                 ("batch", &batch_params),
@@ -313,11 +311,11 @@ impl GpuMlp {
         let mut buffers = vec![weights_buffer, batch_params, layer_table];
         let mut layers = Vec::with_capacity(chunks * n_layers + 1);
         let entry = match kernel {
-            NetworkKernel::PerContact => "per_contact",
-            _ => "layer",
+            NetworkKernel::PerContact => Entry::MlpPerContact,
+            _ => Entry::MlpLayer,
         };
         let group = |params: &wgpu::Buffer, z_in, z_out, buffers: &[wgpu::Buffer]| {
-            kernels.kernel("mlp", entry).bind(
+            kernels.kernel(entry).bind(
                 device,
                 &[
                     ("layer_params", params),
@@ -373,7 +371,6 @@ impl GpuMlp {
         }
         buffers.extend(activations);
         Ok(GpuMlp {
-            kernels,
             _buffers: buffers,
             dispatch,
             plan,
@@ -412,18 +409,15 @@ impl GpuMlp {
     /// every layer of every chunk (chunks past the batch size dispatch
     /// nothing). Returns the number of dispatches.
     pub fn record(&self, pass: &mut wgpu::ComputePass) -> u32 {
-        pass.set_pipeline(&self.kernels.kernel("batch", "plan").pipeline);
-        pass.set_bind_group(0, &self.plan, &[]);
-        pass.dispatch_workgroups(self.entries.div_ceil(64), 1, 1);
+        // wgsl/batch.wgsl's workgroup: 64.
+        self.plan.dispatch(pass, self.entries, 64);
         if self.kernel == NetworkKernel::PerContact {
-            pass.set_pipeline(&self.kernels.kernel("mlp", "per_contact").pipeline);
-            pass.set_bind_group(0, &self.layers[0], &[]);
+            self.layers[0].set(pass);
             pass.dispatch_workgroups_indirect(&self.dispatch, 12 * (self.entries as u64 - 2));
             return 2;
         }
-        pass.set_pipeline(&self.kernels.kernel("mlp", "layer").pipeline);
-        for (e, group) in self.layers.iter().enumerate() {
-            pass.set_bind_group(0, group, &[]);
+        for (e, layer) in self.layers.iter().enumerate() {
+            layer.set(pass);
             pass.dispatch_workgroups_indirect(&self.dispatch, 12 * e as u64);
         }
         1 + self.layers.len() as u32
@@ -450,7 +444,7 @@ pub struct NetworkBatch {
 impl NetworkBatch {
     /// Room for a batch of `shape`.
     pub fn new(
-        kernels: Arc<Kernels>,
+        kernels: &Kernels,
         device: &wgpu::Device,
         net: &Mlp,
         wrt: Range<usize>,

@@ -1,7 +1,10 @@
 //! The GPU path: every stage of the step as a WGSL compute pass on wgpu.
-//! Kernels (pipelines, built once per device) live apart from a scene's
-//! state (buffers), as in wgsparkl.
+//! Kernels (pipelines, built once per device: `kernels`) live apart from a
+//! scene's state (buffers: `buffers`), as in wgsparkl; each stage's module
+//! in `stages` binds the one to the other and records itself, and
+//! [`GpuSim`] runs them as a step.
 
+pub mod buffers;
 pub mod constants;
 pub mod context;
 pub mod kernels;
@@ -10,6 +13,7 @@ pub mod mlp;
 pub mod readback;
 pub mod shaders;
 pub mod sim;
+pub mod stages;
 
 pub use context::GpuContext;
 pub use kernels::Kernels;

@@ -1,0 +1,392 @@
+//! One scene's state on the GPU, apart from the kernels (as in
+//! wgsparkl): the run's constants ([`params_for`]), every buffer's size as
+//! a pure function of the scene ([`Sizes`], as vello's `RenderConfig`),
+//! the check of those sizes against the device's limits, and the buffers.
+
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use crate::config::ModelKind;
+use crate::error::{Error, Result};
+use crate::gpu::constants::{MAX_TRIANGLE_CONTACTS, TILE, WORKGROUP, model};
+use crate::gpu::layout::{
+    BvhNode, Contact, Params, Response, RigidFrame, Scalars, Sections, SpringTerm, StepState, Sym3,
+};
+use crate::nn::weights::NetKind;
+use crate::render::metres_per_force;
+use crate::scene::{Motion, Scene};
+
+/// Workgroups covering `n` invocations.
+pub(crate) fn groups(n: u32) -> u32 {
+    n.div_ceil(WORKGROUP)
+}
+
+pub(crate) fn vec4s(points: &[Vec3], w: f32) -> Vec<[f32; 4]> {
+    points.iter().map(|p| p.extend(w).to_array()).collect()
+}
+
+/// The scene's buffers. Related arrays share one buffer (slots of both
+/// contact directions, A's diagonal and off-diagonal blocks, the placed
+/// body's vertices and normals, all static connectivity in `topology`), so
+/// no kernel binds more than WebGPU's default 8 storage buffers.
+pub(crate) struct Buffers {
+    pub(crate) params: wgpu::Buffer,
+    pub(crate) x: wgpu::Buffer,
+    pub(crate) v: wgpu::Buffer,
+    /// Positions and velocities as `record_checkpoint` last copied them.
+    pub(crate) x_kept: wgpu::Buffer,
+    pub(crate) v_kept: wgpu::Buffer,
+    pub(crate) rest: wgpu::Buffer,
+    pub(crate) topology: wgpu::Buffer,
+    pub(crate) sections: Sections,
+    pub(crate) rest_lengths: wgpu::Buffer,
+    pub(crate) spring_terms: wgpu::Buffer,
+    /// Vertex–face slots (one per cloth vertex), then face–vertex ones
+    /// (one per rigid vertex).
+    pub(crate) contacts: wgpu::Buffer,
+    pub(crate) responses: wgpu::Buffer,
+    /// Per cloth triangle its face–vertex contact count, then the lists.
+    pub(crate) triangle_contacts: wgpu::Buffer,
+    /// A's diagonal blocks, then its off-diagonal ones.
+    pub(crate) matrix: wgpu::Buffer,
+    pub(crate) b: wgpu::Buffer,
+    pub(crate) r: wgpu::Buffer,
+    pub(crate) z: wgpu::Buffer,
+    pub(crate) p: wgpu::Buffer,
+    pub(crate) q: wgpu::Buffer,
+    pub(crate) inv_diag: wgpu::Buffer,
+    pub(crate) partials: wgpu::Buffer,
+    pub(crate) scalars: [wgpu::Buffer; 2],
+    pub(crate) state: wgpu::Buffer,
+    pub(crate) body_vertices: wgpu::Buffer,
+    pub(crate) body_normals: wgpu::Buffer,
+    pub(crate) body_face_normals: wgpu::Buffer,
+    pub(crate) bvh_nodes: wgpu::Buffer,
+    /// The placed body: its vertices, then their normals.
+    pub(crate) rigid: wgpu::Buffer,
+    pub(crate) frame: wgpu::Buffer,
+    /// Tile bounds, then super-tile bounds.
+    pub(crate) bounds: wgpu::Buffer,
+    /// The network batch's size, then its contact slots.
+    pub(crate) net_batch: wgpu::Buffer,
+    pub(crate) net_inputs: wgpu::Buffer,
+    pub(crate) net_outputs: wgpu::Buffer,
+    /// The renderer's force segments (stage "lines") and their scale.
+    pub(crate) lines: wgpu::Buffer,
+    pub(crate) line_scale: wgpu::Buffer,
+}
+
+/// The run's constants, as the kernels read them.
+pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
+    let cloth = &scene.cloth;
+    let cfg = &scene.config;
+    let (cells_x, cells_y) = (cloth.nx - 1, cloth.ny - 1);
+    let (tiles_x, tiles_y) = (cells_x.div_ceil(TILE), cells_y.div_ceil(TILE));
+    let mut p = Params {
+        n_vertices: cloth.vertex_count() as u32,
+        n_springs: cloth.springs.len() as u32,
+        n_triangles: cloth.triangles.len() as u32,
+        model: match cfg.model {
+            ModelKind::Naive => model::NAIVE,
+            ModelKind::Friction => model::FRICTION,
+            ModelKind::FrictionNet => match scene.network.as_ref().map(|n| n.kind) {
+                Some(NetKind::FrictionContact) => model::FRICTION_CONTACT_NET,
+                _ => model::FRICTION_NET,
+            },
+            ModelKind::NaiveNet => model::NAIVE_NET,
+        },
+        net_width: scene.network.as_ref().map_or(0, |n| n.mlp.inputs() as u32),
+        net_rows: scene
+            .network
+            .as_ref()
+            .map_or(0, |n| 1 + n.kind.wrt().len() as u32),
+        net_outputs: scene.network.as_ref().map_or(0, |n| n.mlp.outputs() as u32),
+        cg_max_iters: cfg.solver.cg_iters,
+        dt: cfg.solver.dt,
+        vertex_mass: cloth.vertex_mass,
+        stiffness: cloth.stiffness,
+        cg_tol: cfg.solver.cg_tol,
+        max_speed: cfg.solver.max_speed,
+        damping_mass: cfg.cloth.damping_mass,
+        damping_stiffness: cfg.cloth.damping_stiffness,
+        thickness: cfg.contact.thickness,
+        max_depth: cfg.contact.max_depth,
+        gravity: cfg.solver.gravity,
+        naive_stiffness: cfg.contact.naive_stiffness,
+        force_scale: cfg.contact.force_scale,
+        kn: cfg.contact.kn,
+        kd: cfg.contact.kd,
+        kt: cfg.contact.kt,
+        mu: cfg.contact.mu,
+        cells_x,
+        cells_y,
+        tiles_x,
+        tiles_y,
+        supertiles_x: tiles_x.div_ceil(TILE),
+        supertiles_y: tiles_y.div_ceil(TILE),
+        springs_at: sections.springs,
+        adjacency_at: sections.adjacency,
+        pinned_at: sections.pinned,
+        vertex_triangles_at: sections.vertex_triangles,
+        spring_triangles_at: sections.spring_triangles,
+        body_triangles_at: sections.body_triangles,
+        bvh_order_at: sections.bvh_order,
+        ..Default::default()
+    };
+    if let Some(body) = &scene.rigid {
+        p.has_rigid = 1;
+        p.n_rigid_vertices = body.mesh.vertices.len() as u32;
+        p.n_rigid_triangles = body.mesh.triangles.len() as u32;
+        p.rigid_position = body.position.to_array();
+        p.rigid_rotation = body.rotation.to_array();
+        (p.motion_kind, p.motion_vector) = match body.motion {
+            Motion::Static => (0, [0.0; 3]),
+            Motion::Linear { velocity } => (1, velocity.to_array()),
+            Motion::Sinusoid {
+                axis,
+                amplitude,
+                period,
+                phase,
+            } => {
+                (p.motion_amplitude, p.motion_period, p.motion_phase) = (amplitude, period, phase);
+                (2, axis.to_array())
+            }
+        };
+    }
+    p
+}
+
+/// Every buffer's size in bytes that depends on the scene, a pure function
+/// of it (as vello's `RenderConfig`): the limits check and the allocation
+/// read the same numbers.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Sizes {
+    /// One `vec4<f32>` per cloth vertex: x, v, b, r, z, p, q, …
+    pub(crate) per_vertex: u64,
+    pub(crate) topology: u64,
+    pub(crate) rest_lengths: u64,
+    pub(crate) spring_terms: u64,
+    pub(crate) contacts: u64,
+    pub(crate) responses: u64,
+    pub(crate) triangle_contacts: u64,
+    pub(crate) matrix: u64,
+    pub(crate) partials: u64,
+    pub(crate) rigid: u64,
+    pub(crate) bounds: u64,
+    pub(crate) net_batch: u64,
+    pub(crate) net_inputs: u64,
+    pub(crate) net_outputs: u64,
+    pub(crate) lines: u64,
+}
+
+impl Sizes {
+    pub(crate) fn of(scene: &Scene, params: &Params, topology_words: usize) -> Sizes {
+        let p = params;
+        let (n, s, t) = (
+            p.n_vertices as u64,
+            p.n_springs as u64,
+            p.n_triangles as u64,
+        );
+        let slots = n + p.n_rigid_vertices as u64;
+        // A network batch holds every contact slot, at most.
+        let batch = scene
+            .network
+            .as_ref()
+            .map_or(0, |net| slots * net.kind.evaluations() as u64);
+        let tiles = (p.tiles_x * p.tiles_y + p.supertiles_x * p.supertiles_y) as u64;
+        let size = |n: u64, of: usize| n * of as u64;
+        Sizes {
+            per_vertex: size(n, 16),
+            topology: size(topology_words as u64, 4),
+            rest_lengths: size(s, 4),
+            spring_terms: size(s, size_of::<SpringTerm>()),
+            contacts: size(slots, size_of::<Contact>()),
+            responses: size(slots, size_of::<Response>()),
+            triangle_contacts: size(t * (1 + MAX_TRIANGLE_CONTACTS as u64), 4),
+            matrix: size(n + s, size_of::<Sym3>()),
+            partials: size(3 * groups(n as u32) as u64, 4),
+            rigid: size(2 * p.n_rigid_vertices as u64, 16),
+            bounds: size(tiles, 32),
+            net_batch: size(1 + batch, 4),
+            net_inputs: size(batch * p.net_width as u64, 4),
+            net_outputs: size(batch * (p.net_rows * p.net_outputs) as u64, 4),
+            lines: size(2 * slots, 16),
+        }
+    }
+
+    /// Each buffer a kernel binds whole, by what it holds.
+    pub(crate) fn all(&self) -> [(&'static str, u64); 15] {
+        [
+            ("per-vertex vectors", self.per_vertex),
+            ("topology", self.topology),
+            ("rest lengths", self.rest_lengths),
+            ("spring terms", self.spring_terms),
+            ("contacts", self.contacts),
+            ("responses", self.responses),
+            ("triangle contact lists", self.triangle_contacts),
+            ("system matrix", self.matrix),
+            ("partial sums", self.partials),
+            ("placed body", self.rigid),
+            ("tile bounds", self.bounds),
+            ("network batch", self.net_batch),
+            ("network inputs", self.net_inputs),
+            ("network outputs", self.net_outputs),
+            ("force lines", self.lines),
+        ]
+    }
+}
+
+impl Buffers {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        scene: &Scene,
+        params: &Params,
+        (topology, sections): (Vec<u32>, Sections),
+    ) -> Buffers {
+        let cloth = &scene.cloth;
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let init = |label: &str, contents: &[u8], extra: wgpu::BufferUsages| {
+            // Empty arrays (no rigid body) still need a bindable buffer of
+            // at least one element of the largest struct (Contact, 64 B).
+            let padded;
+            let contents = if contents.is_empty() {
+                padded = [0u8; 64];
+                &padded[..]
+            } else {
+                contents
+            };
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: usage | extra,
+            })
+        };
+        let storage =
+            |label: &str, contents: &[u8]| init(label, contents, wgpu::BufferUsages::empty());
+        let zeroed = |label: &str, bytes: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.max(64),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let sizes = Sizes::of(scene, params, topology.len());
+
+        let body = scene.rigid.as_ref();
+        let body_vertices = body.map_or(vec![], |b| vec4s(&b.mesh.vertices, 1.0));
+        let body_normals = body.map_or(vec![], |b| vec4s(&b.vertex_normals, 0.0));
+        let body_face_normals = body.map_or(vec![], |b| vec4s(&b.face_normals, 0.0));
+        let bvh_nodes: Vec<BvhNode> = body.map_or(vec![], |b| {
+            b.bvh
+                .nodes
+                .iter()
+                .map(|n| BvhNode {
+                    lo: n.bounds.min.to_array(),
+                    first: n.first,
+                    hi: n.bounds.max.to_array(),
+                    count: n.count,
+                })
+                .collect()
+        });
+        Buffers {
+            params: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::bytes_of(params),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            }),
+            x: init(
+                "positions",
+                bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
+                wgpu::BufferUsages::VERTEX,
+            ),
+            v: zeroed("velocities", sizes.per_vertex),
+            x_kept: zeroed("kept positions", sizes.per_vertex),
+            v_kept: zeroed("kept velocities", sizes.per_vertex),
+            rest: storage(
+                "rest positions",
+                bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
+            ),
+            topology: init(
+                "topology",
+                bytemuck::cast_slice(&topology),
+                wgpu::BufferUsages::INDEX,
+            ),
+            sections,
+            rest_lengths: storage("rest lengths", bytemuck::cast_slice(&cloth.rest_lengths)),
+            spring_terms: zeroed("spring terms", sizes.spring_terms),
+            contacts: zeroed("contacts", sizes.contacts),
+            responses: zeroed("responses", sizes.responses),
+            triangle_contacts: zeroed("triangle contacts", sizes.triangle_contacts),
+            matrix: zeroed("system matrix", sizes.matrix),
+            b: zeroed("b", sizes.per_vertex),
+            r: zeroed("r", sizes.per_vertex),
+            z: zeroed("z", sizes.per_vertex),
+            p: zeroed("p", sizes.per_vertex),
+            q: zeroed("q", sizes.per_vertex),
+            inv_diag: zeroed("inverse diagonal", sizes.per_vertex),
+            partials: zeroed("partial sums", sizes.partials),
+            scalars: [
+                zeroed("pcg scalars 0", size_of::<Scalars>() as u64),
+                zeroed("pcg scalars 1", size_of::<Scalars>() as u64),
+            ],
+            state: zeroed("step state", size_of::<StepState>() as u64),
+            body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
+            body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),
+            body_face_normals: storage(
+                "body face normals",
+                bytemuck::cast_slice(&body_face_normals),
+            ),
+            bvh_nodes: storage("body BVH nodes", bytemuck::cast_slice(&bvh_nodes)),
+            rigid: init(
+                "placed body",
+                &vec![0u8; sizes.rigid as usize],
+                wgpu::BufferUsages::VERTEX,
+            ),
+            frame: zeroed("rigid frame", size_of::<RigidFrame>() as u64),
+            bounds: zeroed("tile bounds", sizes.bounds),
+            net_batch: zeroed("network batch", sizes.net_batch),
+            net_inputs: zeroed("network inputs", sizes.net_inputs),
+            net_outputs: zeroed("network outputs", sizes.net_outputs),
+            lines: zeroed("force lines", sizes.lines),
+            line_scale: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("force line scale"),
+                contents: bytemuck::cast_slice(&[metres_per_force(scene), 0.0, 0.0, 0.0]),
+                usage: wgpu::BufferUsages::UNIFORM,
+            }),
+        }
+    }
+}
+
+/// Refuses a scene the device cannot run, naming the limit, what the
+/// scene needs and what the device has, before anything is created.
+pub(crate) fn check_limits(limits: &wgpu::Limits, sizes: &Sizes, params: &Params) -> Result<()> {
+    let bindable = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    for (what, bytes) in sizes.all() {
+        if bytes > bindable {
+            let limit = if bytes > limits.max_buffer_size {
+                "max_buffer_size"
+            } else {
+                "max_storage_buffer_binding_size"
+            };
+            return Err(Error::Gpu(format!(
+                "the scene's {what} need a {bytes}-byte buffer; the device's {limit} is {bindable} bytes (use a smaller --grid)"
+            )));
+        }
+    }
+    let most = (params.n_vertices.max(params.n_springs) as u64)
+        .max((params.n_vertices + params.n_rigid_vertices) as u64);
+    let dispatchable = limits.max_compute_workgroups_per_dimension as u64 * WORKGROUP as u64;
+    if most > dispatchable {
+        return Err(Error::Gpu(format!(
+            "the scene needs {} workgroups in one dispatch; the device's max_compute_workgroups_per_dimension is {} (use a smaller --grid)",
+            most.div_ceil(WORKGROUP as u64),
+            limits.max_compute_workgroups_per_dimension
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,40 @@
+//! Stage "assemble" (wgsl/assemble.wgsl; CPU twin cpu/assemble.rs): the
+//! linearised backward Euler system (thesis eqs. 1–3), gathered per vertex
+//! (diagonal blocks and b) and per spring (off-diagonal blocks).
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Assemble {
+    vertex: Bound,
+    spring: Bound,
+}
+
+impl Assemble {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Assemble {
+        let buffers = [
+            ("params", &b.params),
+            ("v", &b.v),
+            ("topology", &b.topology),
+            ("spring_terms", &b.spring_terms),
+            ("contacts", &b.contacts),
+            ("responses", &b.responses),
+            ("triangle_contacts", &b.triangle_contacts),
+            ("matrix", &b.matrix),
+            ("b", &b.b),
+        ];
+        let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+        Assemble {
+            vertex: bind(Entry::AssembleVertex),
+            spring: bind(Entry::AssembleSpring),
+        }
+    }
+
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        self.vertex.dispatch(pass, p.n_vertices, WORKGROUP);
+        self.spring.dispatch(pass, p.n_springs, WORKGROUP);
+        2
+    }
+}

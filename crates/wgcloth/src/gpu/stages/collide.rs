@@ -1,0 +1,60 @@
+//! Stage "collide" (wgsl/collide.wgsl; CPU twin cpu/collide.rs): the
+//! two-level tile hierarchy over the cloth refitted, then the proximity
+//! tests in both directions (thesis 2.3).
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Collide {
+    tiles: Bound,
+    supertiles: Bound,
+    vertex_face: Bound,
+    face_vertex: Bound,
+    triangle_contacts: wgpu::Buffer,
+}
+
+impl Collide {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Collide {
+        let buffers = [
+            ("params", &b.params),
+            ("x", &b.x),
+            ("topology", &b.topology),
+            ("body_vertices", &b.body_vertices),
+            ("body_face_normals", &b.body_face_normals),
+            ("bvh_nodes", &b.bvh_nodes),
+            ("rigid", &b.rigid),
+            ("frame", &b.frame),
+            ("bounds", &b.bounds),
+            ("contacts", &b.contacts),
+            ("triangle_contacts", &b.triangle_contacts),
+            ("state", &b.state),
+        ];
+        let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+        Collide {
+            tiles: bind(Entry::CollideTiles),
+            supertiles: bind(Entry::CollideSupertiles),
+            vertex_face: bind(Entry::CollideVertexFace),
+            face_vertex: bind(Entry::CollideFaceVertex),
+            triangle_contacts: b.triangle_contacts.clone(),
+        }
+    }
+
+    /// Before the pass: face–vertex contacts append to their triangle's
+    /// list, so the per-triangle counts start at zero.
+    pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
+        let counts = 4 * p.n_triangles as u64;
+        encoder.clear_buffer(&self.triangle_contacts, 0, Some(counts));
+    }
+
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
+        let supertiles = p.supertiles_x * p.supertiles_y;
+        self.supertiles.dispatch(pass, supertiles, WORKGROUP);
+        self.vertex_face.dispatch(pass, p.n_vertices, WORKGROUP);
+        self.face_vertex
+            .dispatch(pass, p.n_rigid_vertices, WORKGROUP);
+        4
+    }
+}

@@ -1,0 +1,32 @@
+//! Stage "integrate" (wgsl/integrate.wgsl; CPU twin cpu/integrate.rs):
+//! x' = x + h v', the clock, and the health flags.
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Integrate {
+    integrate: Bound,
+}
+
+impl Integrate {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Integrate {
+        let buffers = [
+            ("params", &b.params),
+            ("x", &b.x),
+            ("v", &b.v),
+            ("rest_positions", &b.rest),
+            ("topology", &b.topology),
+            ("state", &b.state),
+        ];
+        Integrate {
+            integrate: kernels.kernel(Entry::Integrate).bind(device, &buffers),
+        }
+    }
+
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        self.integrate.dispatch(pass, p.n_vertices, WORKGROUP);
+        1
+    }
+}

@@ -1,0 +1,34 @@
+//! Stage "lines" (wgsl/lines.wgsl; CPU twin render/lines.rs): each
+//! contact's force as a segment, for drawing; not part of a step.
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Lines {
+    force_lines: Bound,
+}
+
+impl Lines {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Lines {
+        let buffers = [
+            ("params", &b.params),
+            ("x", &b.x),
+            ("rigid", &b.rigid),
+            ("contacts", &b.contacts),
+            ("responses", &b.responses),
+            ("line_scale", &b.line_scale),
+            ("lines", &b.lines),
+        ];
+        Lines {
+            force_lines: kernels.kernel(Entry::ForceLines).bind(device, &buffers),
+        }
+    }
+
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        let slots = p.n_vertices + p.n_rigid_vertices;
+        self.force_lines.dispatch(pass, slots, WORKGROUP);
+        1
+    }
+}

@@ -1,0 +1,34 @@
+//! Stage "measure" (wgsl/measure.wgsl; CPU twin cpu/measure.rs): the
+//! deepest any cloth vertex is inside the body, folded into the run's.
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Measure {
+    measure: Bound,
+}
+
+impl Measure {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Measure {
+        let buffers = [
+            ("params", &b.params),
+            ("x", &b.x),
+            ("topology", &b.topology),
+            ("body_vertices", &b.body_vertices),
+            ("body_face_normals", &b.body_face_normals),
+            ("bvh_nodes", &b.bvh_nodes),
+            ("frame", &b.frame),
+            ("state", &b.state),
+        ];
+        Measure {
+            measure: kernels.kernel(Entry::Measure).bind(device, &buffers),
+        }
+    }
+
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        self.measure.dispatch(pass, p.n_vertices, WORKGROUP);
+        1
+    }
+}

@@ -1,0 +1,53 @@
+//! One module per stage of the step, each beside its kernel
+//! (`wgsl/<stage>.wgsl`, CPU twin `cpu/<stage>.rs`), as wgsparkl does: a
+//! stage owns its kernels bound to the scene's buffers and records itself
+//! with `encode`. The scene's buffers ([`super::buffers`]) and the kernels
+//! ([`super::kernels`]) live apart from them.
+
+pub mod assemble;
+pub mod collide;
+pub mod contact;
+pub mod integrate;
+pub mod lines;
+pub mod measure;
+pub mod pcg;
+pub mod rigid;
+pub mod springs;
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::kernels::Kernels;
+use crate::gpu::mlp::GpuMlp;
+
+/// Every stage of a step, bound to one scene's buffers.
+pub(crate) struct Stages {
+    pub(crate) rigid: rigid::Rigid,
+    pub(crate) collide: collide::Collide,
+    pub(crate) contact: contact::Contact,
+    pub(crate) springs: springs::Springs,
+    pub(crate) assemble: assemble::Assemble,
+    pub(crate) pcg: pcg::Pcg,
+    pub(crate) integrate: integrate::Integrate,
+    pub(crate) measure: measure::Measure,
+    pub(crate) lines: lines::Lines,
+}
+
+impl Stages {
+    pub(crate) fn new(
+        kernels: &Kernels,
+        device: &wgpu::Device,
+        b: &Buffers,
+        network: Option<GpuMlp>,
+    ) -> Stages {
+        Stages {
+            rigid: rigid::Rigid::new(kernels, device, b),
+            collide: collide::Collide::new(kernels, device, b),
+            contact: contact::Contact::new(kernels, device, b, network),
+            springs: springs::Springs::new(kernels, device, b),
+            assemble: assemble::Assemble::new(kernels, device, b),
+            pcg: pcg::Pcg::new(kernels, device, b),
+            integrate: integrate::Integrate::new(kernels, device, b),
+            measure: measure::Measure::new(kernels, device, b),
+            lines: lines::Lines::new(kernels, device, b),
+        }
+    }
+}

@@ -1,0 +1,35 @@
+//! Stage "rigid" (wgsl/rigid.wgsl; CPU twin cpu/rigid.rs): places the body
+//! at the end of the step.
+
+use crate::gpu::buffers::Buffers;
+use crate::gpu::constants::WORKGROUP;
+use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::layout::Params;
+
+pub(crate) struct Rigid {
+    place: Bound,
+}
+
+impl Rigid {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Rigid {
+        let buffers = [
+            ("params", &b.params),
+            ("body_vertices", &b.body_vertices),
+            ("body_normals", &b.body_normals),
+            ("rigid", &b.rigid),
+            ("frame", &b.frame),
+            ("state", &b.state),
+        ];
+        Rigid {
+            place: kernels.kernel(Entry::Rigid).bind(device, &buffers),
+        }
+    }
+
+    /// Returns the dispatches recorded.
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+        // At least one invocation: it also writes the frame.
+        self.place
+            .dispatch(pass, p.n_rigid_vertices.max(1), WORKGROUP);
+        1
+    }
+}
