@@ -5,19 +5,18 @@
 //   b_i  = m v_i + h (m g + Σ ±f_s) + Σ β_k h (f − D_c (v_rel − u))
 // CPU twin: src/cpu/assemble.rs (which scatters the contacts instead).
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> v: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> spring_terms: array<SpringTerm>;
+@group(1) @binding(1) var<storage, read> v: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> spring_terms: array<SpringTerm>;
 // Contact slots and their responses: one per cloth vertex (vertex–face),
 // then one per rigid vertex (face–vertex).
-@group(0) @binding(3) var<storage, read> contacts: array<Contact>;
-@group(0) @binding(4) var<storage, read> responses: array<Response>;
+@group(1) @binding(3) var<storage, read> contacts: array<Contact>;
+@group(1) @binding(4) var<storage, read> responses: array<Response>;
 // Per cloth triangle its face–vertex contact count, then
 // MAX_TRIANGLE_CONTACTS slots per triangle.
-@group(0) @binding(5) var<storage, read> triangle_contacts: array<u32>;
+@group(1) @binding(5) var<storage, read> triangle_contacts: array<u32>;
 // A: its diagonal blocks (one per vertex), then one block per spring.
-@group(0) @binding(6) var<storage, read_write> matrix: array<Sym3>;
-@group(0) @binding(7) var<storage, read_write> b: array<vec4<f32>>;
+@group(1) @binding(6) var<storage, read_write> matrix: array<Sym3>;
+@group(1) @binding(7) var<storage, read_write> b: array<vec4<f32>>;
 
 fn stiffness_scale() -> f32 {
     return params.dt * params.dt + params.dt * params.damping_stiffness;
@@ -64,25 +63,26 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var diag = sym_add(sym_diagonal((1.0 + h * params.damping_mass) * m), sym_scale(k_sum, stiffness_scale()));
     var rhs = m * v[i].xyz + h * f;
-    if params.has_rigid != 0u {
-        let c = contacts[i];
-        if c.valid != 0u {
-            let r = responses[i];
-            diag = sym_add(diag, contact_block(r, c.normal));
-            rhs += h * (r.force - sym_mul(r.damping, v[i].xyz));
-        }
-        for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
-            let t = vertex_triangle(q) / 3u;
-            let corner = vertex_triangle(q) % 3u;
-            var list: array<u32, MAX_TRIANGLE_CONTACTS>;
-            let count = sorted_triangle_contacts(t, &list);
-            for (var j = 0u; j < count; j++) {
-                let c = contacts[params.n_vertices + list[j]];
-                let r = responses[params.n_vertices + list[j]];
-                let beta = c.beta[corner];
-                diag = sym_add(diag, sym_scale(contact_block(r, c.normal), beta * beta));
-                rhs += beta * h * (r.force - sym_mul(r.damping, cloth_velocity(c)));
-            }
+    // No branch on params.has_rigid: without a body every slot stays
+    // invalid and every triangle count zero, and lavapipe recompiles a
+    // kernel with a uniform-only branch at each dispatch.
+    let c = contacts[i];
+    if c.valid != 0u {
+        let r = responses[i];
+        diag = sym_add(diag, contact_block(r, c.normal));
+        rhs += h * (r.force - sym_mul(r.damping, v[i].xyz));
+    }
+    for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
+        let t = vertex_triangle(q) / 3u;
+        let corner = vertex_triangle(q) % 3u;
+        var list: array<u32, MAX_TRIANGLE_CONTACTS>;
+        let count = sorted_triangle_contacts(t, &list);
+        for (var j = 0u; j < count; j++) {
+            let c = contacts[params.n_vertices + list[j]];
+            let r = responses[params.n_vertices + list[j]];
+            let beta = c.beta[corner];
+            diag = sym_add(diag, sym_scale(contact_block(r, c.normal), beta * beta));
+            rhs += beta * h * (r.force - sym_mul(r.damping, cloth_velocity(c)));
         }
     }
     matrix[i] = diag;
@@ -96,21 +96,22 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var off = sym_scale(spring_terms[s].block, -stiffness_scale());
-    if params.has_rigid != 0u {
-        let along = spring_triangles(s);
-        for (var side = 0u; side < 2u; side++) {
-            let t = select(along.z, along.x, side == 0u);
-            let edge = select(along.w, along.y, side == 0u);
-            if t == NO_TRIANGLE {
-                continue;
-            }
-            var list: array<u32, MAX_TRIANGLE_CONTACTS>;
-            let count = sorted_triangle_contacts(t, &list);
-            for (var j = 0u; j < count; j++) {
-                let c = contacts[params.n_vertices + list[j]];
-                let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
-                off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + list[j]], c.normal), weight));
-            }
+    // No branch on params.has_rigid: without a body every slot stays
+    // invalid and every triangle count zero, and lavapipe recompiles a
+    // kernel with a uniform-only branch at each dispatch.
+    let along = spring_triangles(s);
+    for (var side = 0u; side < 2u; side++) {
+        let t = select(along.z, along.x, side == 0u);
+        let edge = select(along.w, along.y, side == 0u);
+        if t == NO_TRIANGLE {
+            continue;
+        }
+        var list: array<u32, MAX_TRIANGLE_CONTACTS>;
+        let count = sorted_triangle_contacts(t, &list);
+        for (var j = 0u; j < count; j++) {
+            let c = contacts[params.n_vertices + list[j]];
+            let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
+            off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + list[j]], c.normal), weight));
         }
     }
     matrix[params.n_vertices + s] = off;

@@ -2,7 +2,7 @@
 // over it, shared by the stages that query the body. Prepended after
 // common.wgsl to the stages that list it (gpu::shaders::INCLUDES).
 
-@group(0) @binding(30) var<storage, read> bvh_nodes: array<BvhNode>;
+@group(1) @binding(30) var<storage, read> bvh_nodes: array<BvhNode>;
 
 // A depth-first walk: a box query (p ± reach) or a ray query (p + s d,
 // s ≥ 0, with inv = 1 / d).

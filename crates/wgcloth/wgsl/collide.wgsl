@@ -10,18 +10,17 @@
 //     Each contact is also appended to its cloth triangle's list, which the
 //     assembly gathers from.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> x: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
 // The placed body: its vertices, then their normals.
-@group(0) @binding(4) var<storage, read> rigid: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> frame: RigidFrame;
+@group(1) @binding(4) var<storage, read> rigid: array<vec4<f32>>;
+@group(1) @binding(5) var<storage, read> frame: RigidFrame;
 // The tiles' bounds, then the super-tiles'.
-@group(0) @binding(6) var<storage, read_write> bounds: array<Bounds>;
-@group(0) @binding(7) var<storage, read_write> contacts: array<Contact>;
-@group(0) @binding(8) var<storage, read_write> triangle_contacts: array<atomic<u32>>;
-@group(0) @binding(9) var<storage, read_write> state: StepState;
+@group(1) @binding(6) var<storage, read_write> bounds: array<Bounds>;
+@group(1) @binding(7) var<storage, read_write> contacts: array<Contact>;
+@group(1) @binding(8) var<storage, read_write> triangle_contacts: array<atomic<u32>>;
+@group(1) @binding(9) var<storage, read_write> state: StepState;
 
 fn reach() -> f32 {
     return max(params.thickness, params.max_depth);

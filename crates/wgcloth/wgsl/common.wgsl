@@ -19,6 +19,11 @@ struct Params {
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
 }
 
+// The run's constants: group 0, alone, so a pass binds it once and each
+// kernel's buffers (group 1) change under it without rebinding it (lavapipe
+// recompiles a kernel whenever its uniforms are rebound).
+@group(0) @binding(0) var<uniform> params: Params;
+
 // Time and run statistics, on the GPU so a step needs no host writes.
 // Mirrors `gpu::layout::StepState`.
 struct StepState {

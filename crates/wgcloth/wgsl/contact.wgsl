@@ -4,23 +4,22 @@
 // batch (`gather`), run the network over it (stages "batch" and "mlp") and
 // read its outputs back into responses (`respond_batch`).
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> v: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> v: array<vec4<f32>>;
 // Contact slots and their responses: one per cloth vertex (vertex–face),
 // then one per rigid vertex (face–vertex).
-@group(0) @binding(2) var<storage, read> contacts: array<Contact>;
-@group(0) @binding(3) var<storage, read_write> responses: array<Response>;
+@group(1) @binding(2) var<storage, read> contacts: array<Contact>;
+@group(1) @binding(3) var<storage, read_write> responses: array<Response>;
 // The naive network's geometry: cloth positions and the placed rigid body
 // (vertices, then normals); the triangles are in `topology`.
-@group(0) @binding(4) var<storage, read> x: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> rigid: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(5) var<storage, read> rigid: array<vec4<f32>>;
 // The batch: its size, then each entry's contact slot; the network inputs
 // [entry × width] and outputs [entry × R × net_outputs]: row 0 the output,
 // row 1 + t its derivative along input wrt_start + t. The contact-frame
 // network has two entries per contact, at +slide and −slide.
-@group(0) @binding(6) var<storage, read_write> net_batch: array<atomic<u32>>;
-@group(0) @binding(7) var<storage, read_write> net_inputs: array<f32>;
-@group(0) @binding(8) var<storage, read> net_outputs: array<f32>;
+@group(1) @binding(6) var<storage, read_write> net_batch: array<atomic<u32>>;
+@group(1) @binding(7) var<storage, read_write> net_inputs: array<f32>;
+@group(1) @binding(8) var<storage, read> net_outputs: array<f32>;
 
 // A force with its Jacobians ∂f/∂c and ∂f/∂v_rel.
 struct ForceJacobian {
@@ -177,19 +176,12 @@ fn respond(c: Contact) -> Response {
     return response(evaluate(c.normal * c.depth, v_rel), c.normal, v_rel);
 }
 
+// The analytic models: every contact slot, both directions, in one pass.
 @compute @workgroup_size(WORKGROUP)
-fn vertex_face(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i < params.n_vertices && contacts[i].valid != 0u {
-        responses[i] = respond(contacts[i]);
-    }
-}
-
-@compute @workgroup_size(WORKGROUP)
-fn face_vertex(@builtin(global_invocation_id) id: vec3<u32>) {
-    let k = id.x;
-    if k < params.n_rigid_vertices && contacts[params.n_vertices + k].valid != 0u {
-        responses[params.n_vertices + k] = respond(contacts[params.n_vertices + k]);
+fn respond_slots(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if s < params.n_vertices + params.n_rigid_vertices && contacts[s].valid != 0u {
+        responses[s] = respond(contacts[s]);
     }
 }
 

@@ -10,11 +10,10 @@ fn finite3(a: vec3<f32>) -> bool {
     return all(e != vec3<u32>(0x7f800000u));
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read_write> x: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> v: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> rest_positions: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read_write> state: StepState;
+@group(1) @binding(1) var<storage, read_write> x: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read_write> v: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> rest_positions: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> state: StepState;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {

@@ -3,15 +3,14 @@
 // twin: src/render/lines.rs. Pair 2s, 2s + 1 belongs to contact slot s
 // (vertex–face slots first); an empty slot gets w = 0.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
 // The placed body: its vertices, then their normals.
-@group(0) @binding(2) var<storage, read> rigid: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> contacts: array<Contact>;
-@group(0) @binding(4) var<storage, read> responses: array<Response>;
+@group(1) @binding(2) var<storage, read> rigid: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> contacts: array<Contact>;
+@group(1) @binding(4) var<storage, read> responses: array<Response>;
 // Metres of segment per unit of force.
-@group(0) @binding(5) var<uniform> line_scale: vec4<f32>;
-@group(0) @binding(6) var<storage, read_write> lines: array<vec4<f32>>;
+@group(1) @binding(5) var<uniform> line_scale: vec4<f32>;
+@group(1) @binding(6) var<storage, read_write> lines: array<vec4<f32>>;
 
 @compute @workgroup_size(WORKGROUP)
 fn force_lines(@builtin(global_invocation_id) id: vec3<u32>) {

@@ -4,12 +4,11 @@
 // maximum, and the step's contact count into the total.
 // CPU twin: src/cpu/measure.rs.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> x: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read> frame: RigidFrame;
-@group(0) @binding(5) var<storage, read_write> state: StepState;
+@group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> frame: RigidFrame;
+@group(1) @binding(5) var<storage, read_write> state: StepState;
 
 fn corner(t: u32, k: u32) -> vec3<f32> {
     return body_vertices[body_index(3u * t + k)].xyz;

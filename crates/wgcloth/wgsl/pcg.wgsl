@@ -20,21 +20,20 @@ struct Scalars {
     pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
 // A: its diagonal blocks (one per vertex), then one block per spring.
-@group(0) @binding(1) var<storage, read> matrix: array<Sym3>;
-@group(0) @binding(2) var<storage, read> b: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read_write> x: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read_write> r: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read_write> z: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read_write> p: array<vec4<f32>>;
-@group(0) @binding(7) var<storage, read_write> q: array<vec4<f32>>;
-@group(0) @binding(8) var<storage, read_write> inv_diag: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> matrix: array<Sym3>;
+@group(1) @binding(2) var<storage, read> b: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> x: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> r: array<vec4<f32>>;
+@group(1) @binding(5) var<storage, read_write> z: array<vec4<f32>>;
+@group(1) @binding(6) var<storage, read_write> p: array<vec4<f32>>;
+@group(1) @binding(7) var<storage, read_write> q: array<vec4<f32>>;
+@group(1) @binding(8) var<storage, read_write> inv_diag: array<vec4<f32>>;
 // Per-workgroup partial sums, three segments: pᵀq, rᵀz, bᵀP⁻¹b.
-@group(0) @binding(9) var<storage, read_write> partials: array<f32>;
-@group(0) @binding(10) var<storage, read> scalars_in: Scalars;
-@group(0) @binding(11) var<storage, read_write> scalars_out: Scalars;
-@group(0) @binding(12) var<storage, read_write> state: StepState;
+@group(1) @binding(9) var<storage, read_write> partials: array<f32>;
+@group(1) @binding(10) var<storage, read> scalars_in: Scalars;
+@group(1) @binding(11) var<storage, read_write> scalars_out: Scalars;
+@group(1) @binding(12) var<storage, read_write> state: StepState;
 
 const PQ: u32 = 0u;
 const RZ: u32 = 1u;

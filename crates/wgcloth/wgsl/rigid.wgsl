@@ -1,13 +1,12 @@
 // Stage "rigid": places the kinematic body at the end of the step from the
 // GPU clock and its prescribed motion. CPU twin: src/cpu/rigid.rs.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> body_vertices: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> body_normals: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> body_vertices: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> body_normals: array<vec4<f32>>;
 // The placed body: its vertices, then their normals.
-@group(0) @binding(3) var<storage, read_write> rigid: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read_write> frame: RigidFrame;
-@group(0) @binding(5) var<storage, read_write> state: StepState;
+@group(1) @binding(3) var<storage, read_write> rigid: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> frame: RigidFrame;
+@group(1) @binding(5) var<storage, read_write> state: StepState;
 
 const TAU: f32 = 6.283185307179586;
 

@@ -1,10 +1,9 @@
 // Stage "springs": force and stiffness block of every spring (thesis 2.2,
 // eqs. 4–5). CPU twin: src/cpu/springs.rs.
 
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> x: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> rest_lengths: array<f32>;
-@group(0) @binding(3) var<storage, read_write> spring_terms: array<SpringTerm>;
+@group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> rest_lengths: array<f32>;
+@group(1) @binding(3) var<storage, read_write> spring_terms: array<SpringTerm>;
 
 // f_i = E (l − L) d on the first vertex; K_s = E [(L/l) d dᵀ + max(0, 1 − L/l) I].
 @compute @workgroup_size(WORKGROUP)

@@ -7,7 +7,7 @@
 //   triangles (offsets, then 3 t + corner), spring triangles ((triangle,
 //   edge) × 2 per spring), body triangles, the body BVH's primitive order.
 
-@group(0) @binding(40) var<storage, read> topology: array<u32>;
+@group(1) @binding(40) var<storage, read> topology: array<u32>;
 
 fn cloth_index(k: u32) -> u32 {
     return topology[k];

@@ -17,8 +17,7 @@ pub enum Entry {
     CollideSupertiles,
     CollideVertexFace,
     CollideFaceVertex,
-    ContactVertexFace,
-    ContactFaceVertex,
+    ContactRespondSlots,
     ContactResetBatch,
     ContactGather,
     ContactRespondBatch,
@@ -40,14 +39,13 @@ pub enum Entry {
 }
 
 impl Entry {
-    pub const ALL: [Entry; 25] = [
+    pub const ALL: [Entry; 24] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
         Entry::CollideVertexFace,
         Entry::CollideFaceVertex,
-        Entry::ContactVertexFace,
-        Entry::ContactFaceVertex,
+        Entry::ContactRespondSlots,
         Entry::ContactResetBatch,
         Entry::ContactGather,
         Entry::ContactRespondBatch,
@@ -76,8 +74,7 @@ impl Entry {
             Entry::CollideSupertiles => ("collide", "supertiles"),
             Entry::CollideVertexFace => ("collide", "vertex_face"),
             Entry::CollideFaceVertex => ("collide", "face_vertex"),
-            Entry::ContactVertexFace => ("contact", "vertex_face"),
-            Entry::ContactFaceVertex => ("contact", "face_vertex"),
+            Entry::ContactRespondSlots => ("contact", "respond_slots"),
             Entry::ContactResetBatch => ("contact", "reset_batch"),
             Entry::ContactGather => ("contact", "gather"),
             Entry::ContactRespondBatch => ("contact", "respond_batch"),
@@ -104,14 +101,19 @@ impl Entry {
 /// bindings it uses (so it fits WebGPU's per-stage limits).
 pub struct Kernel {
     pipeline: wgpu::ComputePipeline,
+    /// The layout of its own bind group (group 1 of a scene stage, whose
+    /// group 0 is `params`; group 0 of a standalone one) and what is in it.
     layout: wgpu::BindGroupLayout,
+    group: u32,
     bindings: BTreeMap<String, Binding>,
     entry: Entry,
 }
 
-/// A kernel bound to one scene's buffers: ready to record.
+/// A kernel bound to one scene's buffers: ready to record (a scene
+/// stage's pass binds `params` once, [`Kernels::bind_params`]).
 pub struct Bound {
     pipeline: wgpu::ComputePipeline,
+    index: u32,
     group: wgpu::BindGroup,
 }
 
@@ -119,7 +121,7 @@ impl Bound {
     /// Sets the pipeline and bind group, for a dispatch of the caller's.
     pub fn set(&self, pass: &mut wgpu::ComputePass) {
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.group, &[]);
+        pass.set_bind_group(self.index, &self.group, &[]);
     }
 
     /// Records one invocation per `threads`, in workgroups of `workgroup`.
@@ -155,6 +157,7 @@ impl Kernel {
         });
         Bound {
             pipeline: self.pipeline.clone(),
+            index: self.group,
             group,
         }
     }
@@ -163,6 +166,8 @@ impl Kernel {
 pub struct Kernels {
     /// Indexed by `Entry as usize` ([`Entry::ALL`]'s order).
     kernels: Vec<Kernel>,
+    /// Group 0 of every scene stage: `params` alone.
+    params_layout: wgpu::BindGroupLayout,
     mlp_threads: u32,
     software: bool,
 }
@@ -198,6 +203,19 @@ impl Kernels {
 
     fn compile(device: &wgpu::Device) -> Result<Kernels> {
         let mlp_threads = mlp_threads(&device.limits());
+        let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("params"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: shaders::PARAMS_BINDING,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
         let mut compiled = Vec::new();
         for (stage, _) in STAGES {
             let mut reflected = shaders::reflect(stage, mlp_threads)
@@ -215,26 +233,33 @@ impl Kernels {
                         Error::Gpu(format!("wgsl/{stage}.wgsl has no entry point `{name}`"))
                     })?;
                 let bindings = reflected.swap_remove(at).bindings;
-                compiled.push((entry, Self::pipeline(device, &module, entry, bindings)));
+                let params = (!shaders::STANDALONE.contains(&stage)).then_some(&params_layout);
+                let kernel = Self::pipeline(device, (&module, params), entry, bindings);
+                compiled.push((entry, kernel));
             }
         }
         compiled.sort_by_key(|(entry, _)| *entry as usize);
         Ok(Kernels {
             kernels: compiled.into_iter().map(|(_, k)| k).collect(),
+            params_layout,
             mlp_threads,
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
         })
     }
 
-    /// One entry point's pipeline with a layout of the bindings it uses.
+    /// One entry point's pipeline with a layout of the bindings it uses:
+    /// `params_layout` as group 0 and its own as group 1 for a scene stage,
+    /// its own as group 0 for a standalone one.
     fn pipeline(
         device: &wgpu::Device,
-        module: &wgpu::ShaderModule,
+        (module, params_layout): (&wgpu::ShaderModule, Option<&wgpu::BindGroupLayout>),
         entry: Entry,
-        bindings: BTreeMap<String, Binding>,
+        mut bindings: BTreeMap<String, Binding>,
     ) -> Kernel {
         let (stage, name) = entry.wgsl();
         let label = format!("{stage}::{name}");
+        let group = params_layout.map_or(0, |_| 1);
+        bindings.retain(|_, b| b.group == group);
         let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
             .values()
             .map(|b| wgpu::BindGroupLayoutEntry {
@@ -252,9 +277,13 @@ impl Kernels {
             label: Some(&label),
             entries: &layout_entries,
         });
+        let groups = match params_layout {
+            Some(params) => vec![Some(params), Some(&layout)],
+            None => vec![Some(&layout)],
+        };
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(&label),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &groups,
             immediate_size: 0,
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -268,6 +297,7 @@ impl Kernels {
         Kernel {
             pipeline,
             layout,
+            group,
             bindings,
             entry,
         }
@@ -281,6 +311,18 @@ impl Kernels {
     /// Rows (and outputs) per workgroup tile of the network layer.
     pub fn mlp_tile(&self) -> u32 {
         4 * self.mlp_threads
+    }
+
+    /// Group 0 of every scene stage's pass: the run's constants.
+    pub fn bind_params(&self, device: &wgpu::Device, params: &wgpu::Buffer) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("params"),
+            layout: &self.params_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: shaders::PARAMS_BINDING,
+                resource: params.as_entire_binding(),
+            }],
+        })
     }
 
     /// The kernel of `entry`.

@@ -73,12 +73,18 @@ pub fn source(stage: &str, mlp_threads: u32) -> String {
     }
 }
 
-/// A binding of group 0 as the WGSL declares it.
+/// A binding as the WGSL declares it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Binding {
+    pub group: u32,
     pub binding: u32,
     pub ty: wgpu::BufferBindingType,
 }
+
+/// The scene stages' group 0: `params` alone ([`PARAMS_BINDING`]); their
+/// other bindings are group 1. The standalone stages bind all in group 0.
+pub const PARAMS_GROUP: u32 = 0;
+pub const PARAMS_BINDING: u32 = 0;
 
 /// An entry point and the bindings it uses (through any function it
 /// calls), by variable name: its pipeline's layout holds these alone, so
@@ -117,10 +123,16 @@ pub fn reflect(stage: &str, mlp_threads: u32) -> Result<Vec<EntryPoint>, String>
                 ));
             }
         };
-        if rb.group != 0 {
-            return Err(format!("{stage}: `{name}` is not in group 0"));
+        let own_group = match STANDALONE.contains(&stage) {
+            true => 0,
+            false if name == "params" => PARAMS_GROUP,
+            false => 1,
+        };
+        if rb.group != own_group {
+            return Err(format!("{stage}: `{name}` belongs in group {own_group}"));
         }
         let binding = Binding {
+            group: rb.group,
             binding: rb.binding,
             ty,
         };

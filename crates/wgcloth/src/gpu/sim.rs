@@ -134,6 +134,7 @@ impl GpuSim {
             label: Some("lines"),
             timestamp_writes: None,
         });
+        self.stages.begin(&mut pass);
         self.stages.lines.encode(&mut pass, &self.params);
     }
 
@@ -230,10 +231,11 @@ impl GpuSim {
             s.collide.clear(encoder, p);
         }
         let mut pass = self.pass(encoder, stage);
+        s.begin(&mut pass);
         match stage {
             Stage::Rigid => s.rigid.encode(&mut pass, p),
             Stage::Collide => s.collide.encode(&mut pass, p),
-            Stage::Contact => s.contact.encode(&mut pass, p),
+            Stage::Contact => s.contact.encode(&mut pass, p, &s.params),
             Stage::Springs => s.springs.encode(&mut pass, p),
             Stage::Assemble => s.assemble.encode(&mut pass, p),
             Stage::Pcg => s.pcg.encode(&mut pass, p),

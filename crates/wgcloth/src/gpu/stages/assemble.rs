@@ -15,7 +15,6 @@ pub(crate) struct Assemble {
 impl Assemble {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Assemble {
         let buffers = [
-            ("params", &b.params),
             ("v", &b.v),
             ("topology", &b.topology),
             ("spring_terms", &b.spring_terms),

@@ -18,7 +18,6 @@ pub(crate) struct Collide {
 impl Collide {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Collide {
         let buffers = [
-            ("params", &b.params),
             ("x", &b.x),
             ("topology", &b.topology),
             ("body_vertices", &b.body_vertices),

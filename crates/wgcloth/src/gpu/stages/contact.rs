@@ -10,8 +10,7 @@ use crate::gpu::layout::Params;
 use crate::gpu::mlp::{GpuMlp, NetworkKernel};
 
 pub(crate) struct Contact {
-    vertex_face: Bound,
-    face_vertex: Bound,
+    respond_slots: Bound,
     reset_batch: Bound,
     gather: Bound,
     respond_batch: Bound,
@@ -27,7 +26,6 @@ impl Contact {
         network: Option<GpuMlp>,
     ) -> Contact {
         let buffers = [
-            ("params", &b.params),
             ("v", &b.v),
             ("contacts", &b.contacts),
             ("responses", &b.responses),
@@ -40,8 +38,7 @@ impl Contact {
         ];
         let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
         Contact {
-            vertex_face: bind(Entry::ContactVertexFace),
-            face_vertex: bind(Entry::ContactFaceVertex),
+            respond_slots: bind(Entry::ContactRespondSlots),
             reset_batch: bind(Entry::ContactResetBatch),
             gather: bind(Entry::ContactGather),
             respond_batch: bind(Entry::ContactRespondBatch),
@@ -54,16 +51,23 @@ impl Contact {
         self.network.as_ref().map(GpuMlp::kernel)
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    /// `params` is the pass's group 0, which the network's own kernels
+    /// replace (they set it back after).
+    pub(crate) fn encode(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        p: &Params,
+        params: &wgpu::BindGroup,
+    ) -> u32 {
         let (n, r) = (p.n_vertices, p.n_rigid_vertices);
         let Some(net) = &self.network else {
-            self.vertex_face.dispatch(pass, n, WORKGROUP);
-            self.face_vertex.dispatch(pass, r, WORKGROUP);
-            return 2;
+            self.respond_slots.dispatch(pass, n + r, WORKGROUP);
+            return 1;
         };
         self.reset_batch.dispatch(pass, 1, 1);
         self.gather.dispatch(pass, n + r, WORKGROUP);
         let network = net.record(pass);
+        pass.set_bind_group(0, params, &[]);
         // One thread per batch entry, sized on the GPU: no readback.
         let (args, offset) = net.per_contact_dispatch();
         self.respond_batch.set(pass);

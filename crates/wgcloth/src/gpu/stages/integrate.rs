@@ -13,7 +13,6 @@ pub(crate) struct Integrate {
 impl Integrate {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Integrate {
         let buffers = [
-            ("params", &b.params),
             ("x", &b.x),
             ("v", &b.v),
             ("rest_positions", &b.rest),

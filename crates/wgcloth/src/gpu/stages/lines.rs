@@ -13,7 +13,6 @@ pub(crate) struct Lines {
 impl Lines {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Lines {
         let buffers = [
-            ("params", &b.params),
             ("x", &b.x),
             ("rigid", &b.rigid),
             ("contacts", &b.contacts),

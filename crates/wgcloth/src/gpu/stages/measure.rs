@@ -13,7 +13,6 @@ pub(crate) struct Measure {
 impl Measure {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Measure {
         let buffers = [
-            ("params", &b.params),
             ("x", &b.x),
             ("topology", &b.topology),
             ("body_vertices", &b.body_vertices),

@@ -20,6 +20,8 @@ use crate::gpu::mlp::GpuMlp;
 
 /// Every stage of a step, bound to one scene's buffers.
 pub(crate) struct Stages {
+    /// Group 0 of every pass: the run's constants, set once per pass.
+    pub(crate) params: wgpu::BindGroup,
     pub(crate) rigid: rigid::Rigid,
     pub(crate) collide: collide::Collide,
     pub(crate) contact: contact::Contact,
@@ -32,6 +34,11 @@ pub(crate) struct Stages {
 }
 
 impl Stages {
+    /// Starts a pass's work: the run's constants in group 0.
+    pub(crate) fn begin(&self, pass: &mut wgpu::ComputePass) {
+        pass.set_bind_group(0, &self.params, &[]);
+    }
+
     pub(crate) fn new(
         kernels: &Kernels,
         device: &wgpu::Device,
@@ -39,6 +46,7 @@ impl Stages {
         network: Option<GpuMlp>,
     ) -> Stages {
         Stages {
+            params: kernels.bind_params(device, &b.params),
             rigid: rigid::Rigid::new(kernels, device, b),
             collide: collide::Collide::new(kernels, device, b),
             contact: contact::Contact::new(kernels, device, b, network),

@@ -27,7 +27,6 @@ impl Pcg {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Pcg {
         let side = |k: usize| {
             let buffers = [
-                ("params", &b.params),
                 ("matrix", &b.matrix),
                 ("topology", &b.topology),
                 ("b", &b.b),

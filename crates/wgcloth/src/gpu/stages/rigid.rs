@@ -13,7 +13,6 @@ pub(crate) struct Rigid {
 impl Rigid {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Rigid {
         let buffers = [
-            ("params", &b.params),
             ("body_vertices", &b.body_vertices),
             ("body_normals", &b.body_normals),
             ("rigid", &b.rigid),

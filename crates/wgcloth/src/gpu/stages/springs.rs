@@ -13,7 +13,6 @@ pub(crate) struct Springs {
 impl Springs {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Springs {
         let buffers = [
-            ("params", &b.params),
             ("x", &b.x),
             ("topology", &b.topology),
             ("rest_lengths", &b.rest_lengths),
