@@ -20,9 +20,9 @@ use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::GpuSim;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
-use wgcloth::nn::domain::{Rng, uniform_inputs};
 use wgcloth::nn::weights::{self, Network};
 use wgcloth_cli::bench::{PERIOD_STEPS, UNTIMED_STEPS, VARIANTS};
+use wgcloth_learn::domain::{Rng, uniform_inputs};
 
 const SIZES: [usize; 6] = [1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000];
 

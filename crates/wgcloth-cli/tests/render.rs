@@ -12,7 +12,7 @@ use glam::{Mat4, Vec3};
 use wgcloth::config::SceneKind;
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
-use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines, metres_per_force};
+use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines};
 use wgcloth::{Config, Scene};
 use wgcloth_cli::frames::obj::write_obj;
 use wgcloth_cli::frames::output::{FrameWriter, frame_name};
@@ -62,7 +62,7 @@ fn is_white(p: [u8; 4]) -> bool {
 
 fn render_cpu(ctx: &GpuContext, sim: &CpuSim, camera: &Camera, style: Style) -> Frame {
     let host = HostScene::new(&ctx.device, &sim.scene);
-    host.upload_sim(&ctx.queue, sim, metres_per_force(&sim.scene));
+    host.upload_sim(&ctx.queue, sim, sim.scene.metres_per_force());
     let renderer = Renderer::new(&ctx.device, SIZE, SIZE).unwrap();
     renderer
         .render(&ctx.device, &ctx.queue, &host.source(), camera, style)
@@ -151,7 +151,7 @@ fn force_segments_are_green_where_contacts_are() {
             })
         })
     };
-    let segments = lines::force_lines(&sim, metres_per_force(&sim.scene));
+    let segments = lines::force_lines(&sim, sim.scene.metres_per_force());
     let starts: Vec<Vec3> = segments
         .chunks_exact(2)
         .filter(|pair| pair[0][3] != 0.0)

@@ -14,14 +14,14 @@ use std::path::Path;
 
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
+use crate::domain::{
+    MAX_DEPTH, MAX_SPEED, Rng, Sample, bounds, friction_sample, naive_sample, random_coefficients,
+    uniform_sample,
+};
 use wgcloth::config::{Config, ModelKind, MotionKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::contact::local_frame;
 use wgcloth::error::{Error, Result};
-use wgcloth::nn::domain::{
-    MAX_DEPTH, MAX_SPEED, Rng, Sample, bounds, friction_sample, naive_sample, random_coefficients,
-    uniform_sample,
-};
 use wgcloth::nn::weights::{self, NetKind};
 use wgcloth::scene::Scene;
 

@@ -9,8 +9,8 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
+use crate::domain::{Rng, uniform_sample};
 use wgcloth::cpu::contact::{Coefficients, ContactFrame, friction};
-use wgcloth::nn::domain::{Rng, uniform_sample};
 use wgcloth::nn::weights::{NetKind, Network, WeightsFile};
 
 #[derive(Clone, Debug)]

@@ -13,9 +13,9 @@ use candle_nn::{Linear, Module, Optimizer, VarBuilder, VarMap};
 use glam::Vec3;
 
 use crate::dataset::Dataset;
+use crate::domain::{Rng, bounds};
 use wgcloth::cpu::contact::{Coefficients, ContactFrame};
 use wgcloth::error::{Error, Result};
-use wgcloth::nn::domain::{Rng, bounds};
 use wgcloth::nn::mlp::Layer;
 use wgcloth::nn::weights::{NetKind, WeightsFile};
 

@@ -85,3 +85,44 @@ fn the_thesis_scene_steps_on_a_device_with_webgpu_default_limits() {
         "the sphere never reached the cloth by step {STEPS}"
     );
 }
+
+/// A device below what a scene needs gets an error naming the limit, the
+/// scene's need and the device's value, not a panic and not a validation
+/// error in the app's handler.
+#[test]
+fn a_device_too_small_for_the_scene_gets_an_error_naming_the_limit() {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = pollster::block_on(instance.request_adapter(&Default::default()))
+        .expect("a GPU adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
+    let small = 1 << 16;
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: wgpu::Limits {
+            max_storage_buffer_binding_size: small,
+            ..Default::default()
+        },
+        ..Default::default()
+    }))
+    .expect("a device with a 64 KiB storage binding limit");
+    let errors = Arc::new(Mutex::new(Vec::<String>::new()));
+    let seen = errors.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        seen.lock().unwrap().push(e.to_string())
+    }));
+    let mut config = Config::default();
+    config.cloth.grid = [64, 64];
+    let scene = Scene::new(&config).unwrap();
+    let Err(e) = GpuSim::new(&device, &queue, &scene) else {
+        panic!("a 64² scene cannot fit 64 KiB bindings");
+    };
+    let message = e.to_string();
+    assert!(
+        message.contains("max_storage_buffer_binding_size") && message.contains(&small.to_string()),
+        "{message}"
+    );
+    assert!(
+        errors.lock().unwrap().is_empty(),
+        "{:?}",
+        errors.lock().unwrap()
+    );
+}

@@ -19,10 +19,10 @@ use wgcloth::config::{Config, ModelKind, SceneKind};
 use wgcloth::error::Result;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
 use wgcloth::gpu::{GpuContext, Kernels, context::describe};
-use wgcloth::nn::domain::{Rng, uniform_inputs};
 use wgcloth::nn::weights::{self, Shipped};
 use wgcloth::scene::Scene;
 use wgcloth::stage::Stage;
+use wgcloth_learn::domain::{Rng, uniform_inputs};
 
 /// A model and, for a network model, the shipped network it runs instead
 /// of its default one.

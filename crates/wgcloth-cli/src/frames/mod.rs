@@ -8,9 +8,7 @@ pub mod output;
 use wgcloth::cpu::CpuSim;
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::{GpuContext, GpuSim};
-use wgcloth::render::{
-    Camera, HostScene, MAX_FRAME_SIZE, Renderer, Source, Style, metres_per_force,
-};
+use wgcloth::render::{Camera, HostScene, MAX_FRAME_SIZE, Renderer, Source, Style};
 use wgcloth::scene::Scene;
 
 /// What `wgcloth run --out` records.
@@ -125,7 +123,7 @@ impl<'a> Recording<'a> {
             return Ok(());
         };
         d.host
-            .upload_sim(&d.ctx.queue, sim, metres_per_force(&sim.scene));
+            .upload_sim(&d.ctx.queue, sim, sim.scene.metres_per_force());
         d.draw(&d.host.source(), &mut self.writer)
     }
 

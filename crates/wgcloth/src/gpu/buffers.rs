@@ -13,7 +13,6 @@ use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, Sections, SpringTerm, StepState, Sym3,
 };
 use crate::nn::weights::NetKind;
-use crate::render::metres_per_force;
 use crate::scene::{Motion, Scene};
 
 /// Workgroups covering `n` invocations.
@@ -353,7 +352,7 @@ impl Buffers {
             lines: zeroed("force lines", sizes.lines),
             line_scale: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("force line scale"),
-                contents: bytemuck::cast_slice(&[metres_per_force(scene), 0.0, 0.0, 0.0]),
+                contents: bytemuck::cast_slice(&[scene.metres_per_force(), 0.0, 0.0, 0.0]),
                 usage: wgpu::BufferUsages::UNIFORM,
             }),
         }

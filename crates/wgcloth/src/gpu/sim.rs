@@ -127,7 +127,7 @@ impl GpuSim {
     }
 
     /// Records stage "lines": the last step's contact forces as segments
-    /// in [`GpuSim::force_lines`], `render::metres_per_force` long per unit
+    /// in [`GpuSim::force_lines`], `Scene::metres_per_force` long per unit
     /// of force.
     pub fn record_force_lines(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -518,13 +518,6 @@ impl Renderer {
 /// lavapipe's 2D texture limit).
 pub const MAX_FRAME_SIZE: u32 = 16384;
 
-/// Metres of force segment per unit of force: 5 cm on a 32×32 cloth, and
-/// in proportion to the vertex count, as each vertex's share of the
-/// contact force falls with it.
-pub fn metres_per_force(scene: &Scene) -> f32 {
-    0.05 * scene.cloth.vertex_count() as f32 / 1024.0
-}
-
 #[cfg(test)]
 mod tests {
     use super::SHADER;

@@ -4,8 +4,8 @@
 
 use glam::Vec3;
 
-use crate::cpu::contact::{Coefficients, ContactFrame, friction, naive};
-use crate::nn::weights::NetKind;
+use wgcloth::cpu::contact::{Coefficients, ContactFrame, friction, naive};
+use wgcloth::nn::weights::NetKind;
 
 /// Friction network: |c| ≤ 0.05 m, |v_rel| ≤ 2 m/s, coefficient ranges.
 pub const MAX_DEPTH: f32 = 0.05;
