@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The library crate as an app depends on it (default features): it builds
 # on its own, its normal dependency tree stays within 90 crates, and none of
-# the crates that belong to the CLI or the training side is in it.
+# the crates that belong to the CLI or the training side is in it; its
+# docs build cleanly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -p wgcloth
@@ -18,3 +19,6 @@ for banned in candle-core candle-nn tokenizers clap image gif png indicatif tobj
     exit 1
   fi
 done
+# Every public item documented (#![warn(missing_docs)] in lib.rs, an
+# error under clippy's -D warnings), and the docs build without a warning.
+RUSTDOCFLAGS="-D warnings" cargo doc --release -p wgcloth --no-deps

@@ -5,17 +5,8 @@
 #[path = "../../wgcloth/tests/common/mod.rs"]
 mod common;
 
+use common::sphere;
 use wgcloth::config::ModelKind;
-use wgcloth::{Config, Scene};
-
-fn sphere(grid: u32, model: ModelKind) -> Scene {
-    let mut c = Config {
-        model,
-        ..Default::default()
-    };
-    c.cloth.grid = [grid, grid];
-    Scene::new(&c).unwrap()
-}
 
 /// The network models over 100 steps of the thesis scene pass `wgcloth
 /// validate`: the GPU stays within the scene's own sensitivity of the CPU

@@ -9,22 +9,28 @@
 
 use glam::Vec3;
 
+/// An axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
+    /// The corner with the smallest coordinates.
     pub min: Vec3,
+    /// The corner with the largest coordinates.
     pub max: Vec3,
 }
 
 impl Aabb {
+    /// The empty box (min +∞, max −∞): growing it by a point gives that point.
     pub const EMPTY: Aabb = Aabb {
         min: Vec3::splat(f32::INFINITY),
         max: Vec3::splat(f32::NEG_INFINITY),
     };
 
+    /// The smallest box holding every point; [`Aabb::EMPTY`] for none.
     pub fn of_points(points: &[Vec3]) -> Aabb {
         points.iter().fold(Aabb::EMPTY, |b, p| b.grow(*p))
     }
 
+    /// This box extended to hold `p`.
     pub fn grow(self, p: Vec3) -> Aabb {
         Aabb {
             min: self.min.min(p),
@@ -32,6 +38,7 @@ impl Aabb {
         }
     }
 
+    /// The smallest box holding both.
     pub fn union(self, o: Aabb) -> Aabb {
         Aabb {
             min: self.min.min(o.min),
@@ -39,6 +46,7 @@ impl Aabb {
         }
     }
 
+    /// The box's centre.
     pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5
     }
@@ -49,8 +57,11 @@ impl Aabb {
     }
 }
 
+/// A node of the hierarchy: a leaf (`count` > 0) or an internal node with
+/// two children.
 #[derive(Clone, Copy, Debug)]
 pub struct Node {
+    /// The union of the boxes of every primitive below it.
     pub bounds: Aabb,
     /// Leaf: first index into `Bvh::order`; internal: index of the left child
     /// (the right one is `first + 1`).
@@ -59,8 +70,10 @@ pub struct Node {
     pub count: u32,
 }
 
+/// A bounding-volume hierarchy, stored flat (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Bvh {
+    /// The nodes, the root first; children follow their parent as a pair.
     pub nodes: Vec<Node>,
     /// Primitive indices in leaf order.
     pub order: Vec<u32>,

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::nn::weights::{self, NetKind, Shipped, WeightsFile};
 
+/// The scene a run simulates (`scene`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SceneKind {
@@ -18,6 +19,7 @@ pub enum SceneKind {
     Hang,
 }
 
+/// The collision model (`model`; DESIGN "Collision models").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModelKind {
@@ -34,6 +36,7 @@ pub enum ModelKind {
 }
 
 impl SceneKind {
+    /// Every scene, as the command line offers them.
     pub const ALL: [SceneKind; 2] = [SceneKind::Sphere, SceneKind::Hang];
 
     /// The name on the command line and in config files.
@@ -46,6 +49,7 @@ impl SceneKind {
 }
 
 impl ModelKind {
+    /// Every collision model, as the command line offers them.
     pub const ALL: [ModelKind; 4] = [
         ModelKind::Naive,
         ModelKind::Friction,
@@ -83,35 +87,51 @@ impl ModelKind {
     }
 }
 
+/// The cloth vertices held at their initial positions (`cloth.pins`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Pins {
+    /// The two corners of the top row (the thesis scene).
     TopCorners,
+    /// The whole top row.
     TopEdge,
+    /// No vertex: the cloth falls freely.
     None,
 }
 
+/// The rigid body's mesh (`rigid.shape`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Shape {
+    /// An icosphere of `rigid.radius`, `rigid.subdivisions` times subdivided.
     Sphere,
+    /// A box of `rigid.half_extents`, `rigid.subdivisions` segments per edge.
     Box,
+    /// A square of `rigid.plane_size` in the body's x–z plane, normal +y.
     Plane,
+    /// The OBJ file `rigid.mesh`, scaled by `rigid.scale`.
     Obj,
 }
 
+/// How the rigid body moves (`rigid.motion.kind`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MotionKind {
+    /// It stays at `rigid.position`.
     Static,
+    /// Constant velocity `rigid.motion.velocity`.
     Linear,
+    /// Back and forth along `rigid.motion.axis` (the thesis scene).
     Sinusoid,
 }
 
+/// A rotation by `degrees` about `axis` (`cloth.rotation`, `rigid.rotation`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Rotation {
+    /// Rotation axis: any non-zero vector, normalised when used.
     pub axis: [f32; 3],
+    /// Angle about `axis`, in degrees.
     pub degrees: f32,
 }
 
@@ -124,6 +144,7 @@ impl Default for Rotation {
     }
 }
 
+/// The cloth (`[cloth]`): its grid, material and placement.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ClothConfig {
@@ -139,6 +160,7 @@ pub struct ClothConfig {
     pub damping_mass: f32,
     /// β in s.
     pub damping_stiffness: f32,
+    /// `cloth.pins`: which vertices keep their initial positions.
     pub pins: Pins,
     /// World position of the cloth's centre.
     pub center: [f32; 3],
@@ -162,9 +184,12 @@ impl Default for ClothConfig {
     }
 }
 
+/// The rigid body's prescribed translation (`[rigid.motion]`); each field
+/// applies only to the motion its comment names.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MotionConfig {
+    /// `rigid.motion.kind`: static, linear or sinusoid.
     pub kind: MotionKind,
     /// Sinusoid: direction of travel.
     pub axis: [f32; 3],
@@ -194,9 +219,12 @@ impl Default for MotionConfig {
     }
 }
 
+/// The rigid body of the `sphere` scene (`[rigid]`); the `hang` scene
+/// ignores it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RigidConfig {
+    /// `rigid.shape`: sphere, box, plane or obj.
     pub shape: Shape,
     /// Sphere: m.
     pub radius: f32,
@@ -212,7 +240,10 @@ pub struct RigidConfig {
     pub scale: f32,
     /// World position of the body origin at t = 0 (before the motion).
     pub position: [f32; 3],
+    /// `rigid.rotation`: the body's fixed orientation (the motion only
+    /// translates it).
     pub rotation: Rotation,
+    /// `rigid.motion`: how the body's origin moves over time.
     pub motion: MotionConfig,
 }
 
@@ -233,6 +264,7 @@ impl Default for RigidConfig {
     }
 }
 
+/// Contact detection and the collision models' coefficients (`[contact]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ContactConfig {
@@ -276,11 +308,13 @@ impl Default for ContactConfig {
     }
 }
 
+/// Time stepping and the linear solve (`[solver]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverConfig {
     /// Time step h in s.
     pub dt: f32,
+    /// `solver.steps`: number of time steps a run takes.
     pub steps: u64,
     /// Maximum PCG iterations (thesis: 25).
     pub cg_iters: u32,
@@ -306,14 +340,21 @@ impl Default for SolverConfig {
     }
 }
 
+/// A run's whole configuration; the defaults are the thesis scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
+    /// `scene`: which scene to build.
     pub scene: SceneKind,
+    /// `model`: the collision model.
     pub model: ModelKind,
+    /// `[cloth]`: the cloth.
     pub cloth: ClothConfig,
+    /// `[rigid]`: the rigid body (the `sphere` scene only).
     pub rigid: RigidConfig,
+    /// `[contact]`: contact detection and force coefficients.
     pub contact: ContactConfig,
+    /// `[solver]`: time step, step count and PCG.
     pub solver: SolverConfig,
 }
 

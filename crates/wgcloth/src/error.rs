@@ -4,23 +4,36 @@
 
 use std::path::PathBuf;
 
+/// Everything that can fail in the library, each naming its cause.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A configuration value out of its range (CLI flag or TOML field).
     #[error("invalid `{field}`: {reason}")]
-    Config { field: String, reason: String },
+    Config {
+        /// The dotted config name (`cloth.mass`) or the flag (`--size`).
+        field: String,
+        /// What is wrong with its value.
+        reason: String,
+    },
 
     /// A file that could not be read or written.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The underlying I/O error.
         #[source]
         source: std::io::Error,
     },
 
     /// A file that was read but whose content is wrong.
     #[error("{}: {reason}", path.display())]
-    File { path: PathBuf, reason: String },
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with its content.
+        reason: String,
+    },
 
     /// A request the current build cannot honour.
     #[error("{0}")]
@@ -35,13 +48,17 @@ pub enum Error {
     /// broke down (`health::diagnose` names the vertex).
     #[error("simulation diverged at step {step}, vertex {vertex}: {reason}")]
     Diverged {
+        /// The failing step.
         step: u64,
+        /// The vertex where the failure starts.
         vertex: u32,
+        /// What went wrong there.
         reason: String,
     },
 }
 
 impl Error {
+    /// An invalid configuration value, named by its dotted field or flag.
     pub fn config(field: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::Config {
             field: field.into(),
@@ -49,6 +66,7 @@ impl Error {
         }
     }
 
+    /// A file whose content is wrong.
     pub fn file(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         Error::File {
             path: path.into(),
@@ -56,6 +74,7 @@ impl Error {
         }
     }
 
+    /// A file that could not be read or written.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
@@ -64,4 +83,5 @@ impl Error {
     }
 }
 
+/// The library's result type, failing with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -21,22 +21,29 @@ pub const TOO_FAST: u32 = 2;
 pub struct Divergence {
     /// The failing step (the state after step − 1 is the last good one).
     pub step: u64,
+    /// The vertex where the failure starts.
     pub vertex: u32,
+    /// Why, in one line.
     pub reason: String,
 }
 
 /// What a failed step left behind.
 pub struct FailedStep<'a> {
+    /// The failing step, numbered as in [`Divergence::step`].
     pub step: u64,
     /// The integrate stage's flags.
     pub flags: u32,
+    /// Whether PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
     pub breakdown: bool,
     /// A's diagonal blocks and b, as the step assembled them.
     pub diag: &'a [Mat3],
+    /// The right-hand side b of A v' = b, one entry per vertex.
     pub b: &'a [Vec3],
     /// The state after the step.
     pub x: &'a [Vec3],
+    /// Velocities after the step, m/s.
     pub v: &'a [Vec3],
+    /// `solver.max_speed`, m/s, the speed beyond which a step fails.
     pub max_speed: f32,
 }
 

@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! wgcloth: an implicit (backward Euler) mass-spring cloth with a moving
 //! rigid body and learned collision response, after Yahya (2023),
 //! "Collision resolution for cloth simulations using machine learning".

@@ -2,6 +2,7 @@
 //! pass of a wgsl/ file with the same name; `stage_ms` in reports and the
 //! per-stage benches use these names.
 
+/// A stage of the step, on either backend.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Stage {
     /// Places the rigid body at the end of the step.
@@ -23,6 +24,7 @@ pub enum Stage {
 }
 
 impl Stage {
+    /// Every stage, in the order a step runs them.
     pub const ALL: [Stage; 8] = [
         Stage::Rigid,
         Stage::Collide,
@@ -34,6 +36,7 @@ impl Stage {
         Stage::Measure,
     ];
 
+    /// The stage's name: its cpu/ module, its wgsl/ file and its `stage_ms` key.
     pub const fn name(self) -> &'static str {
         match self {
             Stage::Rigid => "rigid",

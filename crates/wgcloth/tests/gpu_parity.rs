@@ -5,6 +5,7 @@ mod common;
 
 use std::sync::Arc;
 
+use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::{CpuSim, springs};
@@ -118,15 +119,6 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
             assert_eq!(x[i], scene.cloth.rest_positions[i]);
         }
     }
-}
-
-fn sphere(grid: u32, model: ModelKind) -> Scene {
-    let mut c = Config {
-        model,
-        ..Default::default()
-    };
-    c.cloth.grid = [grid, grid];
-    Scene::new(&c).unwrap()
 }
 
 /// Steps at which the default sphere is pushing into the cloth.

@@ -18,10 +18,13 @@ use crate::scene::Cloth;
 /// Scalars of one step.
 #[derive(Clone, Copy, Debug)]
 pub struct StepParams {
+    /// Time step h, s.
     pub dt: f32,
+    /// Gravitational acceleration, m/s².
     pub gravity: Vec3,
-    /// Rayleigh α (1/s) and β (s).
+    /// Rayleigh α (1/s) of D = −αM + βK.
     pub damping_mass: f32,
+    /// Rayleigh β (s) of D = −αM + βK.
     pub damping_stiffness: f32,
 }
 

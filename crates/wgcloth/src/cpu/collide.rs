@@ -31,7 +31,11 @@ use crate::scene::{Cloth, RigidBody};
 ///     is the thesis's w_k w_l K_c.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Contact {
+    /// The cloth vertices the contact acts on: (a) vertex i, repeated;
+    /// (b) the cloth triangle's three. The first
+    /// [`vertex_count`](Contact::vertex_count) are used.
     pub vertices: [u32; 3],
+    /// β_k of each of `vertices` ((a): [1, 0, 0]; (b): −w).
     pub beta: [f32; 3],
     /// The cloth triangle of a face–vertex contact.
     pub cloth_triangle: Option<u32>,
@@ -44,6 +48,7 @@ pub struct Contact {
     pub distance: f32,
     /// d̃ = d − ε < 0.
     pub depth: f32,
+    /// u, the part of v_rel not due to the cloth's velocities (m/s).
     pub velocity_offset: Vec3,
 }
 
@@ -53,7 +58,10 @@ pub struct Contact {
 /// above the triangle's plane is d̃ = d − ε.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Geometry {
+    /// The surface triangle's corners (a, b, c), world space, wound so
+    /// (b − a) × (c − a) points along the contact normal.
     pub triangle: [Vec3; 3],
+    /// The penetrating point, moved by ε against the normal, world space.
     pub point: Vec3,
 }
 
@@ -93,10 +101,13 @@ impl Contact {
         }
     }
 
+    /// How many of `vertices` and `beta` the contact uses: 1 for
+    /// vertex–face, 3 for face–vertex.
     pub fn vertex_count(&self) -> usize {
         if self.cloth_triangle.is_some() { 3 } else { 1 }
     }
 
+    /// v_rel = Σ β_k v_k + u at cloth velocities `v`.
     pub fn relative_velocity(&self, v: &[Vec3]) -> Vec3 {
         (0..self.vertex_count()).fold(self.velocity_offset, |acc, k| {
             acc + self.beta[k] * v[self.vertices[k] as usize]
@@ -104,9 +115,12 @@ impl Contact {
     }
 }
 
+/// The bounds of the proximity test, from the contact configuration.
 #[derive(Clone, Copy, Debug)]
 pub struct Tolerances {
+    /// ε, m: contact starts when d < ε.
     pub thickness: f32,
+    /// How far below a surface, m, a point is still in contact: d > −max_depth.
     pub max_depth: f32,
 }
 
@@ -131,8 +145,11 @@ pub fn point_triangle(p: Vec3, tri: [Vec3; 3], n: Vec3, tol: Tolerances) -> Opti
 /// The candidate that wins (larger d, then lower index).
 #[derive(Clone, Copy, Debug)]
 pub struct Best {
+    /// Index of the triangle (rigid or cloth, whichever the query searched).
     pub triangle: u32,
+    /// Signed distance d of the point above the triangle's plane, m.
     pub distance: f32,
+    /// Barycentric weights of the point's projection onto the triangle.
     pub weights: Vec3,
     /// The triangle's unit normal (in the space the query ran in).
     pub normal: Vec3,
@@ -162,6 +179,7 @@ impl Best {
         }
     }
 
+    /// Stores `cand` in `best` if it wins over what `best` holds.
     pub fn keep(best: &mut Option<Best>, cand: Best) {
         let better = match best {
             None => true,

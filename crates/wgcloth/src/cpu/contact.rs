@@ -23,8 +23,12 @@ use std::sync::Arc;
 /// A force and its Jacobians with respect to c and v_rel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForceJacobian {
+    /// Force on the penetrating point (g, before the scale s, for the
+    /// friction models' unscaled functions).
     pub force: Vec3,
+    /// ∂force/∂c, with c the collision vector.
     pub d_c: Mat3,
+    /// ∂force/∂v_rel.
     pub d_v: Mat3,
 }
 
@@ -47,9 +51,13 @@ impl ForceJacobian {
 /// Friction-model coefficients, in the network's input order.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coefficients {
+    /// Contact stiffness k_n (eq. 8).
     pub kn: f32,
+    /// Contact damping k_d on the approach speed ḋ (eq. 8).
     pub kd: f32,
+    /// Friction stiffness k_t on the tangential velocity ṫ (eq. 9).
     pub kt: f32,
+    /// Coulomb coefficient μ (eq. 9).
     pub mu: f32,
 }
 
@@ -112,25 +120,36 @@ pub fn friction(c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
 /// A collision model with its coefficients, as selected for a run.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Model {
+    /// The naive penalty force f = −c_n d̃ n (thesis eq. 6); see [`naive`].
     Naive {
+        /// c_n, N/m.
         stiffness: f32,
     },
+    /// The analytic friction model of thesis eqs. 8–9, f = s g; see
+    /// [`friction`].
     Friction {
+        /// s, the force scale.
         scale: f32,
+        /// k_n, k_d, k_t, μ.
         coefficients: Coefficients,
     },
     /// g from the network (thesis 2.7), in the world frame or in the
     /// contact's (`ContactFrame`); ∂g/∂c and ∂g/∂v_rel from its input
     /// Jacobian, by reverse mode through the layers.
     FrictionNet {
+        /// The friction network; its kind picks world or contact frame.
         net: Arc<Network>,
+        /// s, the force scale: f = s g.
         scale: f32,
+        /// k_n, k_d, k_t, μ, fed to the network as inputs.
         coefficients: Coefficients,
     },
     /// f / c from the small network of thesis 2.4 in the contact's local
     /// frame, ∂/∂p from its input Jacobian.
     NaiveNet {
+        /// The naive network (7 inputs, [`LocalFrame::inputs`]).
         net: Arc<Network>,
+        /// c_n, N/m: the network predicts f / c_n.
         stiffness: f32,
     },
 }

@@ -9,6 +9,9 @@ use crate::cpu::GRAIN;
 use crate::health::{NOT_FINITE, TOO_FAST};
 use crate::scene::Cloth;
 
+/// x' = x + h v' for every free vertex, with h = `dt` and v' the solved
+/// velocities in `v`; pinned vertices go back to their rest positions with
+/// zero velocity.
 pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3]) {
     x.par_iter_mut()
         .with_min_len(GRAIN)

@@ -31,7 +31,9 @@ pub const GRAIN: usize = 2048;
 /// What one step did.
 #[derive(Clone, Debug, Default)]
 pub struct StepStats {
+    /// How the step's PCG solve ended.
     pub pcg: PcgOutcome,
+    /// Contacts found and responded to (both directions).
     pub contacts: usize,
     /// Deepest cloth vertex inside the rigid surface after the step, m.
     pub max_penetration: f32,
@@ -42,9 +44,13 @@ pub struct StepStats {
 /// Cloth state: positions, velocities, time.
 #[derive(Clone, Debug)]
 pub struct State {
+    /// Vertex positions, m.
     pub x: Vec<Vec3>,
+    /// Vertex velocities, m/s.
     pub v: Vec<Vec3>,
+    /// Simulated time, s.
     pub time: f64,
+    /// Steps taken so far.
     pub step: u64,
 }
 
@@ -60,9 +66,15 @@ impl State {
     }
 }
 
+/// The CPU simulator: one scene, its cloth state, the collision model, and
+/// what each stage leaves for the next. [`step`](CpuSim::step) runs the
+/// stages of [`Stage::ALL`] in order.
 pub struct CpuSim {
+    /// The scene simulated: cloth, rigid body, configuration, network.
     pub scene: Scene,
+    /// The cloth's positions, velocities and time.
     pub state: State,
+    /// The collision model, built from the scene's configuration.
     pub model: Model,
     params: StepParams,
     tolerances: Tolerances,
@@ -78,6 +90,7 @@ pub struct CpuSim {
 }
 
 impl CpuSim {
+    /// A simulator for `scene`, its cloth at rest at time 0.
     pub fn new(scene: Scene) -> CpuSim {
         let cfg = &scene.config;
         let cloth = &scene.cloth;
@@ -264,14 +277,19 @@ pub fn energy(scene: &Scene, x: &[Vec3], v: &[Vec3]) -> Energy {
     }
 }
 
+/// The energy of a cloth state, J, in f64.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Energy {
+    /// Σ ½ m |v|².
     pub kinetic: f64,
+    /// Gravitational potential Σ −m g·x (zero at the origin).
     pub gravity: f64,
+    /// Elastic potential of the springs, Σ ½ E (l − L)².
     pub elastic: f64,
 }
 
 impl Energy {
+    /// Kinetic + gravitational + elastic, J.
     pub fn total(&self) -> f64 {
         self.kinetic + self.gravity + self.elastic
     }

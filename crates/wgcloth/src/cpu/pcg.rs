@@ -9,15 +9,19 @@ use crate::cpu::GRAIN;
 use crate::scene::cloth::Adjacency;
 
 /// A = M − hD − h²K in the cloth's sparsity: one diagonal block per vertex
-/// and one symmetric off-diagonal block per spring, A_ij = A_ji = off[s]
+/// and one symmetric off-diagonal block per spring, A_ij = A_ji = `off[s]`
 /// (every other coupling — the face contacts — lies on a spring's pair).
 #[derive(Clone, Debug, Default)]
 pub struct BlockMatrix {
+    /// A_ii, one block per vertex.
     pub diag: Vec<Mat3>,
+    /// A_ij = A_ji, one block per spring (i, j), in spring order.
     pub off: Vec<Mat3>,
 }
 
 impl BlockMatrix {
+    /// The zero matrix of a cloth with `vertices` vertices and `springs`
+    /// springs.
     pub fn new(vertices: usize, springs: usize) -> BlockMatrix {
         BlockMatrix {
             diag: vec![Mat3::ZERO; vertices],
@@ -65,8 +69,10 @@ impl BlockMatrix {
     }
 }
 
+/// How a PCG solve ended.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PcgOutcome {
+    /// CG iterations run.
     pub iterations: u32,
     /// √(rᵀP⁻¹r / bᵀP⁻¹b) at exit: the preconditioned relative residual.
     pub relative_residual: f32,

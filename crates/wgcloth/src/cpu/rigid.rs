@@ -9,11 +9,15 @@ use crate::scene::RigidBody;
 /// The rigid body in world space at one instant.
 #[derive(Clone, Debug, Default)]
 pub struct RigidFrame {
+    /// Body → world rotation (the body's fixed orientation).
     pub rotation: Quat,
+    /// World position of the body origin, m.
     pub translation: Vec3,
     /// Velocity of every point of the body (it only translates).
     pub velocity: Vec3,
+    /// The mesh's vertices in world space.
     pub vertices: Vec<Vec3>,
+    /// The mesh's unit outward vertex normals in world space.
     pub vertex_normals: Vec<Vec3>,
 }
 
@@ -24,6 +28,8 @@ impl RigidFrame {
     }
 }
 
+/// Places `body` at time `t` (s): fills `frame` with its rotation,
+/// translation, velocity, and world-space vertices and vertex normals.
 pub fn transform(body: &RigidBody, t: f32, frame: &mut RigidFrame) {
     frame.rotation = body.rotation;
     frame.translation = body.translation(t);

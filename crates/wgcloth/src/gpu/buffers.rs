@@ -1,6 +1,6 @@
 //! One scene's state on the GPU, apart from the kernels (as in
-//! wgsparkl): the run's constants ([`params_for`]), every buffer's size as
-//! a pure function of the scene ([`Sizes`], as vello's `RenderConfig`),
+//! wgsparkl): the run's constants (`params_for`), every buffer's size as
+//! a pure function of the scene (`Sizes`, as vello's `RenderConfig`),
 //! the check of those sizes against the device's limits, and the buffers.
 
 use glam::Vec3;

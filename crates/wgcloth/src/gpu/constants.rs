@@ -13,15 +13,21 @@ pub const NO_TRIANGLE: u32 = u32::MAX;
 /// Cloth grid cells per tile edge, and tiles per super-tile edge (the
 /// face–vertex broad phase).
 pub const TILE: u32 = 8;
-/// The widest layer and the most layers the `per_contact` network kernel holds.
+/// The widest layer the `per_contact` network kernel holds.
 pub const MLP_MAX_WIDTH: u32 = 256;
+/// The most layers the `per_contact` network kernel holds.
 pub const MLP_MAX_LAYERS: u32 = 16;
 
 /// `Params::model`: which contact model the kernels evaluate.
 pub mod model {
+    /// `ModelKind::Naive`: the penalty force f = −c d̃ n (thesis eq. 6).
     pub const NAIVE: u32 = 0;
+    /// `ModelKind::Friction`: contact and Coulomb friction force (thesis eqs. 8–9).
     pub const FRICTION: u32 = 1;
+    /// `ModelKind::FrictionNet`: the friction force from the trained
+    /// network (thesis 2.6–2.7).
     pub const FRICTION_NET: u32 = 2;
+    /// `ModelKind::NaiveNet`: the naive force from the small network of thesis 2.4.
     pub const NAIVE_NET: u32 = 3;
     /// friction-net with a contact-frame network (`NetKind::FrictionContact`).
     pub const FRICTION_CONTACT_NET: u32 = 4;

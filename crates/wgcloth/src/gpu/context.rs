@@ -10,8 +10,11 @@ use std::time::Duration;
 /// A device and queue with what the simulator needs to know of them.
 #[derive(Clone, Debug)]
 pub struct GpuContext {
+    /// The device the simulator runs on.
     pub device: wgpu::Device,
+    /// The device's queue.
     pub queue: wgpu::Queue,
+    /// The adapter the device was opened on, for logs and reports ([`describe`]).
     pub adapter: wgpu::AdapterInfo,
     /// The first validation error or device loss, recorded instead of
     /// panicking so a run can stop with one clear error.

@@ -12,33 +12,59 @@ use crate::gpu::shaders::{self, Binding, STAGES};
 /// checks that the files have no other.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Entry {
+    /// Places the rigid body at the end of the step (`rigid::main`).
     Rigid,
+    /// Refits the bounds of the cloth tiles (`collide::tiles`).
     CollideTiles,
+    /// Refits the super-tile bounds from the tiles (`collide::supertiles`).
     CollideSupertiles,
+    /// The rigid triangle closest to each cloth vertex (`collide::vertex_face`).
     CollideVertexFace,
+    /// The cloth triangle closest to each rigid vertex (`collide::face_vertex`).
     CollideFaceVertex,
+    /// The analytic models' response of every contact slot (`contact::respond_slots`).
     ContactRespondSlots,
+    /// Empties the network batch (`contact::reset_batch`).
     ContactResetBatch,
+    /// Appends every valid contact and its inputs to the network batch
+    /// (`contact::gather`).
     ContactGather,
+    /// Responses from the network's outputs (`contact::respond_batch`).
     ContactRespondBatch,
+    /// Force and stiffness block of every spring (`springs::main`).
     Springs,
+    /// A's diagonal block and b, per vertex (`assemble::vertex`).
     AssembleVertex,
+    /// A's off-diagonal block, per spring (`assemble::spring`).
     AssembleSpring,
+    /// r = S (b − A x), p = P⁻¹ r, and partial rᵀp and bᵀP⁻¹b (`pcg::init`).
     PcgInit,
+    /// PCG's starting scalars (`pcg::init_scalars`).
     PcgInitScalars,
+    /// q = S A p and partial pᵀq (`pcg::spmv`).
     PcgSpmv,
+    /// x += α p, r −= α q, z = P⁻¹ r and partial rᵀz (`pcg::update`).
     PcgUpdate,
+    /// p = z + β p and the next scalars (`pcg::direction`).
     PcgDirection,
+    /// Folds the solve's outcome into the run statistics (`pcg::finish`).
     PcgFinish,
+    /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
+    /// Penetration depth and the contact total (`measure::main`).
     Measure,
+    /// Sizes a network batch's indirect dispatches (`batch::plan`).
     BatchPlan,
+    /// One dense network layer as a tiled matrix product (`mlp::layer`).
     MlpLayer,
+    /// The whole network, one contact per invocation (`mlp::per_contact`).
     MlpPerContact,
+    /// Each contact's force as a segment for the renderer (`lines::force_lines`).
     ForceLines,
 }
 
 impl Entry {
+    /// Every entry point, in declaration order (`Entry as usize`).
     pub const ALL: [Entry; 24] = [
         Entry::Rigid,
         Entry::CollideTiles,
@@ -163,6 +189,8 @@ impl Kernel {
     }
 }
 
+/// Every entry point's pipeline for one device, and the `params` layout
+/// the scene stages share; built once and shared by every scene on it.
 pub struct Kernels {
     /// Indexed by `Entry as usize` ([`Entry::ALL`]'s order).
     kernels: Vec<Kernel>,

@@ -9,57 +9,104 @@ use crate::scene::Scene;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+/// The run's constants, as every scene stage reads them (mirrors `Params`
+/// in wgsl/common.wgsl, a uniform in group 0); built by `buffers::params_for`.
 pub struct Params {
+    /// Cloth vertices.
     pub n_vertices: u32,
+    /// Cloth springs.
     pub n_springs: u32,
+    /// Cloth triangles.
     pub n_triangles: u32,
+    /// The rigid body's vertices (0 without a body).
     pub n_rigid_vertices: u32,
+    /// The rigid body's triangles (0 without a body).
     pub n_rigid_triangles: u32,
+    /// The contact model the kernels evaluate ([`model`](crate::gpu::constants::model)).
     pub model: u32,
+    /// 1 when the scene has a rigid body, else 0.
     pub has_rigid: u32,
+    /// Most PCG iterations per step (`solver.cg_iters`); the pass records
+    /// them all, and converged ones return at once.
     pub cg_max_iters: u32,
+    /// Time step h in s.
     pub dt: f32,
+    /// Mass of each cloth vertex in kg.
     pub vertex_mass: f32,
+    /// Spring stiffness E in N/m (thesis eq. 4), the same for every spring.
     pub stiffness: f32,
+    /// Relative residual at which PCG stops (`solver.cg_tol`).
     pub cg_tol: f32,
+    /// Rayleigh damping α (mass term) in 1/s.
     pub damping_mass: f32,
+    /// Rayleigh damping β (stiffness term) in s.
     pub damping_stiffness: f32,
+    /// Contact thickness ε in m: contact starts this far outside a surface.
     pub thickness: f32,
+    /// Points deeper than this below a surface, in m, are not its contacts.
     pub max_depth: f32,
+    /// Gravitational acceleration in m/s².
     pub gravity: [f32; 3],
+    /// c of the naive model (thesis eq. 6), N/m.
     pub naive_stiffness: f32,
+    /// s of the friction model (thesis eqs. 8–9).
     pub force_scale: f32,
+    /// Contact stiffness k_n.
     pub kn: f32,
+    /// Contact damping k_d.
     pub kd: f32,
+    /// Friction stiffness k_t.
     pub kt: f32,
+    /// Coulomb coefficient μ.
     pub mu: f32,
+    /// The body's motion: 0 static, 1 linear, 2 sinusoid (wgsl/rigid.wgsl).
     pub motion_kind: u32,
+    /// Sinusoid: period in s.
     pub motion_period: f32,
+    /// Sinusoid: phase in radians.
     pub motion_phase: f32,
+    /// World position of the body's origin at t = 0 (before the motion), m.
     pub rigid_position: [f32; 3],
+    /// Sinusoid: amplitude in m.
     pub motion_amplitude: f32,
+    /// The body's fixed orientation, a unit quaternion (x, y, z, w).
     pub rigid_rotation: [f32; 4],
+    /// Linear: the velocity in m/s; sinusoid: the unit axis of travel.
     pub motion_vector: [f32; 3],
+    /// Cloth grid cells along a row (`nx − 1`).
     pub cells_x: u32,
+    /// Cloth grid cells along a column (`ny − 1`).
     pub cells_y: u32,
+    /// Tiles of `TILE × TILE` cells along x (the face–vertex broad phase).
     pub tiles_x: u32,
+    /// Tiles along y.
     pub tiles_y: u32,
+    /// Super-tiles of `TILE × TILE` tiles along x.
     pub supertiles_x: u32,
+    /// Super-tiles along y.
     pub supertiles_y: u32,
-    /// Network inputs per row, rows per batch entry (1 + Jacobian
-    /// columns) and outputs per row.
+    /// Network inputs per batch entry (0 without a network).
     pub net_width: u32,
+    /// Rows per batch entry: 1 + the Jacobian columns (0 without a network).
     pub net_rows: u32,
+    /// Network outputs per row (0 without a network).
     pub net_outputs: u32,
     /// `solver.max_speed`: a faster vertex raises `StepState::health`.
     pub max_speed: f32,
-    /// Where each section of the topology buffer starts ([`Sections`]).
+    /// Where each section of the topology buffer starts, in `u32`s
+    /// ([`Sections`]): here [`Sections::springs`].
     pub springs_at: u32,
+    /// Start of [`Sections::adjacency`].
     pub adjacency_at: u32,
+    /// Start of [`Sections::pinned`].
     pub pinned_at: u32,
+    /// Start of [`Sections::vertex_triangles`].
     pub vertex_triangles_at: u32,
+    /// Start of [`Sections::spring_triangles`].
     pub spring_triangles_at: u32,
+    /// Start of [`Sections::body_triangles`].
     pub body_triangles_at: u32,
+    /// Start of [`Sections::bvh_order`].
     pub bvh_order_at: u32,
 }
 
@@ -67,19 +114,31 @@ pub struct Params {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct StepState {
+    /// Simulated time in s.
     pub time: f32,
+    /// Steps taken.
     pub steps: u32,
+    /// PCG iterations summed over every step.
     pub cg_iterations_total: u32,
+    /// Steps whose PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
     pub cg_breakdowns: u32,
+    /// The largest relative residual √(δ/δ₀) any step's PCG ended at.
     pub cg_residual_max: f32,
+    /// Contacts summed over every step (stage "measure" adds `contacts_last`).
     pub contacts_total: u32,
+    /// Contacts the last step found (stage "collide" counts them).
     pub contacts_last: u32,
+    /// The deepest the cloth has been inside the body, in m, as the bit
+    /// pattern of a non-negative `f32` (so the kernels can take an atomic max).
     pub max_penetration_bits: u32,
+    /// PCG iterations of the last step.
     pub last_iterations: u32,
+    /// Relative residual √(δ/δ₀) the last step's PCG ended at.
     pub last_residual: f32,
     /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
     /// pass and kept until the state is replaced.
     pub health: u32,
+    /// Padding to the WGSL size.
     pub pad: u32,
 }
 
@@ -87,7 +146,10 @@ pub struct StepState {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct SpringTerm {
+    /// The spring's force on its first vertex in N (w = 0); the second
+    /// gets the opposite.
     pub force: [f32; 4],
+    /// Its stiffness block K_s = ∂f_i/∂x_j (wgsl/springs.wgsl).
     pub block: Sym3,
 }
 
@@ -95,11 +157,14 @@ pub struct SpringTerm {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Sym3 {
+    /// (xx, yy, zz, xy).
     pub a: [f32; 4],
+    /// (xz, yz, 0, 0).
     pub b: [f32; 4],
 }
 
 impl Sym3 {
+    /// The full symmetric matrix.
     pub fn to_mat3(self) -> glam::Mat3 {
         let [xx, yy, zz, xy] = self.a;
         let [xz, yz, _, _] = self.b;
@@ -109,24 +174,42 @@ impl Sym3 {
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+/// A contact slot (mirrors `Contact` in wgsl/common.wgsl and
+/// `cpu::collide::Contact`): the force on cloth vertex k is β_k f and
+/// v_rel = Σ β_k v_k + offset.
 pub struct Contact {
-    /// `triangle` is the cloth triangle of a face–vertex contact and the
-    /// rigid triangle of a vertex–face one.
+    /// Unit normal of the surface, pointing to the side the penetrating
+    /// point should be pushed towards.
     pub normal: [f32; 3],
+    /// d̃ = d − ε in m, negative in contact.
     pub depth: f32,
+    /// β per cloth vertex: (1, 0, 0) vertex–face, minus the barycentric
+    /// weights face–vertex.
     pub beta: [f32; 3],
+    /// Signed distance d of the penetrating point above the surface, in m.
     pub distance: f32,
+    /// u in v_rel: minus the rigid surface's velocity (vertex–face) or the
+    /// rigid vertex's velocity (face–vertex), m/s.
     pub offset: [f32; 3],
+    /// Nonzero when the slot holds a contact this step.
     pub valid: u32,
+    /// The cloth vertices β weighs (vertex–face: the one vertex, three times).
     pub vertices: [u32; 3],
+    /// The cloth triangle of a face–vertex contact and the rigid triangle
+    /// of a vertex–face one.
     pub triangle: u32,
 }
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+/// What a contact adds to the system (mirrors `Response` in
+/// wgsl/common.wgsl and `cpu::contact::Response`).
 pub struct Response {
+    /// Force on the penetrating point in N (cloth vertex k receives β_k f).
     pub force: [f32; 3],
+    /// k with K_c = k n nᵀ, the contact stiffness block.
     pub normal_stiffness: f32,
+    /// The contact damping block D_c.
     pub damping: Sym3,
 }
 
@@ -134,10 +217,15 @@ pub struct Response {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct RigidFrame {
+    /// The body's orientation, a unit quaternion (x, y, z, w).
     pub rotation: [f32; 4],
+    /// World position of the body's origin at the end of the step, m.
     pub translation: [f32; 3],
+    /// Padding to the WGSL layout.
     pub pad0: f32,
+    /// The body's velocity at the end of the step, m/s.
     pub velocity: [f32; 3],
+    /// Padding to the WGSL layout.
     pub pad1: f32,
 }
 
@@ -145,9 +233,14 @@ pub struct RigidFrame {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct BvhNode {
+    /// Lower corner of the box, in body space.
     pub lo: [f32; 3],
+    /// Leaf: first index into the BVH's primitive order; internal: the
+    /// left child (the right is `first + 1`).
     pub first: u32,
+    /// Upper corner of the box, in body space.
     pub hi: [f32; 3],
+    /// Primitives of a leaf; 0 for an internal node.
     pub count: u32,
 }
 
@@ -155,12 +248,19 @@ pub struct BvhNode {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct Scalars {
+    /// δ = rᵀz of the current iterate (rᵀP⁻¹r at the start).
     pub delta: f32,
+    /// δ₀ = bᵀP⁻¹b.
     pub delta0: f32,
+    /// PCG has converged once δ ≤ this: `cg_tol`² δ₀.
     pub threshold: f32,
+    /// Iterations run so far.
     pub iterations: u32,
+    /// Nonzero once converged or broken down: later kernels return at once.
     pub done: u32,
+    /// Nonzero when PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
     pub breakdown: u32,
+    /// Padding to the WGSL size.
     pub pad: [u32; 2],
 }
 
@@ -170,12 +270,19 @@ pub struct Scalars {
 /// to 256 bytes, so a section can also be bound on its own.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Sections {
+    /// Start of the springs (two vertices each), in `u32`s.
     pub springs: u32,
+    /// Start of the adjacency: offsets per vertex, then (spring, other vertex) pairs.
     pub adjacency: u32,
+    /// Start of the pinned flags, one per vertex (nonzero: pinned).
     pub pinned: u32,
+    /// Start of each vertex's triangles: offsets per vertex, then 3 t + corner.
     pub vertex_triangles: u32,
+    /// Start of (triangle, corner) × 2 per spring, `NO_TRIANGLE` where none.
     pub spring_triangles: u32,
+    /// Start of the rigid body's triangles (three vertices each).
     pub body_triangles: u32,
+    /// Start of the body BVH's primitive order.
     pub bvh_order: u32,
 }
 

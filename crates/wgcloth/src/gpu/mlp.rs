@@ -23,17 +23,29 @@ use crate::nn::Mlp;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct LayerParams {
+    /// This layer's inputs.
     pub inputs: u32,
+    /// This layer's outputs.
     pub outputs: u32,
+    /// Where the layer's weights start in the weights buffer, in `f32`s.
     pub weight_offset: u32,
+    /// Where its biases start.
     pub bias_offset: u32,
+    /// R = 1 + T: the value row and one tangent row per Jacobian input.
     pub rows_per_contact: u32,
+    /// The first input the Jacobian is taken along.
     pub wrt_start: u32,
+    /// Nonzero for the first layer, which loads the batch inputs and unit seeds.
     pub first: u32,
+    /// The chunk's first contact in the batch.
     pub chunk_start: u32,
+    /// Most contacts per chunk.
     pub chunk_contacts: u32,
+    /// Last layer: the output row the chunk's rows start at; 0 otherwise.
     pub out_row_offset: u32,
+    /// Slope of the activation for negative inputs (leaky ReLU).
     pub negative_slope: f32,
+    /// Layers of the network.
     pub n_layers: u32,
 }
 
@@ -41,19 +53,28 @@ pub struct LayerParams {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct BatchParams {
+    /// Chunks of the tiled kernel (0 with `per_contact`).
     pub n_chunks: u32,
+    /// Layers of the network.
     pub n_layers: u32,
+    /// Most contacts per chunk.
     pub chunk_contacts: u32,
+    /// Rows per contact: 1 + the Jacobian columns.
     pub rows_per_contact: u32,
+    /// Rows per workgroup of the `layer` kernel (its tile).
     pub rows_per_group: u32,
+    /// `per_contact`'s workgroup size.
     pub threads_per_network_group: u32,
+    /// Workgroup size of the caller's per-contact pass after the network.
     pub threads_per_contact_group: u32,
+    /// Padding to the WGSL size.
     pub pad: u32,
 }
 
-/// `MLP_MAX_WIDTH` and `MLP_MAX_LAYERS` in wgsl/mlp.wgsl: the networks
-/// `per_contact` holds.
+/// `MLP_MAX_WIDTH` in wgsl/mlp.wgsl: the widest layer `per_contact`
+/// holds.
 pub const PER_CONTACT_MAX_WIDTH: usize = 256;
+/// The most layers `per_contact` holds (`MLP_MAX_LAYERS`).
 pub const PER_CONTACT_MAX_LAYERS: usize = 16;
 /// `per_contact`'s workgroup size.
 const PER_CONTACT_GROUP: u32 = 64;
@@ -102,11 +123,14 @@ fn pack(net: &Mlp, align: usize) -> (Vec<f32>, Vec<u32>) {
 pub enum NetworkKernel {
     /// `per_contact` on a CPU adapter when the network fits it, else `layer`.
     Auto,
+    /// `layer`: one tiled matrix product per layer, for GPUs.
     Tiled,
+    /// `per_contact`: one contact per invocation, for CPU adapters.
     PerContact,
 }
 
 impl NetworkKernel {
+    /// Its name in reports: "auto", "tiled" or "per-contact".
     pub fn name(self) -> &'static str {
         match self {
             NetworkKernel::Auto => "auto",
@@ -119,13 +143,17 @@ impl NetworkKernel {
 /// How large a batch is and how it runs.
 #[derive(Clone, Copy, Debug)]
 pub struct BatchShape {
+    /// Most contacts a batch holds.
     pub capacity: usize,
     /// Most contacts per chunk of the tiled kernel (the limits may lower it).
     pub max_chunk: usize,
+    /// Which kernel evaluates the network.
     pub kernel: NetworkKernel,
 }
 
 impl BatchShape {
+    /// Up to `capacity` contacts, chunked only as the limits require, the
+    /// kernel chosen automatically.
     pub fn new(capacity: usize) -> BatchShape {
         BatchShape {
             capacity,
@@ -142,8 +170,11 @@ pub const CONTACT_GROUP: u32 = 256;
 /// The caller's buffers: inputs [capacity × inputs] f32, the batch size
 /// (one u32), outputs [capacity × (1 + |wrt|) × outputs] f32.
 pub struct BatchBuffers<'a> {
+    /// The network inputs, [capacity × inputs] `f32`.
     pub inputs: &'a wgpu::Buffer,
+    /// The batch size: one `u32`.
     pub count: &'a wgpu::Buffer,
+    /// The outputs, [capacity × (1 + |wrt|) × outputs] `f32`.
     pub outputs: &'a wgpu::Buffer,
 }
 
@@ -152,6 +183,8 @@ pub fn output_bytes(net: &Mlp, capacity: usize, wrt: &Range<usize>) -> u64 {
     (capacity * (1 + wrt.len()) * net.outputs() * 4) as u64
 }
 
+/// One network uploaded for batches in the caller's buffers: its weights,
+/// activations and the bound dispatches of its chosen kernel.
 pub struct GpuMlp {
     /// Kept alive for the bind groups.
     _buffers: Vec<wgpu::Buffer>,
@@ -515,6 +548,7 @@ impl NetworkBatch {
         read_buffer(device, queue, &self.outputs)
     }
 
+    /// The uploaded network (its kernel, chunks and cost).
     pub fn network(&self) -> &GpuMlp {
         &self.net
     }

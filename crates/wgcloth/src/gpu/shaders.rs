@@ -24,6 +24,8 @@ pub const STAGES: [(&str, &str); 11] = [
     ("lines", include_str!("../../wgsl/lines.wgsl")),
 ];
 
+/// `wgsl/common.wgsl`: the code every scene stage starts with (`Params`,
+/// the shared structs and helpers).
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
@@ -76,14 +78,18 @@ pub fn source(stage: &str, mlp_threads: u32) -> String {
 /// A binding as the WGSL declares it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Binding {
+    /// Its bind group.
     pub group: u32,
+    /// Its binding number in the group.
     pub binding: u32,
+    /// Uniform or storage, and whether read-only.
     pub ty: wgpu::BufferBindingType,
 }
 
 /// The scene stages' group 0: `params` alone ([`PARAMS_BINDING`]); their
 /// other bindings are group 1. The standalone stages bind all in group 0.
 pub const PARAMS_GROUP: u32 = 0;
+/// The binding of `params` in group [`PARAMS_GROUP`].
 pub const PARAMS_BINDING: u32 = 0;
 
 /// An entry point and the bindings it uses (through any function it
@@ -92,7 +98,9 @@ pub const PARAMS_BINDING: u32 = 0;
 /// as no one entry point uses more.
 #[derive(Clone, Debug)]
 pub struct EntryPoint {
+    /// The entry point's WGSL function name.
     pub name: String,
+    /// The bindings it uses, by variable name.
     pub bindings: BTreeMap<String, Binding>,
 }
 

@@ -29,6 +29,8 @@ struct Timer {
     period_ns: f32,
 }
 
+/// One scene's buffers and bound stages on the app's device: records or
+/// runs steps and reads their results back.
 pub struct GpuSim {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -174,6 +176,7 @@ impl GpuSim {
         self.stages.contact.network_kernel()
     }
 
+    /// The cloth's indices at the start of [`Self::indices`]: three per triangle.
     pub fn index_count(&self) -> u32 {
         3 * self.params.n_triangles
     }
@@ -294,14 +297,17 @@ impl GpuSim {
             .collect())
     }
 
+    /// Cloth positions, read back (blocks until the GPU is done).
     pub fn read_positions(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.x)
     }
 
+    /// Cloth velocities, read back (blocks until the GPU is done).
     pub fn read_velocities(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.v)
     }
 
+    /// The clock and run statistics, read back (blocks until the GPU is done).
     pub fn read_state(&self) -> Result<StepState> {
         Ok(self.read::<StepState>(&self.buffers.state)?[0])
     }

@@ -10,23 +10,34 @@ use rayon::prelude::*;
 /// One dense layer: y = W x + b, W row-major [outputs × inputs].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Layer {
+    /// Input width.
     pub inputs: usize,
+    /// Output width.
     pub outputs: usize,
+    /// W, row-major [outputs × inputs].
     pub weight: Vec<f32>,
+    /// b, one value per output.
     pub bias: Vec<f32>,
 }
 
+/// A multilayer perceptron: LeakyReLU after every layer but the last, which
+/// is linear.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mlp {
+    /// The layers, input side first; each one's inputs are the previous
+    /// one's outputs.
     pub layers: Vec<Layer>,
+    /// LeakyReLU's slope for negative pre-activations (thesis: 0.01).
     pub negative_slope: f32,
 }
 
 impl Mlp {
+    /// The network's input width.
     pub fn inputs(&self) -> usize {
         self.layers[0].inputs
     }
 
+    /// The network's output width.
     pub fn outputs(&self) -> usize {
         self.layers[self.layers.len() - 1].outputs
     }

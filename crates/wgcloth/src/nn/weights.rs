@@ -1,7 +1,7 @@
 //! The weights file, `weights/*.safetensors` (DESIGN "The networks"):
-//! f32 tensors `layer{i}.weight` [out, in] and `layer{i}.bias` [out],
-//! `input_min`, `input_max` [inputs], `output_mean`, `output_std`
-//! [outputs]; metadata `format` = `wgcloth-mlp/1`, `model`, `activation`,
+//! f32 tensors `layer{i}.weight` (out × in) and `layer{i}.bias` (out),
+//! `input_min`, `input_max` (one per input), `output_mean`, `output_std`
+//! (one per output); metadata `format` = `wgcloth-mlp/1`, `model`, `activation`,
 //! `negative_slope`, `inputs`, `outputs`, plus the training recipe and
 //! figures. The network maps u = (x − min)/(max − min) to standardised
 //! outputs y, g = y ⊙ std + mean. Reading validates everything and names
@@ -17,6 +17,7 @@ use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 use crate::error::{Error, Result};
 use crate::nn::mlp::{Layer, Mlp};
 
+/// The `format` metadata of every weights file this crate reads and writes.
 pub const FORMAT: &str = "wgcloth-mlp/1";
 
 /// A network shipped in `weights/`, compiled in so that the network models
@@ -25,10 +26,12 @@ pub const FORMAT: &str = "wgcloth-mlp/1";
 pub struct Shipped {
     /// The file's path in the repository.
     pub path: &'static str,
+    /// The file's content.
     pub bytes: &'static [u8],
 }
 
 impl Shipped {
+    /// Parses and validates the compiled-in file.
     pub fn read(self) -> Result<WeightsFile> {
         WeightsFile::parse(self.bytes, Path::new(self.path))
     }
@@ -50,25 +53,36 @@ pub const FRICTION_THESIS: Shipped = shipped!("friction_mlp.safetensors");
 pub const FRICTION_SMALL: Shipped = shipped!("friction_mlp_small.safetensors");
 /// The naive network (thesis 2.4).
 pub const NAIVE: Shipped = shipped!("naive_mlp.safetensors");
+/// Every shipped network.
 pub const SHIPPED: [Shipped; 3] = [FRICTION_THESIS, FRICTION_SMALL, NAIVE];
 
 /// The friction network's inputs (c = n d̃, v_rel, coefficients) and outputs (g = f / s).
 pub const FRICTION_INPUTS: [&str; 10] =
     ["cx", "cy", "cz", "vx", "vy", "vz", "kn", "kd", "kt", "mu"];
+/// The friction network's outputs: g = f / s, world frame.
 pub const FRICTION_OUTPUTS: [&str; 3] = ["gx", "gy", "gz"];
-/// The naive network's local frame (thesis 2.4): a at the origin, b on +x.
 /// The friction network in the contact frame: depth |c|, approach speed
 /// v_rel·ĉ, signed sliding speed ±|ṫ|, coefficients; outputs g along n and
 /// along ṫ/|ṫ| (see `cpu::contact::friction_contact_net`).
 pub const FRICTION_CONTACT_INPUTS: [&str; 7] =
     ["depth", "approach", "slide", "kn", "kd", "kt", "mu"];
+/// The contact-frame network's outputs: g along n and along ṫ/|ṫ|.
 pub const FRICTION_CONTACT_OUTPUTS: [&str; 2] = ["gn", "gt"];
+/// The naive network's inputs (thesis 2.4): b's x, corner c and the point p
+/// in the local frame with corner a at the origin, b on +x and the normal
+/// on +z, so cz = 0 (`cpu::contact::LocalFrame`).
 pub const NAIVE_INPUTS: [&str; 7] = ["bx", "cx", "cy", "cz", "px", "py", "pz"];
+/// The naive network's outputs: f / c in the local frame.
 pub const NAIVE_OUTPUTS: [&str; 3] = ["fx", "fy", "fz"];
 
+/// What a network computes: a weights file's `model` metadata.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NetKind {
+    /// The friction force g of thesis 2.6–2.7 from world-frame c, v_rel
+    /// and the coefficients (model `friction`).
     Friction,
+    /// The naive force of thesis 2.4 from a triangle and a point in the
+    /// local frame (model `naive`).
     Naive,
     /// The friction model in the contact frame (model `friction-contact`):
     /// rotation invariant by construction, so a small network learns only
@@ -81,6 +95,7 @@ impl NetKind {
     /// trains on friction data.
     pub const DATA: [NetKind; 2] = [NetKind::Friction, NetKind::Naive];
 
+    /// The `model` metadata value.
     pub fn name(self) -> &'static str {
         match self {
             NetKind::Friction => "friction",
@@ -117,6 +132,7 @@ impl NetKind {
         }
     }
 
+    /// The input names, in order, as in the `inputs` metadata.
     pub fn inputs(self) -> &'static [&'static str] {
         match self {
             NetKind::Friction => &FRICTION_INPUTS,
@@ -125,6 +141,7 @@ impl NetKind {
         }
     }
 
+    /// The output names, in order, as in the `outputs` metadata.
     pub fn outputs(self) -> &'static [&'static str] {
         match self {
             NetKind::Friction => &FRICTION_OUTPUTS,
@@ -137,7 +154,9 @@ impl NetKind {
 /// A network ready to run: its kind and its layers in physical units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Network {
+    /// What it computes.
     pub kind: NetKind,
+    /// The layers, in physical units.
     pub mlp: Mlp,
 }
 
@@ -156,12 +175,20 @@ impl Network {
 /// A network as stored: layers acting on scaled data, and the scalers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WeightsFile {
+    /// What it computes (`model`).
     pub kind: NetKind,
+    /// The layers, mapping min-max scaled inputs to standardised outputs
+    /// (`layer{i}.weight`, `layer{i}.bias`).
     pub layers: Vec<Layer>,
+    /// LeakyReLU's slope for negative pre-activations (`negative_slope`).
     pub negative_slope: f32,
+    /// Per input, the value scaled to 0 (`input_min`).
     pub input_min: Vec<f32>,
+    /// Per input, the value scaled to 1 (`input_max`).
     pub input_max: Vec<f32>,
+    /// Per output, the mean added back: g = y ⊙ std + mean (`output_mean`).
     pub output_mean: Vec<f32>,
+    /// Per output, the standard deviation y is multiplied by (`output_std`).
     pub output_std: Vec<f32>,
     /// Everything else in the metadata: training recipe and figures.
     pub notes: BTreeMap<String, String>,
@@ -199,11 +226,13 @@ pub fn floats(view: &TensorView, name: &str, shape: &[usize], path: &Path) -> Re
 }
 
 impl WeightsFile {
+    /// Reads and validates the weights file at `path`.
     pub fn read(path: &Path) -> Result<WeightsFile> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         WeightsFile::parse(&bytes, path)
     }
 
+    /// Validates a weights file's bytes; `path` only names it in errors.
     pub fn parse(bytes: &[u8], path: &Path) -> Result<WeightsFile> {
         let (_, header) = SafeTensors::read_metadata(bytes)
             .map_err(|e| Error::file(path, format!("not a safetensors file: {e}")))?;
@@ -384,6 +413,8 @@ impl WeightsFile {
         Ok(file)
     }
 
+    /// The file as safetensors bytes: every tensor, the standard metadata
+    /// and `notes`.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut meta: HashMap<String, String> = self.notes.clone().into_iter().collect();
         for (k, v) in [

@@ -7,9 +7,13 @@ use glam::{Mat4, Vec3};
 
 use crate::scene::Scene;
 
+/// A perspective camera looking from `eye` at `target`, y up, with one
+/// directional light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// Where the camera is, world, m.
     pub eye: Vec3,
+    /// The point it looks at, world, m.
     pub target: Vec3,
     /// Vertical field of view, radians.
     pub fov_y: f32,

@@ -5,6 +5,8 @@
 
 use crate::cpu::CpuSim;
 
+/// The force segments of the contacts of `sim`'s last step, `metres_per_force`
+/// m per unit of force, in the slot layout above.
 pub fn force_lines(sim: &CpuSim, metres_per_force: f32) -> Vec<[f32; 4]> {
     let n = sim.state.x.len();
     let body = sim.rigid_frame().map_or(&[][..], |f| &f.vertices[..]);

@@ -27,19 +27,25 @@ pub const DEFAULT_SIZE: u32 = 512;
 /// What a frame shows besides the shaded surfaces.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Style {
+    /// Draw the edges of the cloth's triangles.
     pub wireframe: bool,
+    /// Draw each contact's force as a segment from the penetrating point.
     pub forces: bool,
 }
 
 /// A rendered frame, RGBA8 (sRGB), rows top to bottom.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// 4 bytes per pixel, width × height pixels.
     pub rgba: Vec<u8>,
 }
 
 impl Frame {
+    /// The RGBA of pixel (x, y), y counted down from the top row.
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
         let i = 4 * (y * self.width + x) as usize;
         [
@@ -55,13 +61,22 @@ impl Frame {
 /// positions (vec4) and triangles (u32 ×3), the placed body's vertices and
 /// triangles, and force segments (vec4 pairs).
 pub struct Source<'a> {
+    /// Cloth positions, one vec4 per vertex.
     pub positions: &'a wgpu::Buffer,
+    /// Cloth triangles, three u32 vertex indices each.
     pub triangles: &'a wgpu::Buffer,
+    /// Number of cloth triangles drawn.
     pub triangle_count: u32,
+    /// The body's vertices placed in the world, one vec4 each.
     pub body_vertices: &'a wgpu::Buffer,
+    /// The body's triangles, three u32 each; a binding, as they may be a
+    /// section of a larger buffer.
     pub body_triangles: wgpu::BufferBinding<'a>,
+    /// Number of body triangles drawn (0 without a body).
     pub body_triangle_count: u32,
+    /// Force segments, two vec4 per contact slot (w = 0: no contact).
     pub lines: &'a wgpu::Buffer,
+    /// Number of contact slots: one per cloth vertex, one per body vertex.
     pub line_count: u32,
 }
 
@@ -112,6 +127,8 @@ fn vec4s(points: &[Vec3], w: f32) -> Vec<[f32; 4]> {
 }
 
 impl HostScene {
+    /// Buffers sized for `scene`, holding the cloth at rest and no force
+    /// segments until the first upload.
     pub fn new(device: &wgpu::Device, scene: &Scene) -> HostScene {
         let buffer = |label: &str, contents: &[u8]| {
             // Bindings need at least one element.
@@ -181,6 +198,7 @@ impl HostScene {
         );
     }
 
+    /// The buffers to draw a frame from.
     pub fn source(&self) -> Source<'_> {
         Source {
             positions: &self.positions,
@@ -246,6 +264,7 @@ fn texture(
 }
 
 impl Pipelines {
+    /// Compiles the pipelines for targets of colour `format`.
     pub fn new(device: &wgpu::Device, format: wgpu::TextureFormat) -> Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render"),

@@ -10,39 +10,59 @@ use glam::Vec3;
 /// scattering, which is also how the GPU twins accumulate.
 #[derive(Clone, Debug, Default)]
 pub struct Adjacency {
+    /// Vertex i's entries are `offsets[i]..offsets[i + 1]`; one more than
+    /// the vertex count.
     pub offsets: Vec<u32>,
+    /// Each entry's spring, an index into [`Cloth::springs`].
     pub spring: Vec<u32>,
+    /// Each entry's other vertex, ascending within a vertex's entries.
     pub other: Vec<u32>,
 }
 
 impl Adjacency {
+    /// The entries of vertex `i`.
     pub fn range(&self, i: usize) -> std::ops::Range<usize> {
         self.offsets[i] as usize..self.offsets[i + 1] as usize
     }
 }
 
+/// The three spring families of thesis 2.2.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SpringKind {
+    /// To the next vertex along a row or a column.
     Structural,
+    /// To a diagonal neighbour.
     Shear,
+    /// To the vertex two along a row or a column (resists bending).
     Bend,
 }
 
+/// The cloth's rest state and fixed topology (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Cloth {
+    /// Particles per row (along the width).
     pub nx: u32,
+    /// Particles per column (along the height), row 0 on top.
     pub ny: u32,
     /// Initial positions; pinned vertices stay at theirs.
     pub rest_positions: Vec<Vec3>,
+    /// Vertex indices, two triangles per grid cell, the cell diagonals
+    /// alternating like a checkerboard.
     pub triangles: Vec<[u32; 3]>,
+    /// The two vertices [i, j] of each spring.
     pub springs: Vec<[u32; 2]>,
+    /// Each spring's family, parallel to `springs`.
     pub spring_kinds: Vec<SpringKind>,
+    /// Each spring's rest length L in m: its length in `rest_positions`.
     pub rest_lengths: Vec<f32>,
+    /// Vertex → incident springs, what the stages gather over.
     pub adjacency: Adjacency,
     /// For each triangle, the springs along its edges (t0 t1), (t1 t2), (t2 t0):
     /// where the cross blocks of a face contact land.
     pub triangle_springs: Vec<[u32; 3]>,
+    /// Per vertex, whether it is pinned at its rest position.
     pub pinned: Vec<bool>,
+    /// m_i in kg: the total mass shared equally by the vertices.
     pub vertex_mass: f32,
     /// E of thesis eq. 4 (N/m), the same for every spring.
     pub stiffness: f32,
@@ -50,7 +70,7 @@ pub struct Cloth {
 
 impl Cloth {
     /// A grid whose vertex (row r, column c) is `r * nx + c`, row 0 on top;
-    /// `place` maps grid coordinates (u, v) ∈ [0,1]², v = 0 on top, to world.
+    /// `place` maps grid coordinates (u, v) ∈ \[0, 1\]², v = 0 on top, to world.
     pub fn grid(
         nx: u32,
         ny: u32,
@@ -161,6 +181,7 @@ impl Cloth {
         }
     }
 
+    /// The number of particles, nx · ny.
     pub fn vertex_count(&self) -> usize {
         self.rest_positions.len()
     }

@@ -9,9 +9,12 @@ use glam::Vec3;
 
 use crate::error::{Error, Result};
 
+/// An indexed triangle mesh, wound counter-clockwise seen from outside.
 #[derive(Clone, Debug, Default)]
 pub struct TriMesh {
+    /// Vertex positions in m.
     pub vertices: Vec<Vec3>,
+    /// Each triangle's three vertex indices.
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -41,6 +44,7 @@ impl TriMesh {
         n.into_iter().map(Vec3::normalize_or_zero).collect()
     }
 
+    /// The mesh scaled by `s` about the origin.
     pub fn scaled(mut self, s: f32) -> TriMesh {
         for v in &mut self.vertices {
             *v *= s;

@@ -16,10 +16,14 @@ pub use mesh::TriMesh;
 pub use rigid::{Motion, RigidBody};
 use std::sync::Arc;
 
+/// What a run simulates, built once from a config (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Scene {
+    /// The validated configuration it was built from.
     pub config: Config,
+    /// The cloth.
     pub cloth: Cloth,
+    /// The rigid body; `None` in the `hang` scene.
     pub rigid: Option<RigidBody>,
     /// The collision network, folded to physical units, for network models.
     pub network: Option<Arc<Network>>,
@@ -37,6 +41,8 @@ impl Scene {
         0.05 * self.cloth.vertex_count() as f32 / 1024.0
     }
 
+    /// Validates `config` and builds its cloth, its rigid body (reading an
+    /// OBJ mesh if it names one) and the network of a network model.
     pub fn new(config: &Config) -> Result<Scene> {
         config.validate()?;
         let c = &config.cloth;

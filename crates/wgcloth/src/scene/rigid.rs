@@ -9,22 +9,30 @@ use crate::scene::mesh::TriMesh;
 /// Prescribed translation of the body's origin; the orientation is fixed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Motion {
+    /// The body does not move.
     Static,
     /// Constant velocity.
     Linear {
+        /// World velocity in m/s.
         velocity: Vec3,
     },
     /// `amplitude · sin(2π t / period + phase)` along the unit `axis`
     /// (the thesis scene: along world z through the cloth).
     Sinusoid {
+        /// Unit direction of travel, world frame.
         axis: Vec3,
+        /// Peak displacement in m.
         amplitude: f32,
+        /// Period in s.
         period: f32,
+        /// Phase at t = 0, radians.
         phase: f32,
     },
 }
 
 impl Motion {
+    /// The body origin's offset from [`RigidBody::position`] at time `t` (s),
+    /// m.
     pub fn displacement(&self, t: f32) -> Vec3 {
         match *self {
             Motion::Static => Vec3::ZERO,
@@ -38,6 +46,8 @@ impl Motion {
         }
     }
 
+    /// The body's velocity at time `t` (s), m/s: the derivative of
+    /// [`Motion::displacement`].
     pub fn velocity(&self, t: f32) -> Vec3 {
         match *self {
             Motion::Static => Vec3::ZERO,
@@ -55,6 +65,8 @@ impl Motion {
     }
 }
 
+/// The kinematic rigid body: its mesh and what is derived from it, in body
+/// space, and how it is placed in the world over time.
 #[derive(Clone, Debug)]
 pub struct RigidBody {
     /// Body-space mesh.
@@ -65,13 +77,17 @@ pub struct RigidBody {
     pub vertex_normals: Vec<Vec3>,
     /// Hierarchy over the body-space triangles.
     pub bvh: Bvh,
+    /// Body → world rotation, fixed for the run.
     pub rotation: Quat,
     /// Position of the body origin at t = 0, before the motion.
     pub position: Vec3,
+    /// The prescribed translation of the body origin.
     pub motion: Motion,
 }
 
 impl RigidBody {
+    /// A body placed by `rotation` and `position`, with its normals and
+    /// hierarchy computed from `mesh`.
     pub fn new(mesh: TriMesh, rotation: Quat, position: Vec3, motion: Motion) -> RigidBody {
         let bvh = Bvh::build(&triangle_boxes(&mesh.vertices, &mesh.triangles));
         RigidBody {

@@ -62,3 +62,13 @@ pub fn gpu_context() -> Option<wgcloth::gpu::GpuContext> {
         }
     }
 }
+
+/// The thesis sphere scene on an N×N cloth with `model`.
+pub fn sphere(grid: u32, model: wgcloth::config::ModelKind) -> wgcloth::Scene {
+    let mut c = wgcloth::Config {
+        model,
+        ..Default::default()
+    };
+    c.cloth.grid = [grid, grid];
+    wgcloth::Scene::new(&c).unwrap()
+}
