@@ -343,7 +343,7 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
     ctx.queue.submit([encoder.finish()]);
     ctx.finish().unwrap();
-    assert_eq!(dispatches, 50 * (14 + 3 * 25), "dispatches per step");
+    assert_eq!(dispatches, 50 * (15 + 2 * 25), "dispatches per step");
     assert_eq!(
         embedded.read_positions().unwrap(),
         separate.read_positions().unwrap()

@@ -1,7 +1,8 @@
-//! The memory-traffic floor of a PCG iteration: the bytes its three passes
-//! (wgsl/pcg.wgsl `spmv`, `update`, `direction`; the same three fused loops
-//! in src/cpu/pcg.rs) must move between memory and the processor if every
-//! array they touch crosses once, and the copy bandwidth that moves them.
+//! The memory-traffic floor of a PCG iteration: the bytes its passes
+//! (wgsl/pcg.wgsl `next` and `update`; the three fused loops `spmv`,
+//! `update`, `direction` in src/cpu/pcg.rs) must move between memory and
+//! the processor if every array they touch crosses once, and the copy
+//! bandwidth that moves them.
 
 use std::time::Instant;
 
@@ -22,34 +23,41 @@ pub struct Layout {
     pub off_block: u64,
     /// A vertex's pinned flag.
     pub flag: u64,
+    /// Vector entries one iteration reads or writes per vertex.
+    pub vectors_per_iteration: u64,
 }
 
 /// wgsl/pcg.wgsl: `vec4<f32>` vectors, `Sym3` blocks (8 floats), u32 flags.
+/// Per vertex `next` reads z and p and writes p' and q; `update` reads and
+/// writes x and r, reads p, q and P⁻¹ and writes z: 12 vectors.
 pub const GPU: Layout = Layout {
     vector: 16,
     diag_block: 32,
     off_block: 32,
     flag: 4,
+    vectors_per_iteration: 12,
 };
 
-/// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags.
+/// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags. Per vertex
+/// `spmv` reads p and writes q; `update` reads and writes x and r, reads
+/// p, q and P⁻¹ and writes z; `direction` reads z and reads and writes p:
+/// 13 vectors.
 pub const CPU: Layout = Layout {
     vector: 12,
     diag_block: 36,
     off_block: 36,
     flag: 1,
+    vectors_per_iteration: 13,
 };
 
 impl Layout {
     /// Bytes one iteration must move for `vertices` and `springs`. Per
-    /// vertex: `spmv` reads A's diagonal block, the flag, the adjacency
-    /// offset and p, and writes q (neighbours' p come from cache);
-    /// `update` reads and writes x and r, reads p, q and P⁻¹ and writes z;
-    /// `direction` reads z and reads and writes p: 13 vectors in all. Per
-    /// spring: its off-diagonal block once and its two adjacency entries
-    /// (spring and neighbour index, u32 each) at each end.
+    /// vertex: A's diagonal block, the flag, the adjacency offset and the
+    /// vector entries (neighbours' come from cache). Per spring: its
+    /// off-diagonal block once and its two adjacency entries (spring and
+    /// neighbour index, u32 each) at each end.
     pub fn iteration_bytes(&self, vertices: u64, springs: u64) -> u64 {
-        let per_vertex = self.diag_block + self.flag + 4 + 13 * self.vector;
+        let per_vertex = self.diag_block + self.flag + 4 + self.vectors_per_iteration * self.vector;
         let per_spring = self.off_block + 2 * 8;
         vertices * per_vertex + springs * per_spring
     }

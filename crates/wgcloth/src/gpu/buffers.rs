@@ -50,9 +50,10 @@ pub(crate) struct Buffers {
     pub(crate) matrix: wgpu::Buffer,
     pub(crate) b: wgpu::Buffer,
     pub(crate) r: wgpu::Buffer,
-    pub(crate) z: wgpu::Buffer,
-    pub(crate) p: wgpu::Buffer,
-    pub(crate) q: wgpu::Buffer,
+    /// PCG: z = P⁻¹ r, then q = S A p (one `vec4` per vertex each).
+    pub(crate) zq: wgpu::Buffer,
+    /// PCG: the search direction, ping-ponged between iterations.
+    pub(crate) p: [wgpu::Buffer; 2],
     pub(crate) inv_diag: wgpu::Buffer,
     pub(crate) partials: wgpu::Buffer,
     pub(crate) scalars: [wgpu::Buffer; 2],
@@ -203,7 +204,7 @@ impl Sizes {
             responses: size(slots, size_of::<Response>()),
             triangle_contacts: size(t * (1 + MAX_TRIANGLE_CONTACTS as u64), 4),
             matrix: size(n + s, size_of::<Sym3>()),
-            partials: size(3 * groups(n as u32) as u64, 4),
+            partials: size(4 * groups(n as u32) as u64, 4),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             bounds: size(tiles, 32),
             net_batch: size(1 + batch, 4),
@@ -322,9 +323,11 @@ impl Buffers {
             matrix: zeroed("system matrix", sizes.matrix),
             b: zeroed("b", sizes.per_vertex),
             r: zeroed("r", sizes.per_vertex),
-            z: zeroed("z", sizes.per_vertex),
-            p: zeroed("p", sizes.per_vertex),
-            q: zeroed("q", sizes.per_vertex),
+            zq: zeroed("z and q", 2 * sizes.per_vertex),
+            p: [
+                zeroed("p 0", sizes.per_vertex),
+                zeroed("p 1", sizes.per_vertex),
+            ],
             inv_diag: zeroed("inverse diagonal", sizes.per_vertex),
             partials: zeroed("partial sums", sizes.partials),
             scalars: [

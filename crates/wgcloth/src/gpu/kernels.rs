@@ -37,16 +37,19 @@ pub enum Entry {
     AssembleVertex,
     /// A's off-diagonal block, per spring (`assemble::spring`).
     AssembleSpring,
-    /// r = S (b − A x), p = P⁻¹ r, and partial rᵀp and bᵀP⁻¹b (`pcg::init`).
+    /// r = S (b − A x), z = P⁻¹ r, and partial rᵀz and bᵀP⁻¹b (`pcg::init`).
     PcgInit,
     /// PCG's starting scalars (`pcg::init_scalars`).
     PcgInitScalars,
-    /// q = S A p and partial pᵀq (`pcg::spmv`).
+    /// The first iteration: p = z, q = S A p and partial pᵀq (`pcg::spmv`).
     PcgSpmv,
     /// x += α p, r −= α q, z = P⁻¹ r and partial rᵀz (`pcg::update`).
     PcgUpdate,
-    /// p = z + β p and the next scalars (`pcg::direction`).
-    PcgDirection,
+    /// Ends an iteration and starts the next: the scalars, p' = z + β p,
+    /// q = S A p' and partial p'ᵀq (`pcg::next`).
+    PcgNext,
+    /// Ends the last iteration: its scalars alone (`pcg::conclude`).
+    PcgConclude,
     /// Folds the solve's outcome into the run statistics (`pcg::finish`).
     PcgFinish,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
@@ -65,7 +68,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 24] = [
+    pub const ALL: [Entry; 25] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -82,7 +85,8 @@ impl Entry {
         Entry::PcgInitScalars,
         Entry::PcgSpmv,
         Entry::PcgUpdate,
-        Entry::PcgDirection,
+        Entry::PcgNext,
+        Entry::PcgConclude,
         Entry::PcgFinish,
         Entry::Integrate,
         Entry::Measure,
@@ -111,7 +115,8 @@ impl Entry {
             Entry::PcgInitScalars => ("pcg", "init_scalars"),
             Entry::PcgSpmv => ("pcg", "spmv"),
             Entry::PcgUpdate => ("pcg", "update"),
-            Entry::PcgDirection => ("pcg", "direction"),
+            Entry::PcgNext => ("pcg", "next"),
+            Entry::PcgConclude => ("pcg", "conclude"),
             Entry::PcgFinish => ("pcg", "finish"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
