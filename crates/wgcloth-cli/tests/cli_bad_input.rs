@@ -496,6 +496,8 @@ fn tiny_run_writes_report_json() {
         "finite",
         "cg_iterations_mean",
         "cg_residual_max",
+        "cg_residual_median",
+        "cg_steps_above_goal",
         "contacts_mean",
     ] {
         assert!(obj.contains_key(key), "report lacks `{key}`:\n{text}");
