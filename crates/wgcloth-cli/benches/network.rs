@@ -121,7 +121,7 @@ fn step64(c: &mut Criterion) {
                     })
                 });
             } else if let Some((ctx, kernels)) = &gpu {
-                let sim = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene)
+                let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)
                     .expect("fits the adapter");
                 let time = start.time as f32;
                 group.bench_function(v.label(), |b| {
@@ -156,9 +156,8 @@ fn period(c: &mut Criterion) {
             } else if let Some((ctx, kernels)) = &gpu {
                 group.bench_function(v.label(), |b| {
                     b.iter(|| {
-                        let sim =
-                            GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene)
-                                .expect("fits the adapter");
+                        let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)
+                            .expect("fits the adapter");
                         for _ in 0..PERIOD_STEPS {
                             sim.step();
                         }

@@ -27,7 +27,7 @@ fn stages(c: &mut Criterion) {
             cpu.step();
         }
         let on_gpu = gpu.as_ref().map(|(ctx, kernels)| {
-            let sim = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene)
+            let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)
                 .expect("fits the adapter");
             for _ in 0..UNTIMED_STEPS {
                 sim.step();

@@ -31,7 +31,7 @@ fn step(c: &mut Criterion) {
             }
             group.bench_function(BenchmarkId::new("cpu", grid), |b| b.iter(|| cpu.step()));
             if let Some((ctx, kernels)) = &gpu {
-                let sim = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &s)
+                let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &s)
                     .expect("fits the adapter");
                 for _ in 0..warm_steps(kind) {
                     sim.step();

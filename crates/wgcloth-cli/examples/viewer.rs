@@ -144,9 +144,8 @@ impl App {
             ..self.config.clone()
         };
         let scene = Scene::new(&config).map_err(|e| e.to_string())?;
-        let sim =
-            GpuSim::with_kernels(gfx.kernels.clone(), &gfx.ctx.device, &gfx.ctx.queue, &scene)
-                .map_err(|e| e.to_string())?;
+        let sim = GpuSim::with_kernels(&gfx.kernels, &gfx.ctx.device, &gfx.ctx.queue, &scene)
+            .map_err(|e| e.to_string())?;
         if self.orbit.is_none() {
             let period = scene.config.rigid.motion.period;
             self.orbit = Some(Orbit::new(Camera::framing(&scene, period)));

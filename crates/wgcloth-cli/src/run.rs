@@ -453,7 +453,7 @@ fn run_gpu(
     mut checkpoint: Option<&mut Checkpoint>,
 ) -> Result<Report> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
-    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene)?;
+    let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, scene)?;
     ctx.finish()?;
     if let Some(r) = obs.recording.as_deref_mut() {
         r.gpu(0, &sim, scene)?;
@@ -599,7 +599,7 @@ pub fn validate(
     mut progress: impl FnMut(u64),
 ) -> Result<Validation> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
-    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)?;
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene)?;
     let mut cpu = CpuSim::new(scene.clone());
     let mut nudged = CpuSim::new(scene);
     for (i, x) in nudged.state.x.iter_mut().enumerate() {

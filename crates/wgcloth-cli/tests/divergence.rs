@@ -149,7 +149,7 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
 
     let Some(ctx) = gpu() else { return };
     let kernels = std::sync::Arc::new(Kernels::new(&ctx.device).expect("kernels"));
-    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
+    let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
     sim.upload_state(&x0, &v0, scene.config.solver.dt);
     sim.step();
     ctx.finish().expect("device healthy");
@@ -187,7 +187,7 @@ fn the_gpu_raises_the_same_flags_as_the_cpu() {
     let Some(ctx) = gpu() else { return };
     let scene = falling(0.05);
     let kernels = std::sync::Arc::new(Kernels::new(&ctx.device).expect("kernels"));
-    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
+    let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
     let mut cpu = CpuSim::new(scene);
     for step in 1..=4 {
         sim.step();

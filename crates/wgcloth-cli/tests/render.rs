@@ -179,14 +179,20 @@ fn force_segments_are_green_where_contacts_are() {
 
 /// A GPU run's frame, drawn from the simulator's own buffers, matches the
 /// CPU run's frame of the same step (the two runs agree to rounding before
-/// contact).
+/// contact), with a body and without one (whose empty triangle list must
+/// still bind).
 #[test]
 fn gpu_frames_draw_from_the_simulators_buffers_like_the_cpu() {
     let Some(ctx) = gpu() else { return };
-    let scene = scene(SceneKind::Sphere);
+    for kind in [SceneKind::Sphere, SceneKind::Hang] {
+        gpu_frame_matches_the_cpu(&ctx, scene(kind));
+    }
+}
+
+fn gpu_frame_matches_the_cpu(ctx: &GpuContext, scene: Scene) {
     let camera = camera(&scene);
     let kernels = Arc::new(Kernels::new(&ctx.device).unwrap());
-    let gpu_sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let gpu_sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     let mut cpu_sim = CpuSim::new(scene.clone());
     for _ in 0..20 {
         gpu_sim.step();
@@ -209,7 +215,9 @@ fn gpu_frames_draw_from_the_simulators_buffers_like_the_cpu() {
             style,
         )
         .unwrap();
-    let from_cpu = render_cpu(&ctx, &cpu_sim, &camera, style);
+    ctx.finish()
+        .expect("no device error drawing from the GPU's buffers");
+    let from_cpu = render_cpu(ctx, &cpu_sim, &camera, style);
     let differing = from_gpu
         .rgba
         .chunks_exact(4)

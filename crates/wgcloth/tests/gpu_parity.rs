@@ -62,7 +62,7 @@ fn springs_and_assembly_match_the_cpu_on_the_same_state() {
     let Some((ctx, kernels)) = gpu() else { return };
     let scene = hang(12);
     let mut cpu = cpu_after(&scene, 7);
-    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
     gpu.step();
     cpu.step();
@@ -102,7 +102,7 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
     let Some((ctx, kernels)) = gpu() else { return };
     let scene = hang(16);
     let cpu = cpu_after(&scene, 60);
-    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     for _ in 0..60 {
         gpu.step();
     }
@@ -146,7 +146,7 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
             scene = Scene::new(&scene.config).unwrap();
         }
         let mut cpu = cpu_after(&scene, IN_CONTACT);
-        let gpu = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
         let speed = max_norm(&cpu.state.v);
         gpu.step();
@@ -266,7 +266,7 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
             cpu_contacts += s.contacts;
             cpu_deepest = cpu_deepest.max(s.max_penetration);
         }
-        let gpu = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+        let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         for _ in 0..steps {
             gpu.step();
         }
@@ -310,7 +310,7 @@ fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
         cpu.state.x[i] = center + dir * (0.15 - 0.002 * k as f32);
         cpu.state.v[i] = Vec3::ZERO;
     }
-    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.time as f32);
     gpu.step();
     let stats = cpu.step();
@@ -332,13 +332,13 @@ fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
 fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let Some((ctx, kernels)) = gpu() else { return };
     let scene = sphere(12, ModelKind::Friction);
-    let separate = GpuSim::with_kernels(kernels.clone(), &ctx.device, &ctx.queue, &scene).unwrap();
+    let separate = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     for _ in 0..50 {
         separate.step();
     }
     // An embedding app: its own encoder, many steps, one submission; the
     // clock and the rigid body's motion live on the GPU.
-    let embedded = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let embedded = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
     ctx.queue.submit([encoder.finish()]);
@@ -370,7 +370,7 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
 #[test]
 fn a_lost_device_is_an_error_not_a_panic_or_a_hang() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &hang(8)).unwrap();
+    let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &hang(8)).unwrap();
     sim.step();
     ctx.finish().unwrap();
     ctx.device.destroy();
@@ -394,7 +394,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     let scene = Scene::new(&c).unwrap();
     let mut cpu = CpuSim::new(scene.clone());
     let cpu_iters: u32 = (0..20).map(|_| cpu.step().pcg.iterations).sum();
-    let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     for _ in 0..20 {
         gpu.step();
     }

@@ -18,7 +18,7 @@ struct BatchParams {
 // Indirect dispatch arguments, 3 × u32 per entry.
 @group(0) @binding(2) var<storage, read_write> dispatch: array<u32>;
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(BATCH_GROUP)
 fn plan(@builtin(global_invocation_id) id: vec3<u32>) {
     let e = id.x;
     let layer_entries = batch.n_chunks * batch.n_layers;

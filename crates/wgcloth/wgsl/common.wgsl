@@ -117,14 +117,14 @@ struct Contact {
     triangle: u32,
 }
 
-// What a contact adds to the system (mirrors `cpu::contact::Response`):
-// force on the penetrating point, K_c = normal_stiffness n nᵀ, and D_c.
 // A spring's force on its first vertex and its stiffness block.
 struct SpringTerm {
     force: vec4<f32>,
     block: Sym3,
 }
 
+// What a contact adds to the system (mirrors `cpu::contact::Response`):
+// force on the penetrating point, K_c = normal_stiffness n nᵀ, and D_c.
 struct Response {
     force: vec3<f32>,
     normal_stiffness: f32,

@@ -187,10 +187,6 @@ fn respond_slots(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // --- The network models (thesis 2.4, 2.7). ---
 
-fn slot_contact(s: u32) -> Contact {
-    return contacts[s];
-}
-
 // The naive network's local frame (mirrors cpu::contact::local_frame): the
 // contact's triangle wound along its normal, a at the origin, b on +x, the
 // triangle in the xy-plane; the point moved by ε against the normal.
@@ -292,7 +288,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if s >= params.n_vertices + params.n_rigid_vertices {
         return;
     }
-    let k = slot_contact(s);
+    let k = contacts[s];
     if k.valid == 0u {
         return;
     }
@@ -412,7 +408,7 @@ fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let s = atomicLoad(&net_batch[1u + entry]);
-    let k = slot_contact(s);
+    let k = contacts[s];
     let v_rel = relative_velocity(k);
     let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel);
     responses[s] = r;

@@ -149,7 +149,7 @@ fn layer(
 // layout. Weight rows are padded to whole vec4s here, so the inner loops
 // take four inputs at a time (lavapipe also stops any invocation after
 // 65,535 loop iterations).
-@compute @workgroup_size(64)
+@compute @workgroup_size(BATCH_GROUP)
 fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = id.x;
     if c >= count[0] {

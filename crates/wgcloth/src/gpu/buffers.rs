@@ -161,7 +161,8 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
 /// read the same numbers.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Sizes {
-    /// One `vec4<f32>` per cloth vertex: x, v, b, r, z, p, q, …
+    /// One `vec4<f32>` per cloth vertex: x, v, b, r, each p, P⁻¹ (and
+    /// twice this for z and q together, `zq`).
     pub(crate) per_vertex: u64,
     pub(crate) topology: u64,
     pub(crate) rest_lengths: u64,
@@ -215,9 +216,10 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn all(&self) -> [(&'static str, u64); 15] {
+    pub(crate) fn all(&self) -> [(&'static str, u64); 16] {
         [
             ("per-vertex vectors", self.per_vertex),
+            ("PCG z and q", 2 * self.per_vertex),
             ("topology", self.topology),
             ("rest lengths", self.rest_lengths),
             ("spring terms", self.spring_terms),
@@ -370,13 +372,16 @@ pub(crate) fn check_limits(limits: &wgpu::Limits, sizes: &Sizes, params: &Params
         .min(limits.max_buffer_size);
     for (what, bytes) in sizes.all() {
         if bytes > bindable {
-            let limit = if bytes > limits.max_buffer_size {
-                "max_buffer_size"
+            let (limit, value) = if bytes > limits.max_buffer_size {
+                ("max_buffer_size", limits.max_buffer_size)
             } else {
-                "max_storage_buffer_binding_size"
+                (
+                    "max_storage_buffer_binding_size",
+                    limits.max_storage_buffer_binding_size,
+                )
             };
             return Err(Error::Gpu(format!(
-                "the scene's {what} need a {bytes}-byte buffer; the device's {limit} is {bindable} bytes (use a smaller --grid)"
+                "the scene's {what} need a {bytes}-byte buffer; the device's {limit} is {value} bytes (a smaller cloth grid fits)"
             )));
         }
     }
@@ -385,7 +390,7 @@ pub(crate) fn check_limits(limits: &wgpu::Limits, sizes: &Sizes, params: &Params
     let dispatchable = limits.max_compute_workgroups_per_dimension as u64 * WORKGROUP as u64;
     if most > dispatchable {
         return Err(Error::Gpu(format!(
-            "the scene needs {} workgroups in one dispatch; the device's max_compute_workgroups_per_dimension is {} (use a smaller --grid)",
+            "the scene needs {} workgroups in one dispatch; the device's max_compute_workgroups_per_dimension is {} (a smaller cloth grid fits)",
             most.div_ceil(WORKGROUP as u64),
             limits.max_compute_workgroups_per_dimension
         )));

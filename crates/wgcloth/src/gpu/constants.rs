@@ -18,6 +18,10 @@ pub const MLP_MAX_WIDTH: u32 = 256;
 /// The most layers the `per_contact` network kernel holds.
 pub const MLP_MAX_LAYERS: u32 = 16;
 
+/// Invocations per workgroup of the network batch's kernels (`batch::plan`,
+/// `mlp::per_contact`).
+pub const BATCH_GROUP: u32 = 64;
+
 /// `Params::model`: which contact model the kernels evaluate.
 pub mod model {
     /// `ModelKind::Naive`: the penalty force f = −c d̃ n (thesis eq. 6).
@@ -35,8 +39,9 @@ pub mod model {
 
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// is the kernels' `else` branch, so they never name it).
-pub const SHARED: [(&str, u32); 13] = [
+pub const SHARED: [(&str, u32); 14] = [
     ("WORKGROUP", WORKGROUP),
+    ("BATCH_GROUP", BATCH_GROUP),
     ("MAX_TRIANGLE_CONTACTS", MAX_TRIANGLE_CONTACTS),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),

@@ -1,6 +1,7 @@
 //! Compute pipelines, built once per device and shared by every scene
-//! simulated on it. Each stage file gets one explicit bind group layout
-//! (reflected from its WGSL), shared by all its entry points.
+//! simulated on it. Each entry point gets a bind group layout of just the
+//! bindings it uses (reflected from its WGSL with naga): group 0 the run's
+//! `params` for every scene stage, group 1 its own buffers.
 
 use std::collections::BTreeMap;
 
@@ -270,6 +271,13 @@ impl Kernels {
                 let kernel = Self::pipeline(device, (&module, params), entry, bindings);
                 compiled.push((entry, kernel));
             }
+        }
+        if compiled.len() != Entry::ALL.len() {
+            return Err(Error::Gpu(format!(
+                "{} entry points compiled, {} listed in kernels::Entry",
+                compiled.len(),
+                Entry::ALL.len()
+            )));
         }
         compiled.sort_by_key(|(entry, _)| *entry as usize);
         Ok(Kernels {

@@ -344,6 +344,9 @@ pub fn topology(scene: &Scene) -> (Vec<u32>, Sections) {
         ),
         bvh_order: section(&mut body.into_iter().flat_map(|b| b.bvh.order.iter().copied())),
     };
+    // One word past the last section, so an empty one (no body) still
+    // binds within the buffer.
+    data.push(0);
     (data, sections)
 }
 

@@ -15,6 +15,7 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::error::{Error, Result};
+use crate::gpu::constants::{BATCH_GROUP, MLP_MAX_LAYERS, MLP_MAX_WIDTH, WORKGROUP};
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::nn::Mlp;
@@ -71,13 +72,10 @@ pub struct BatchParams {
     pub pad: u32,
 }
 
-/// `MLP_MAX_WIDTH` in wgsl/mlp.wgsl: the widest layer `per_contact`
-/// holds.
-pub const PER_CONTACT_MAX_WIDTH: usize = 256;
-/// The most layers `per_contact` holds (`MLP_MAX_LAYERS`).
-pub const PER_CONTACT_MAX_LAYERS: usize = 16;
-/// `per_contact`'s workgroup size.
-const PER_CONTACT_GROUP: u32 = 64;
+/// The widest layer `per_contact` holds.
+pub const PER_CONTACT_MAX_WIDTH: usize = MLP_MAX_WIDTH as usize;
+/// The most layers `per_contact` holds.
+pub const PER_CONTACT_MAX_LAYERS: usize = MLP_MAX_LAYERS as usize;
 
 /// Mesa's llvmpipe ends an invocation after this many loop iterations
 /// (`LP_MAX_TGSI_LOOP_ITERATIONS`), silently.
@@ -162,10 +160,6 @@ impl BatchShape {
         }
     }
 }
-
-/// Workgroup size of the caller's per-contact pass after the network
-/// (`WORKGROUP` in wgsl/common.wgsl).
-pub const CONTACT_GROUP: u32 = 256;
 
 /// The caller's buffers: inputs [capacity × inputs] f32, the batch size
 /// (one u32), outputs [capacity × (1 + |wrt|) × outputs] f32.
@@ -323,8 +317,9 @@ impl GpuMlp {
                 chunk_contacts: chunk as u32,
                 rows_per_contact: rows as u32,
                 rows_per_group: tile as u32,
-                threads_per_network_group: PER_CONTACT_GROUP,
-                threads_per_contact_group: CONTACT_GROUP,
+                threads_per_network_group: BATCH_GROUP,
+                // The caller's per-contact pass after the network.
+                threads_per_contact_group: WORKGROUP,
                 pad: 0,
             }),
         );
@@ -442,8 +437,7 @@ impl GpuMlp {
     /// every layer of every chunk (chunks past the batch size dispatch
     /// nothing). Returns the number of dispatches.
     pub fn record(&self, pass: &mut wgpu::ComputePass) -> u32 {
-        // wgsl/batch.wgsl's workgroup: 64.
-        self.plan.dispatch(pass, self.entries, 64);
+        self.plan.dispatch(pass, self.entries, BATCH_GROUP);
         if self.kernel == NetworkKernel::PerContact {
             self.layers[0].set(pass);
             pass.dispatch_workgroups_indirect(&self.dispatch, 12 * (self.entries as u64 - 2));

@@ -4,7 +4,7 @@
 //! in `stages` binds the one to the other and records itself, and
 //! [`GpuSim`] runs them as a step.
 
-pub mod buffers;
+pub(crate) mod buffers;
 pub mod constants;
 pub mod context;
 pub mod kernels;
@@ -13,7 +13,7 @@ pub mod mlp;
 pub mod readback;
 pub mod shaders;
 pub mod sim;
-pub mod stages;
+pub(crate) mod stages;
 
 pub use context::GpuContext;
 pub use kernels::Kernels;

@@ -98,7 +98,9 @@ impl Readback {
             .max()?;
         let mut taken = None;
         for slot in &self.slots {
-            if slot.state.load(Ordering::Acquire) != READY {
+            // A copy that finished since `newest` was found stays for the
+            // next call.
+            if slot.state.load(Ordering::Acquire) != READY || slot.sequence > newest {
                 continue;
             }
             if slot.sequence == newest

@@ -4,8 +4,6 @@
 //! [`GpuSim::indices`] directly. It ties the scene's buffers
 //! (`gpu::buffers`) to the stages that record the step (`gpu::stages`).
 
-use std::sync::Arc;
-
 use bytemuck::Pod;
 use glam::Vec3;
 
@@ -42,18 +40,19 @@ pub struct GpuSim {
 
 impl GpuSim {
     /// Compiles the kernels for `device` and uploads `scene` onto it: the
-    /// one call an app needs. Fails with an error naming the limit when the
+    /// one call an app needs. It waits on the device's error scopes, which
+    /// resolve at once on native backends. Fails with an error naming the limit when the
     /// device cannot run the scene. To run several scenes on one device,
     /// build [`Kernels`] once and use [`GpuSim::with_kernels`].
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> Result<GpuSim> {
-        Self::with_kernels(Arc::new(Kernels::new(device)?), device, queue, scene)
+        Self::with_kernels(&Kernels::new(device)?, device, queue, scene)
     }
 
     /// Uploads `scene` onto the app's device with kernels already built for
     /// it. Fails with a clear error when the scene exceeds the device's
     /// limits.
     pub fn with_kernels(
-        kernels: Arc<Kernels>,
+        kernels: &Kernels,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         scene: &Scene,
@@ -73,7 +72,7 @@ impl GpuSim {
     /// Builds everything once the scene is known to fit (errors the device
     /// reports come back through the caller's error scopes).
     fn create(
-        kernels: Arc<Kernels>,
+        kernels: &Kernels,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         scene: &Scene,
@@ -87,7 +86,7 @@ impl GpuSim {
                 let (capacity, wrt) = (slots * net.kind.evaluations(), net.kind.wrt());
                 debug_assert!(buffers.net_outputs.size() >= output_bytes(&net.mlp, capacity, &wrt));
                 Some(GpuMlp::new(
-                    &kernels,
+                    kernels,
                     device,
                     &net.mlp,
                     wrt,
@@ -121,7 +120,7 @@ impl GpuSim {
         Ok(GpuSim {
             device: device.clone(),
             queue: queue.clone(),
-            stages: Stages::new(&kernels, device, &buffers, network),
+            stages: Stages::new(kernels, device, &buffers, network),
             params,
             buffers,
             timer,
@@ -146,9 +145,10 @@ impl GpuSim {
         &self.buffers.lines
     }
 
-    /// The rigid body's vertices placed at the current time (the first
-    /// `vec4` per vertex of the buffer; their normals follow), and its
-    /// triangles (three `u32` indices each).
+    /// The rigid body's vertices placed at the current time (a `vec4` per
+    /// vertex; all their normals follow all the vertices in the buffer),
+    /// and its triangles (three `u32` indices each; one zero word without
+    /// a body).
     pub fn body(&self) -> (&wgpu::Buffer, wgpu::BufferBinding<'_>) {
         let triangles = 3 * self.params.n_rigid_triangles as u64;
         let triangles = wgpu::BufferBinding {

@@ -13,6 +13,7 @@ use wgpu::util::DeviceExt;
 use crate::cpu::CpuSim;
 use crate::error::{Error, Result};
 use crate::gpu::GpuSim;
+use crate::gpu::buffers::vec4s;
 use crate::gpu::context::read_buffer;
 use crate::scene::Scene;
 
@@ -120,10 +121,6 @@ pub struct HostScene {
     triangle_count: u32,
     body_triangle_count: u32,
     line_count: u32,
-}
-
-fn vec4s(points: &[Vec3], w: f32) -> Vec<[f32; 4]> {
-    points.iter().map(|p| p.extend(w).to_array()).collect()
 }
 
 impl HostScene {

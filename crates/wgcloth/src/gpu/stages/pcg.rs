@@ -7,9 +7,9 @@ use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 
-/// The kernels bound with the ping-pong buffers one way round: reading
-/// scalars `[k]` and direction `[k]`, writing scalars and direction
-/// `[1 - k]`.
+/// The kernels bound with the ping-pong buffers one way round: scalars
+/// `[k]` and direction `[k]` as this iteration's (`spmv` writes the first
+/// direction there), scalars and direction `[1 - k]` as the next one's.
 struct Side {
     init: Bound,
     init_scalars: Bound,
