@@ -107,6 +107,10 @@ pub struct Report {
     pub stage_ms: BTreeMap<String, f64>,
     /// Compute dispatches one step records (GPU only).
     pub dispatches_per_step: Option<u32>,
+    /// GPU memory of the scene's state, bytes (`GpuSim::state_bytes`; GPU
+    /// only), and per cloth vertex.
+    pub gpu_state_bytes: Option<u64>,
+    pub gpu_bytes_per_vertex: Option<f64>,
     /// Deepest any cloth vertex got inside the rigid surface, m (≥ 0).
     pub max_penetration: f32,
     pub finite: bool,
@@ -406,6 +410,8 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         ms_per_step,
         stage_ms,
         dispatches_per_step: None,
+        gpu_state_bytes: None,
+        gpu_bytes_per_vertex: None,
         max_penetration,
         finite: sim.is_finite(),
         last_good: divergence.is_some().then_some(last_good),
@@ -547,6 +553,8 @@ fn run_gpu(
         ms_per_step,
         stage_ms,
         dispatches_per_step: Some(dispatches),
+        gpu_state_bytes: Some(sim.state_bytes()),
+        gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
         max_penetration: f32::from_bits(state.max_penetration_bits),
         finite,
         divergence,
@@ -638,11 +646,19 @@ impl Report {
             .dispatches_per_step
             .map(|d| format!(", {d} dispatches/step"))
             .unwrap_or_default();
+        let memory = match (self.gpu_state_bytes, self.gpu_bytes_per_vertex) {
+            (Some(bytes), Some(per_vertex)) => format!(
+                "gpu memory   {:.2} MiB of state, {per_vertex:.0} bytes per vertex\n",
+                bytes as f64 / (1 << 20) as f64
+            ),
+            _ => String::new(),
+        };
         format!(
             "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
              backend      {} — {}\n\
              {}\
              ms/step      {:.3} (median{dispatches})\n\
+             {memory}\
              stages (ms)  {}\n\
              pcg          {:.1} iterations/step, relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} breakdowns\n\
              contacts     {:.1} per step\n\

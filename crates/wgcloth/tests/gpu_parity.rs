@@ -591,3 +591,20 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
         "{err}"
     );
 }
+
+/// The scene's GPU state holds at least the step's per-vertex vectors
+/// (x, v and their checkpoint copies, rest, b, r, z and q, both directions,
+/// P⁻¹: 13 `vec4`s) and grows with the cloth, not faster.
+#[test]
+fn state_bytes_count_the_per_vertex_vectors_and_grow_with_the_cloth() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let bytes = |grid: u32| {
+        let scene = sphere(grid, ModelKind::Friction);
+        let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        let n = scene.cloth.vertex_count() as u64;
+        assert!(sim.state_bytes() >= 13 * 16 * n, "{grid}²: {}", sim.state_bytes());
+        sim.state_bytes() as f64
+    };
+    let growth = bytes(64) / bytes(32);
+    assert!((3.0..=4.5).contains(&growth), "64² / 32²: {growth}");
+}

@@ -29,6 +29,9 @@ pub(crate) fn vec4s(points: &[Vec3], w: f32) -> Vec<[f32; 4]> {
 /// body's vertices and normals, all static connectivity in `topology`), so
 /// no kernel binds more than WebGPU's default 8 storage buffers.
 pub(crate) struct Buffers {
+    /// Bytes of all the storage buffers below (the two small uniforms and
+    /// the network's weights not counted).
+    pub(crate) storage_bytes: u64,
     pub(crate) params: wgpu::Buffer,
     pub(crate) x: wgpu::Buffer,
     pub(crate) v: wgpu::Buffer,
@@ -249,6 +252,12 @@ impl Buffers {
         let usage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
+        // Bytes of the storage buffers, for the memory a scene takes.
+        let allocated = std::cell::Cell::new(0u64);
+        let counted = |buffer: wgpu::Buffer| {
+            allocated.set(allocated.get() + buffer.size());
+            buffer
+        };
         let init = |label: &str, contents: &[u8], extra: wgpu::BufferUsages| {
             // Empty arrays (no rigid body) still need a bindable buffer of
             // at least one element of the largest struct (Contact, 64 B).
@@ -259,21 +268,23 @@ impl Buffers {
             } else {
                 contents
             };
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: usage | extra,
-            })
+            counted(
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: usage | extra,
+                }),
+            )
         };
         let storage =
             |label: &str, contents: &[u8]| init(label, contents, wgpu::BufferUsages::empty());
         let zeroed = |label: &str, bytes: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
+            counted(device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: bytes.max(64),
                 usage,
                 mapped_at_creation: false,
-            })
+            }))
         };
         let sizes = Sizes::of(scene, params, topology.len());
 
@@ -360,6 +371,8 @@ impl Buffers {
                 contents: bytemuck::cast_slice(&[scene.metres_per_force(), 0.0, 0.0, 0.0]),
                 usage: wgpu::BufferUsages::UNIFORM,
             }),
+            // Last: every buffer above is counted.
+            storage_bytes: allocated.get(),
         }
     }
 }

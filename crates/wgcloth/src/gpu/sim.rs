@@ -159,6 +159,12 @@ impl GpuSim {
         (&self.buffers.rigid, triangles)
     }
 
+    /// GPU memory the scene's state takes, in bytes: every storage buffer
+    /// of the step (a network's weights and activations not counted).
+    pub fn state_bytes(&self) -> u64 {
+        self.buffers.storage_bytes
+    }
+
     /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
     pub fn positions(&self) -> &wgpu::Buffer {
         &self.buffers.x
