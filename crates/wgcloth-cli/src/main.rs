@@ -683,7 +683,12 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            // The library names the limit; the flag that fixes it is ours.
+            let hint = match e {
+                Error::Limit { .. } => " (use a smaller --grid)",
+                _ => "",
+            };
+            eprintln!("error: {e}{hint}");
             ExitCode::from(2)
         }
     }

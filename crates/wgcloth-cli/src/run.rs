@@ -307,6 +307,8 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
     };
     let error = match run_gpu(ctx, &scene, steps, &mut obs, Some(&mut checkpoint)) {
         Err(Error::Gpu(what)) => what,
+        // A scene beyond the device's limits still runs on the CPU.
+        Err(e @ Error::Limit { .. }) => e.to_string(),
         done => return done,
     };
     let resumed_from = checkpoint.state.step;

@@ -44,6 +44,20 @@ pub enum Error {
     #[error("GPU: {0}")]
     Gpu(String),
 
+    /// A scene the device cannot run: what needs more than one of the
+    /// device's limits allows (a smaller cloth grid fits).
+    #[error("GPU: the scene's {what} need {needed}; the device's {limit} is {device}")]
+    Limit {
+        /// What the scene needs it for ("topology", "contacts", …).
+        what: String,
+        /// The `wgpu::Limits` field.
+        limit: &'static str,
+        /// What the scene needs, with its unit.
+        needed: String,
+        /// The device's value of the limit, with its unit.
+        device: String,
+    },
+
     /// The simulation state stopped being finite, exploded or the solver
     /// broke down (`health::diagnose` names the vertex).
     #[error("simulation diverged at step {step}, vertex {vertex}: {reason}")]

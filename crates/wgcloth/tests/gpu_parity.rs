@@ -602,7 +602,11 @@ fn state_bytes_count_the_per_vertex_vectors_and_grow_with_the_cloth() {
         let scene = sphere(grid, ModelKind::Friction);
         let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         let n = scene.cloth.vertex_count() as u64;
-        assert!(sim.state_bytes() >= 13 * 16 * n, "{grid}²: {}", sim.state_bytes());
+        assert!(
+            sim.state_bytes() >= 13 * 16 * n,
+            "{grid}²: {}",
+            sim.state_bytes()
+        );
         sim.state_bytes() as f64
     };
     let growth = bytes(64) / bytes(32);

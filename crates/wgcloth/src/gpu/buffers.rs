@@ -393,20 +393,27 @@ pub(crate) fn check_limits(limits: &wgpu::Limits, sizes: &Sizes, params: &Params
                     limits.max_storage_buffer_binding_size,
                 )
             };
-            return Err(Error::Gpu(format!(
-                "the scene's {what} need a {bytes}-byte buffer; the device's {limit} is {value} bytes (a smaller cloth grid fits)"
-            )));
+            return Err(Error::Limit {
+                what: what.into(),
+                limit,
+                needed: format!("a {bytes}-byte buffer"),
+                device: format!("{value} bytes"),
+            });
         }
     }
     let most = (params.n_vertices.max(params.n_springs) as u64)
         .max((params.n_vertices + params.n_rigid_vertices) as u64);
     let dispatchable = limits.max_compute_workgroups_per_dimension as u64 * WORKGROUP as u64;
     if most > dispatchable {
-        return Err(Error::Gpu(format!(
-            "the scene needs {} workgroups in one dispatch; the device's max_compute_workgroups_per_dimension is {} (a smaller cloth grid fits)",
-            most.div_ceil(WORKGROUP as u64),
-            limits.max_compute_workgroups_per_dimension
-        )));
+        return Err(Error::Limit {
+            what: "vertices or springs".into(),
+            limit: "max_compute_workgroups_per_dimension",
+            needed: format!(
+                "{} workgroups in one dispatch",
+                most.div_ceil(WORKGROUP as u64)
+            ),
+            device: limits.max_compute_workgroups_per_dimension.to_string(),
+        });
     }
     Ok(())
 }
