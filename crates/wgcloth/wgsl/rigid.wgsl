@@ -15,10 +15,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let t = state.time + params.dt;
     var offset = vec3<f32>(0.0);
     var velocity = vec3<f32>(0.0);
-    if params.motion_kind == 1u {
+    if params.motion_kind == MOTION_LINEAR {
         offset = params.motion_vector * t;
         velocity = params.motion_vector;
-    } else if params.motion_kind == 2u {
+    } else if params.motion_kind == MOTION_SINUSOID {
         let w = TAU / params.motion_period;
         let phase = w * t + params.motion_phase;
         offset = params.motion_vector * params.motion_amplitude * sin(phase);

@@ -8,7 +8,7 @@ use wgpu::util::DeviceExt;
 
 use crate::config::ModelKind;
 use crate::error::{Error, Result};
-use crate::gpu::constants::{MAX_TRIANGLE_CONTACTS, TILE, WORKGROUP, model};
+use crate::gpu::constants::{MAX_TRIANGLE_CONTACTS, TILE, WORKGROUP, model, motion};
 use crate::gpu::layout::{
     BvhNode, Contact, Params, Response, RigidFrame, Scalars, Sections, SpringTerm, StepState, Sym3,
 };
@@ -143,8 +143,8 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         p.rigid_position = body.position.to_array();
         p.rigid_rotation = body.rotation.to_array();
         (p.motion_kind, p.motion_vector) = match body.motion {
-            Motion::Static => (0, [0.0; 3]),
-            Motion::Linear { velocity } => (1, velocity.to_array()),
+            Motion::Static => (motion::STATIC, [0.0; 3]),
+            Motion::Linear { velocity } => (motion::LINEAR, velocity.to_array()),
             Motion::Sinusoid {
                 axis,
                 amplitude,
@@ -152,7 +152,7 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
                 phase,
             } => {
                 (p.motion_amplitude, p.motion_period, p.motion_phase) = (amplitude, period, phase);
-                (2, axis.to_array())
+                (motion::SINUSOID, axis.to_array())
             }
         };
     }

@@ -22,6 +22,16 @@ pub const MLP_MAX_LAYERS: u32 = 16;
 /// `mlp::per_contact`).
 pub const BATCH_GROUP: u32 = 64;
 
+/// `Params::motion_kind`: how the rigid body moves (wgsl/rigid.wgsl).
+pub mod motion {
+    /// The body stays where it is placed.
+    pub const STATIC: u32 = 0;
+    /// Constant velocity, `Params::motion_vector`.
+    pub const LINEAR: u32 = 1;
+    /// A sinusoid along the unit axis `Params::motion_vector`.
+    pub const SINUSOID: u32 = 2;
+}
+
 /// `Params::model`: which contact model the kernels evaluate.
 pub mod model {
     /// `ModelKind::Naive`: the penalty force f = −c d̃ n (thesis eq. 6).
@@ -38,8 +48,9 @@ pub mod model {
 }
 
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
-/// is the kernels' `else` branch, so they never name it).
-pub const SHARED: [(&str, u32); 14] = [
+/// and `motion::STATIC` are the kernels' `else` branches, so they never
+/// name them).
+pub const SHARED: [(&str, u32); 16] = [
     ("WORKGROUP", WORKGROUP),
     ("BATCH_GROUP", BATCH_GROUP),
     ("MAX_TRIANGLE_CONTACTS", MAX_TRIANGLE_CONTACTS),
@@ -47,6 +58,8 @@ pub const SHARED: [(&str, u32); 14] = [
     ("TILE", TILE),
     ("MLP_MAX_WIDTH", MLP_MAX_WIDTH),
     ("MLP_MAX_LAYERS", MLP_MAX_LAYERS),
+    ("MOTION_LINEAR", motion::LINEAR),
+    ("MOTION_SINUSOID", motion::SINUSOID),
     ("MODEL_NAIVE", model::NAIVE),
     ("MODEL_FRICTION", model::FRICTION),
     ("MODEL_FRICTION_NET", model::FRICTION_NET),
