@@ -19,6 +19,28 @@ pub enum SceneKind {
     Hang,
 }
 
+/// The PCG preconditioner (`solver.preconditioner`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preconditioner {
+    /// A geometric multigrid V-cycle on the cloth's grid: iterations to a
+    /// tolerance grow slowly with the grid (docs/DESIGN.md "The solve").
+    #[default]
+    Multigrid,
+    /// The diagonal of A (the thesis's).
+    Jacobi,
+}
+
+impl Preconditioner {
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preconditioner::Multigrid => "multigrid",
+            Preconditioner::Jacobi => "jacobi",
+        }
+    }
+}
+
 /// The collision model (`model`; DESIGN "Collision models").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -318,8 +340,11 @@ pub struct SolverConfig {
     pub steps: u64,
     /// Maximum PCG iterations (thesis: 25).
     pub cg_iters: u32,
-    /// Relative residual at which PCG stops (thesis: 1e-6); 0 runs every iteration.
+    /// Relative residual |S r| / |S b| at which PCG stops (thesis: 1e-6);
+    /// 0 runs every iteration.
     pub cg_tol: f32,
+    /// The PCG preconditioner (thesis: Jacobi).
+    pub preconditioner: Preconditioner,
     /// m/s².
     pub gravity: [f32; 3],
     /// m/s: a vertex faster than this stops the run as diverging (the
@@ -332,8 +357,9 @@ impl Default for SolverConfig {
         SolverConfig {
             dt: 0.01,
             steps: 200,
-            cg_iters: 25,
-            cg_tol: 1e-6,
+            cg_iters: 100,
+            cg_tol: 1e-3,
+            preconditioner: Preconditioner::Multigrid,
             gravity: [0.0, -9.81, 0.0],
             max_speed: 100.0,
         }

@@ -39,6 +39,7 @@ pub mod error;
 pub mod gpu;
 pub mod health;
 pub mod math;
+pub mod multigrid;
 pub mod nn;
 pub mod render;
 pub mod scene;

@@ -1,26 +1,35 @@
-// Stage "pcg": Jacobi-preconditioned conjugate gradient on A v' = b, pinned
-// rows filtered (Baraff & Witkin's modified PCG). CPU twin: src/cpu/pcg.rs.
+// Stage "pcg": preconditioned conjugate gradient on A v' = b, pinned rows
+// filtered (Baraff & Witkin's modified PCG), preconditioned by Jacobi (the
+// thesis's) or by a multigrid V-cycle (wgsl/multigrid.wgsl). CPU twin:
+// src/cpu/pcg.rs.
 //
-// Two dispatches per iteration, no host round trip: `update` (α; x, r,
-// z = P⁻¹ r and partial rᵀz) and `next`, which finishes one iteration and
-// starts the next: β = δ' / δ and the new scalars, p' = z + β p, q = S A p'
-// and partial p'ᵀq. The first iteration's q comes from `spmv`, and
-// `conclude` finishes the last. Each workgroup reduces the previous
-// dispatch's partial sums itself, in the same order, so every one sees the
-// same α and β. The scalars and the direction ping-pong between two
-// buffers each (`*_in` this iteration's, `*_next` the next one's), and the
-// pᵀq partials between two segments, by the iteration count's parity;
-// once converged every kernel returns at once and carries the scalars.
+// No host round trip: with Jacobi an iteration is `update` (α; x, r,
+// z = P⁻¹ r, partial rᵀz and rᵀr) and `next`, which finishes one
+// iteration and starts the next: β = δ' / δ and the new scalars,
+// p' = z + β p, q = S A p' and partial p'ᵀq. With multigrid, `advance`
+// (x, r and partial rᵀr) and the V-cycle, whose last kernel leaves z and
+// partial rᵀz, take `update`'s place. The first iteration's q comes from
+// `spmv`, and `conclude` finishes the last. Each workgroup reduces the
+// previous dispatch's partial sums itself, in the same order, so every one
+// sees the same α and β. The scalars and the direction ping-pong between
+// two buffers each (`*_in` this iteration's, `*_next` the next one's), and
+// the pᵀq partials between two segments, by the iteration count's parity.
+// The scalars also hold the dispatch sizes of every level of the next
+// iteration's indirect dispatches, zero once the solve is over, so a
+// converged solve records iterations that cost nothing; `next` and
+// `conclude` run regardless and carry the scalars.
 
 struct Scalars {
     delta: f32,
-    delta0: f32,
+    bb: f32,
     threshold: f32,
     iterations: u32,
     done: u32,
     breakdown: u32,
-    pad0: u32,
-    pad1: u32,
+    rr: f32,
+    pad: u32,
+    // [workgroups, 1, 1] per multigrid level (level 0: the cloth).
+    groups: array<u32, 3 * MAX_LEVELS>,
 }
 
 // A: its diagonal blocks (one per vertex), then one block per spring.
@@ -34,17 +43,9 @@ struct Scalars {
 @group(1) @binding(6) var<storage, read_write> p: array<vec4<f32>>;
 @group(1) @binding(7) var<storage, read_write> p_next: array<vec4<f32>>;
 @group(1) @binding(8) var<storage, read_write> inv_diag: array<vec4<f32>>;
-// Per-workgroup partial sums, four segments: pᵀq of even and of odd
-// iterations, rᵀz, bᵀP⁻¹b.
-@group(1) @binding(9) var<storage, read_write> partials: array<f32>;
 @group(1) @binding(10) var<storage, read> scalars_in: Scalars;
 @group(1) @binding(11) var<storage, read_write> scalars_next: Scalars;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
-
-// Segments of `partials`: PQ + (iteration parity), RZ, BB.
-const PQ: u32 = 0u;
-const RZ: u32 = 2u;
-const BB: u32 = 3u;
 
 // The pᵀq segment of iteration `iteration`.
 fn pq_segment(iteration: u32) -> u32 {
@@ -91,30 +92,15 @@ fn row_next(i: u32, beta: f32) -> vec3<f32> {
     return acc;
 }
 
-fn partial_count() -> u32 {
-    return (params.n_vertices + WORKGROUP - 1u) / WORKGROUP;
-}
-
-fn store_partial(segment: u32, wg: u32, value: f32) {
-    partials[segment * partial_count() + wg] = value;
-}
-
-// Σ of a segment's partials over all workgroups of the previous dispatch.
-fn total(lid: u32, segment: u32) -> f32 {
-    var s = 0.0;
-    for (var k = lid; k < partial_count(); k += WORKGROUP) {
-        s += partials[segment * partial_count() + k];
-    }
-    return workgroup_sum(lid, s);
-}
-
-// r = S (b − A x), z = P⁻¹ r, with partial rᵀz and bᵀP⁻¹b.
+// r = S (b − A x), Jacobi's z = P⁻¹ r (the V-cycle overwrites it), with
+// partial rᵀz, |S b|² and rᵀr.
 @compute @workgroup_size(WORKGROUP)
 fn init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(workgroup_id) wg: vec3<u32>) {
     let i = id.x;
     var rz = 0.0;
     var bb = 0.0;
+    var rr = 0.0;
     if i < params.n_vertices {
         let free = !is_pinned(i);
         let m = select(vec3<f32>(0.0), 1.0 / sym_diag(matrix[i]), free);
@@ -124,24 +110,49 @@ fn init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         let zi = m * ri;
         zq[i] = vec4<f32>(zi, 0.0);
         rz = dot(ri, zi);
-        bb = dot(b[i].xyz, m * b[i].xyz);
+        bb = select(0.0, dot(b[i].xyz, b[i].xyz), free);
+        rr = dot(ri, ri);
     }
     let s_rz = workgroup_sum(lid, rz);
     let s_bb = workgroup_sum(lid, bb);
+    let s_rr = workgroup_sum(lid, rr);
     if lid == 0u {
         store_partial(RZ, wg.x, s_rz);
         store_partial(BB, wg.x, s_bb);
+        store_partial(RR, wg.x, s_rr);
     }
 }
 
-// The starting scalars (one workgroup).
+// Whether the solve goes on from residual rᵀr = rr and δ = rᵀz.
+fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
+    return rr > threshold && delta > 0.0;
+}
+
+// The starting scalars (one workgroup), and every level's dispatch size
+// (the levels of multigrid::levels, halving from the cloth's grid).
 @compute @workgroup_size(WORKGROUP)
 fn init_scalars(@builtin(local_invocation_index) lid: u32) {
     let delta = total(lid, RZ);
-    let delta0 = total(lid, BB);
+    let bb = total(lid, BB);
+    let rr = total(lid, RR);
     if lid == 0u {
-        let threshold = params.cg_tol * params.cg_tol * delta0;
-        scalars_next = Scalars(delta, delta0, threshold, 0u, u32(!(delta > threshold && delta > 0.0)), 0u, 0u, 0u);
+        var s: Scalars;
+        s.delta = delta;
+        s.bb = bb;
+        s.rr = rr;
+        s.threshold = params.cg_tol * params.cg_tol * bb;
+        let on = going_on(rr, delta, s.threshold);
+        s.done = u32(!on);
+        var nx = params.cells_x + 1u;
+        var ny = params.cells_y + 1u;
+        for (var l = 0u; l < MAX_LEVELS; l++) {
+            s.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
+            s.groups[3u * l + 1u] = 1u;
+            s.groups[3u * l + 2u] = 1u;
+            nx = (nx + 1u) / 2u;
+            ny = (ny + 1u) / 2u;
+        }
+        scalars_next = s;
     }
 }
 
@@ -167,31 +178,57 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     }
 }
 
-// α = δ / pᵀq; x += α p; r −= α q; z = P⁻¹ r; partial rᵀz.
+// α = δ / pᵀq, or 0 at a breakdown (which `next` or `conclude` records).
+fn step_length(lid: u32) -> f32 {
+    let pq = total(lid, pq_segment(scalars_in.iterations));
+    return select(0.0, scalars_in.delta / pq, pq > 0.0);
+}
+
+// x += α p; r −= α q at vertex i, returning the new r.
+fn advance_vertex(i: u32, alpha: f32) -> vec3<f32> {
+    x[i] = vec4<f32>(x[i].xyz + alpha * p[i].xyz, x[i].w);
+    let ri = r[i].xyz - alpha * q(i);
+    r[i] = vec4<f32>(ri, 0.0);
+    return ri;
+}
+
+// Jacobi: x += α p; r −= α q; z = P⁻¹ r; partial rᵀz and rᵀr.
 @compute @workgroup_size(WORKGROUP)
 fn update(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
           @builtin(workgroup_id) wg: vec3<u32>) {
-    if scalars_in.done != 0u {
-        return;
-    }
-    let pq = total(lid, pq_segment(scalars_in.iterations));
-    if !(pq > 0.0) {
-        return; // breakdown: `next` or `conclude` records it
-    }
-    let alpha = scalars_in.delta / pq;
+    let alpha = step_length(lid);
     let i = id.x;
     var rz = 0.0;
-    if i < params.n_vertices {
-        x[i] = vec4<f32>(x[i].xyz + alpha * p[i].xyz, x[i].w);
-        let ri = r[i].xyz - alpha * q(i);
-        r[i] = vec4<f32>(ri, 0.0);
+    var rr = 0.0;
+    if i < params.n_vertices && alpha != 0.0 {
+        let ri = advance_vertex(i, alpha);
         let zi = inv_diag[i].xyz * ri;
         zq[i] = vec4<f32>(zi, 0.0);
         rz = dot(ri, zi);
+        rr = dot(ri, ri);
     }
-    let s = workgroup_sum(lid, rz);
+    let s_rz = workgroup_sum(lid, rz);
+    let s_rr = workgroup_sum(lid, rr);
     if lid == 0u {
-        store_partial(RZ, wg.x, s);
+        store_partial(RZ, wg.x, s_rz);
+        store_partial(RR, wg.x, s_rr);
+    }
+}
+
+// Multigrid: x += α p; r −= α q; partial rᵀr (the V-cycle follows).
+@compute @workgroup_size(WORKGROUP)
+fn advance(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+           @builtin(workgroup_id) wg: vec3<u32>) {
+    let alpha = step_length(lid);
+    let i = id.x;
+    var rr = 0.0;
+    if i < params.n_vertices && alpha != 0.0 {
+        let ri = advance_vertex(i, alpha);
+        rr = dot(ri, ri);
+    }
+    let s = workgroup_sum(lid, rr);
+    if lid == 0u {
+        store_partial(RR, wg.x, s);
     }
 }
 
@@ -213,19 +250,34 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
     let pq = total(lid, pq_segment(scalars_in.iterations));
     if !(pq > 0.0) {
         if leader {
-            scalars_next = scalars_in;
-            scalars_next.done = 1u;
-            scalars_next.breakdown = 1u;
+            var s = scalars_in;
+            s.done = 1u;
+            s.breakdown = 1u;
+            for (var l = 0u; l < MAX_LEVELS; l++) {
+                s.groups[3u * l] = 0u;
+            }
+            scalars_next = s;
         }
         return Ending(false, 0.0);
     }
     let delta = total(lid, RZ);
-    let converged = !(delta > scalars_in.threshold && delta > 0.0);
+    let rr = total(lid, RR);
+    let on = going_on(rr, delta, scalars_in.threshold);
     if leader {
-        scalars_next = Scalars(delta, scalars_in.delta0, scalars_in.threshold, scalars_in.iterations + 1u,
-                               u32(converged), u32(!(delta == delta)), 0u, 0u);
+        var s = scalars_in;
+        s.delta = delta;
+        s.rr = rr;
+        s.iterations += 1u;
+        s.done = u32(!on);
+        s.breakdown = u32(!(delta == delta && rr == rr));
+        if !on {
+            for (var l = 0u; l < MAX_LEVELS; l++) {
+                s.groups[3u * l] = 0u;
+            }
+        }
+        scalars_next = s;
     }
-    return Ending(!converged, delta / scalars_in.delta);
+    return Ending(on, delta / scalars_in.delta);
 }
 
 // Ends this iteration and starts the next: p' = z + β p, q = S A p' and
@@ -264,8 +316,8 @@ fn conclude(@builtin(local_invocation_index) lid: u32) {
 fn finish() {
     let s = scalars_in;
     var residual = 0.0;
-    if s.delta0 > 0.0 {
-        residual = sqrt(max(s.delta, 0.0) / s.delta0);
+    if s.bb > 0.0 {
+        residual = sqrt(max(s.rr, 0.0) / s.bb);
     }
     state.last_iterations = s.iterations;
     state.last_residual = residual;

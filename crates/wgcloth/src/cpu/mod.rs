@@ -7,6 +7,7 @@ pub mod collide;
 pub mod contact;
 pub mod integrate;
 pub mod measure;
+pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
 pub mod springs;
@@ -227,14 +228,17 @@ impl CpuSim {
             Stage::Pcg => {
                 // v holds the initial guess (last velocity; pinned entries are 0).
                 let cfg = &self.scene.config.solver;
+                let settings = pcg::SolveSettings {
+                    max_iters: cfg.cg_iters,
+                    tol: cfg.cg_tol,
+                    preconditioner: cfg.preconditioner,
+                };
                 stats.pcg = pcg::solve(
                     &self.matrix,
-                    &cloth.adjacency,
-                    &cloth.pinned,
+                    cloth,
                     &self.rhs,
                     v,
-                    cfg.cg_iters,
-                    cfg.cg_tol,
+                    settings,
                     &mut self.scratch,
                 );
             }

@@ -1,11 +1,16 @@
-//! Stage "pcg": the system matrix and the Jacobi-preconditioned conjugate
+//! Stage "pcg": the system matrix and the preconditioned conjugate
 //! gradient solve of thesis eq. 1, with pinned vertices removed by
-//! filtering (Baraff & Witkin's modified PCG). Mirrors wgsl/pcg.wgsl.
+//! filtering (Baraff & Witkin's modified PCG). The preconditioner is the
+//! thesis's Jacobi or a multigrid V-cycle (`cpu::multigrid`). Mirrors
+//! wgsl/pcg.wgsl.
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
+pub use crate::config::Preconditioner;
 use crate::cpu::GRAIN;
+use crate::cpu::multigrid::Multigrid;
+use crate::scene::Cloth;
 use crate::scene::cloth::Adjacency;
 
 /// A = M − hD − h²K in the cloth's sparsity: one diagonal block per vertex
@@ -30,7 +35,7 @@ impl BlockMatrix {
     }
 
     /// Row i of A x, gathered over the vertex's springs.
-    fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
+    pub(crate) fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
         let mut acc = self.diag[i] * x[i];
         for k in adj.range(i) {
             acc += self.off[adj.spring[k] as usize] * x[adj.other[k] as usize];
@@ -74,13 +79,25 @@ impl BlockMatrix {
 pub struct PcgOutcome {
     /// CG iterations run.
     pub iterations: u32,
-    /// √(rᵀP⁻¹r / bᵀP⁻¹b) at exit: the preconditioned relative residual.
+    /// |S r| / |S b| at exit: the relative residual of the free rows, the
+    /// same measure whichever preconditioner ran.
     pub relative_residual: f32,
     /// pᵀAp ≤ 0 or a non-finite scalar stopped the iteration.
     pub breakdown: bool,
 }
 
-/// Work vectors, kept between steps.
+/// When a solve stops, and how it is preconditioned.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolveSettings {
+    /// The most iterations.
+    pub max_iters: u32,
+    /// Stop once |S r| ≤ `tol` |S b| (0: run every iteration).
+    pub tol: f32,
+    /// The preconditioner P.
+    pub preconditioner: Preconditioner,
+}
+
+/// Work vectors and the multigrid hierarchy, kept between steps.
 #[derive(Clone, Debug, Default)]
 pub struct PcgScratch {
     r: Vec<Vec3>,
@@ -88,30 +105,36 @@ pub struct PcgScratch {
     p: Vec<Vec3>,
     q: Vec<Vec3>,
     inv_diag: Vec<Vec3>,
+    multigrid: Option<Multigrid>,
 }
 
-/// Solves A x = b for the free vertices; `x` holds the initial guess on
-/// entry, and pinned entries keep their value (the prescribed velocity).
-/// Stops after `max_iters` or when the preconditioned residual falls below
-/// `tol` relative to b's (tol = 0: run every iteration).
+/// Solves A x = b for the free vertices of `cloth`; `x` holds the initial
+/// guess on entry, and pinned entries keep their value (the prescribed
+/// velocity). Stops after `max_iters` or once the relative residual is at
+/// most `tol`.
 ///
-/// Each iteration is three fused passes, as on the GPU: q = S A p with
-/// pᵀq; the x, r, z updates with rᵀz; and the p update. Dot products sum in
+/// Each iteration is fused passes, as on the GPU: q = S A p with pᵀq; the
+/// x and r updates with rᵀr; z = P⁻¹ r with rᵀz (fused into the update for
+/// Jacobi, a V-cycle for multigrid); and the p update. Dot products sum in
 /// f64 so a 10⁶-term sum keeps the digits the convergence test reads.
-#[allow(clippy::too_many_arguments)]
 pub fn solve(
     a: &BlockMatrix,
-    adj: &Adjacency,
-    pinned: &[bool],
+    cloth: &Cloth,
     b: &[Vec3],
     x: &mut [Vec3],
-    max_iters: u32,
-    tol: f32,
+    settings: SolveSettings,
     s: &mut PcgScratch,
 ) -> PcgOutcome {
+    let (adj, pinned) = (&cloth.adjacency, &cloth.pinned[..]);
     let n = b.len();
     for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
         v.resize(n, Vec3::ZERO);
+    }
+    let multigrid = settings.preconditioner == Preconditioner::Multigrid;
+    if multigrid {
+        s.multigrid
+            .get_or_insert_with(|| Multigrid::new(cloth))
+            .setup(a, cloth);
     }
     // Jacobi preconditioner; zero on pinned rows, which is the filter S.
     s.inv_diag
@@ -126,48 +149,48 @@ pub fn solve(
                 Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
             };
         });
-    let delta0 = b
+    let bb = b
         .par_iter()
         .with_min_len(GRAIN)
-        .zip(&s.inv_diag)
-        .map(|(bi, m)| (*bi * *m).dot(*bi) as f64)
+        .enumerate()
+        .filter(|&(i, _)| !pinned[i])
+        .map(|(_, bi)| bi.length_squared() as f64)
         .sum::<f64>();
-    // r = S (b − A x), p = P⁻¹ r.
+    // r = S (b − A x), z = P⁻¹ r, p = z.
     a.multiply(adj, x, &mut s.q);
-    let mut delta =
+    let mut rr =
         s.r.par_iter_mut()
             .with_min_len(GRAIN)
-            .zip(s.p.par_iter_mut())
             .enumerate()
-            .map(|(i, (r, p))| {
+            .map(|(i, r)| {
                 *r = if pinned[i] { Vec3::ZERO } else { b[i] - s.q[i] };
-                *p = *r * s.inv_diag[i];
-                r.dot(*p) as f64
+                r.length_squared() as f64
             })
             .sum::<f64>();
+    let mut delta = precondition(a, cloth, settings.preconditioner, s);
+    s.p.copy_from_slice(&s.z);
 
     let mut out = PcgOutcome::default();
-    let threshold = (tol as f64).powi(2) * delta0;
-    while out.iterations < max_iters && delta > threshold && delta > 0.0 {
+    let threshold = (settings.tol as f64).powi(2) * bb;
+    while out.iterations < settings.max_iters && rr > threshold && delta > 0.0 {
         let pq = a.multiply_filtered_dot(adj, pinned, &s.p, &mut s.q);
         if !(pq > 0.0 && pq.is_finite()) {
             out.breakdown = true;
             break;
         }
         let alpha = (delta / pq) as f32;
-        let delta_new = x
+        rr = x
             .par_iter_mut()
             .with_min_len(GRAIN)
             .zip(s.r.par_iter_mut())
-            .zip(s.z.par_iter_mut())
             .enumerate()
-            .map(|(i, ((x, r), z))| {
+            .map(|(i, (x, r))| {
                 *x += alpha * s.p[i];
                 *r -= alpha * s.q[i];
-                *z = *r * s.inv_diag[i];
-                r.dot(*z) as f64
+                r.length_squared() as f64
             })
             .sum::<f64>();
+        let delta_new = precondition(a, cloth, settings.preconditioner, s);
         let beta = (delta_new / delta) as f32;
         s.p.par_iter_mut()
             .with_min_len(GRAIN)
@@ -176,11 +199,34 @@ pub fn solve(
         delta = delta_new;
         out.iterations += 1;
     }
-    out.breakdown |= !delta.is_finite();
-    out.relative_residual = if delta0 > 0.0 {
-        (delta.max(0.0) / delta0).sqrt() as f32
+    out.breakdown |= !(delta.is_finite() && rr.is_finite());
+    out.relative_residual = if bb > 0.0 {
+        (rr.max(0.0) / bb).sqrt() as f32
     } else {
         0.0
     };
     out
+}
+
+/// z = P⁻¹ r, returning rᵀz.
+fn precondition(
+    a: &BlockMatrix,
+    cloth: &Cloth,
+    preconditioner: Preconditioner,
+    s: &mut PcgScratch,
+) -> f64 {
+    match (preconditioner, &mut s.multigrid) {
+        (Preconditioner::Multigrid, Some(mg)) => mg.apply(a, cloth, &s.r, &mut s.z),
+        _ => s
+            .z
+            .par_iter_mut()
+            .with_min_len(GRAIN)
+            .zip(&s.r)
+            .zip(&s.inv_diag)
+            .map(|((z, r), m)| {
+                *z = *r * *m;
+                r.dot(*z) as f64
+            })
+            .sum(),
+    }
 }

@@ -6,12 +6,14 @@
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
-use crate::config::ModelKind;
+use crate::config::{ModelKind, Preconditioner};
 use crate::error::{Error, Result};
 use crate::gpu::constants::{MAX_TRIANGLE_CONTACTS, TILE, WORKGROUP, model, motion};
 use crate::gpu::layout::{
-    BvhNode, Contact, Params, Response, RigidFrame, Scalars, Sections, SpringTerm, StepState, Sym3,
+    BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, SpringTerm,
+    StepState, Sym3,
 };
+use crate::multigrid::{self, STENCIL};
 use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
 
@@ -59,7 +61,16 @@ pub(crate) struct Buffers {
     pub(crate) p: [wgpu::Buffer; 2],
     pub(crate) inv_diag: wgpu::Buffer,
     pub(crate) partials: wgpu::Buffer,
+    /// PCG's scalars, ping-ponged; they also hold the next iteration's
+    /// indirect dispatch sizes.
     pub(crate) scalars: [wgpu::Buffer; 2],
+    /// Multigrid: every level's smoother blocks, then every coarse level's
+    /// stencils (one element when Jacobi preconditions).
+    pub(crate) operators: wgpu::Buffer,
+    /// Multigrid: every coarse level's right-hand side and correction.
+    pub(crate) vectors: wgpu::Buffer,
+    /// Multigrid: one `Hop` per level, what its dispatches work between.
+    pub(crate) hops: Vec<wgpu::Buffer>,
     pub(crate) state: wgpu::Buffer,
     pub(crate) body_vertices: wgpu::Buffer,
     pub(crate) body_normals: wgpu::Buffer,
@@ -159,6 +170,52 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
     p
 }
 
+/// The multigrid levels as the kernels see them, the cloth first, with
+/// their offsets into the operators and vectors buffers; empty when the
+/// scene is preconditioned by Jacobi.
+pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
+    if scene.config.solver.preconditioner != Preconditioner::Multigrid {
+        return vec![];
+    }
+    let levels = multigrid::levels(scene.cloth.nx, scene.cloth.ny);
+    let total: u32 = levels.iter().map(|l| l.nodes() as u32).sum();
+    let (mut smoothers, mut stencils, mut vectors) = (0, total, 0);
+    levels
+        .iter()
+        .enumerate()
+        .map(|(k, l)| {
+            let n = l.nodes() as u32;
+            let coarse = k > 0;
+            let g = Grid {
+                level: k as u32,
+                nx: l.nx,
+                ny: l.ny,
+                smoothers_at: smoothers,
+                stencil_at: if coarse { stencils } else { 0 },
+                rhs_at: if coarse { vectors } else { 0 },
+                correction_at: if coarse { vectors + n } else { 0 },
+                pad: 0,
+            };
+            smoothers += n;
+            if coarse {
+                stencils += n * STENCIL;
+                vectors += 2 * n;
+            }
+            g
+        })
+        .collect()
+}
+
+/// Each level's `Hop`: it and the next coarser one.
+pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
+    (0..grids.len())
+        .map(|l| Hop {
+            fine: grids[l],
+            coarse: grids.get(l + 1).copied().unwrap_or_default(),
+        })
+        .collect()
+}
+
 /// Every buffer's size in bytes that depends on the scene, a pure function
 /// of it (as vello's `RenderConfig`): the limits check and the allocation
 /// read the same numbers.
@@ -175,6 +232,8 @@ pub(crate) struct Sizes {
     pub(crate) triangle_contacts: u64,
     pub(crate) matrix: u64,
     pub(crate) partials: u64,
+    pub(crate) operators: u64,
+    pub(crate) vectors: u64,
     pub(crate) rigid: u64,
     pub(crate) bounds: u64,
     pub(crate) net_batch: u64,
@@ -199,6 +258,14 @@ impl Sizes {
             .map_or(0, |net| slots * net.kind.evaluations() as u64);
         let tiles = (p.tiles_x * p.tiles_y + p.supertiles_x * p.supertiles_y) as u64;
         let size = |n: u64, of: usize| n * of as u64;
+        let grids = multigrid_grids(scene);
+        let (operators, vectors) = match grids.last() {
+            Some(last) => {
+                let n = last.nx as u64 * last.ny as u64;
+                (last.stencil_at as u64 + n * STENCIL as u64, last.correction_at as u64 + n)
+            }
+            None => (1, 1),
+        };
         Sizes {
             per_vertex: size(n, 16),
             topology: size(topology_words as u64, 4),
@@ -208,7 +275,9 @@ impl Sizes {
             responses: size(slots, size_of::<Response>()),
             triangle_contacts: size(t * (1 + MAX_TRIANGLE_CONTACTS as u64), 4),
             matrix: size(n + s, size_of::<Sym3>()),
-            partials: size(4 * groups(n as u32) as u64, 4),
+            partials: size(5 * groups(n as u32) as u64, 4),
+            operators: size(operators, size_of::<Sym3>()),
+            vectors: size(vectors, 16),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             bounds: size(tiles, 32),
             net_batch: size(1 + batch, 4),
@@ -219,7 +288,7 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn all(&self) -> [(&'static str, u64); 16] {
+    pub(crate) fn all(&self) -> [(&'static str, u64); 18] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
@@ -231,6 +300,8 @@ impl Sizes {
             ("triangle contact lists", self.triangle_contacts),
             ("system matrix", self.matrix),
             ("partial sums", self.partials),
+            ("multigrid operators", self.operators),
+            ("multigrid vectors", self.vectors),
             ("placed body", self.rigid),
             ("tile bounds", self.bounds),
             ("network batch", self.net_batch),
@@ -343,10 +414,21 @@ impl Buffers {
             ],
             inv_diag: zeroed("inverse diagonal", sizes.per_vertex),
             partials: zeroed("partial sums", sizes.partials),
-            scalars: [
-                zeroed("pcg scalars 0", size_of::<Scalars>() as u64),
-                zeroed("pcg scalars 1", size_of::<Scalars>() as u64),
-            ],
+            scalars: [0, 1].map(|k| {
+                let bytes = size_of::<Scalars>() as u64;
+                counted(device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("pcg scalars {k}")),
+                    size: bytes,
+                    usage: usage | wgpu::BufferUsages::INDIRECT,
+                    mapped_at_creation: false,
+                }))
+            }),
+            operators: zeroed("multigrid operators", sizes.operators),
+            vectors: zeroed("multigrid vectors", sizes.vectors),
+            hops: hops(&multigrid_grids(scene))
+                .iter()
+                .map(|hop| storage("multigrid hop", bytemuck::bytes_of(hop)))
+                .collect(),
             state: zeroed("step state", size_of::<StepState>() as u64),
             body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
             body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),

@@ -3,6 +3,7 @@
 //! declares one of these itself (a test checks both directions).
 
 use crate::health;
+use crate::multigrid;
 
 /// Invocations per workgroup of the per-element kernels.
 pub const WORKGROUP: u32 = 256;
@@ -50,7 +51,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 16] = [
+pub const SHARED: [(&str, u32); 20] = [
     ("WORKGROUP", WORKGROUP),
     ("BATCH_GROUP", BATCH_GROUP),
     ("MAX_TRIANGLE_CONTACTS", MAX_TRIANGLE_CONTACTS),
@@ -66,22 +67,31 @@ pub const SHARED: [(&str, u32); 16] = [
     ("MODEL_FRICTION_CONTACT_NET", model::FRICTION_CONTACT_NET),
     ("NOT_FINITE", health::NOT_FINITE),
     ("TOO_FAST", health::TOO_FAST),
+    ("STENCIL", multigrid::STENCIL),
+    ("COARSEST_NODES", multigrid::COARSEST_NODES),
+    ("COARSE_SWEEPS", multigrid::COARSE_SWEEPS),
+    ("MAX_LEVELS", multigrid::MAX_LEVELS),
     // Set per device (`Kernels::new`); this is the declared default.
     ("MLP_THREADS", 16),
 ];
 
-/// The WGSL declarations of [`SHARED`], with the network tile's threads
-/// per edge chosen for the device.
+/// The `f32` constants the kernels read, by their WGSL names.
+pub const SHARED_F32: [(&str, f32); 1] = [("SMOOTH_WEIGHT", multigrid::SMOOTH_WEIGHT)];
+
+/// The WGSL declarations of [`SHARED`] and [`SHARED_F32`], with the
+/// network tile's threads per edge chosen for the device.
 pub fn prelude(mlp_threads: u32) -> String {
-    SHARED
+    let integers = SHARED.iter().map(|&(name, value)| {
+        let value = if name == "MLP_THREADS" {
+            mlp_threads
+        } else {
+            value
+        };
+        format!("const {name}: u32 = {value}u;\n")
+    });
+    // `{:?}` writes an f32 with the digits that read back as the same f32.
+    let floats = SHARED_F32
         .iter()
-        .map(|&(name, value)| {
-            let value = if name == "MLP_THREADS" {
-                mlp_threads
-            } else {
-                value
-            };
-            format!("const {name}: u32 = {value}u;\n")
-        })
-        .collect()
+        .map(|&(name, value)| format!("const {name}: f32 = {value:?};\n"));
+    integers.chain(floats).collect()
 }

@@ -44,8 +44,10 @@ pub enum Entry {
     PcgInitScalars,
     /// The first iteration: p = z, q = S A p and partial pᵀq (`pcg::spmv`).
     PcgSpmv,
-    /// x += α p, r −= α q, z = P⁻¹ r and partial rᵀz (`pcg::update`).
+    /// Jacobi: x += α p, r −= α q, z = P⁻¹ r, partial rᵀz and rᵀr (`pcg::update`).
     PcgUpdate,
+    /// Multigrid: x += α p, r −= α q and partial rᵀr (`pcg::advance`).
+    PcgAdvance,
     /// Ends an iteration and starts the next: the scalars, p' = z + β p,
     /// q = S A p' and partial p'ᵀq (`pcg::next`).
     PcgNext,
@@ -53,6 +55,14 @@ pub enum Entry {
     PcgConclude,
     /// Folds the solve's outcome into the run statistics (`pcg::finish`).
     PcgFinish,
+    /// A coarse level's Galerkin operator and smoother (`multigrid::galerkin`).
+    MgGalerkin,
+    /// Pre-smoothing and restriction to the next level (`multigrid::down`).
+    MgDown,
+    /// The coarsest level's sweeps (`multigrid::coarse`).
+    MgCoarse,
+    /// Interpolation and post-smoothing; z on the cloth (`multigrid::up`).
+    MgUp,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
     /// Penetration depth and the contact total (`measure::main`).
@@ -69,7 +79,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 25] = [
+    pub const ALL: [Entry; 30] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -86,9 +96,14 @@ impl Entry {
         Entry::PcgInitScalars,
         Entry::PcgSpmv,
         Entry::PcgUpdate,
+        Entry::PcgAdvance,
         Entry::PcgNext,
         Entry::PcgConclude,
         Entry::PcgFinish,
+        Entry::MgGalerkin,
+        Entry::MgDown,
+        Entry::MgCoarse,
+        Entry::MgUp,
         Entry::Integrate,
         Entry::Measure,
         Entry::BatchPlan,
@@ -116,9 +131,14 @@ impl Entry {
             Entry::PcgInitScalars => ("pcg", "init_scalars"),
             Entry::PcgSpmv => ("pcg", "spmv"),
             Entry::PcgUpdate => ("pcg", "update"),
+            Entry::PcgAdvance => ("pcg", "advance"),
             Entry::PcgNext => ("pcg", "next"),
             Entry::PcgConclude => ("pcg", "conclude"),
             Entry::PcgFinish => ("pcg", "finish"),
+            Entry::MgGalerkin => ("multigrid", "galerkin"),
+            Entry::MgDown => ("multigrid", "down"),
+            Entry::MgCoarse => ("multigrid", "coarse"),
+            Entry::MgUp => ("multigrid", "up"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
             Entry::BatchPlan => ("batch", "plan"),
@@ -154,6 +174,13 @@ impl Bound {
     pub fn set(&self, pass: &mut wgpu::ComputePass) {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(self.index, &self.group, &[]);
+    }
+
+    /// Records a dispatch whose workgroup counts the GPU wrote at `offset`
+    /// of `args` (three `u32`s).
+    pub fn dispatch_indirect(&self, pass: &mut wgpu::ComputePass, args: &wgpu::Buffer, offset: u64) {
+        self.set(pass);
+        pass.dispatch_workgroups_indirect(args, offset);
     }
 
     /// Records one invocation per `threads`, in workgroups of `workgroup`.

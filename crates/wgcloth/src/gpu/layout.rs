@@ -5,6 +5,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::constants::NO_TRIANGLE;
+use crate::multigrid::MAX_LEVELS;
 use crate::scene::Scene;
 
 #[repr(C)]
@@ -246,13 +247,13 @@ pub struct BvhNode {
 
 /// PCG scalars (mirrors `Scalars` in wgsl/pcg.wgsl).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct Scalars {
-    /// δ = rᵀz of the current iterate (rᵀP⁻¹r at the start).
+    /// δ = rᵀz of the current iterate.
     pub delta: f32,
-    /// δ₀ = bᵀP⁻¹b.
-    pub delta0: f32,
-    /// PCG has converged once δ ≤ this: `cg_tol`² δ₀.
+    /// |S b|².
+    pub bb: f32,
+    /// PCG has converged once rᵀr ≤ this: `cg_tol`² |S b|².
     pub threshold: f32,
     /// Iterations run so far.
     pub iterations: u32,
@@ -260,8 +261,54 @@ pub struct Scalars {
     pub done: u32,
     /// Nonzero when PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
     pub breakdown: u32,
-    /// Padding to the WGSL size.
-    pub pad: [u32; 2],
+    /// rᵀr of the current iterate.
+    pub rr: f32,
+    /// Padding to the WGSL layout.
+    pub pad: u32,
+    /// The next iteration's indirect dispatch, `[workgroups, 1, 1]` per
+    /// multigrid level (level 0: the cloth); zero workgroups once done.
+    pub groups: [u32; 3 * MAX_LEVELS as usize],
+}
+
+impl Scalars {
+    /// Byte offset of level `l`'s indirect dispatch arguments.
+    pub fn groups_offset(l: usize) -> u64 {
+        (std::mem::offset_of!(Scalars, groups) + 12 * l) as u64
+    }
+}
+
+/// One multigrid level as the kernels see it (mirrors `Grid` in
+/// wgsl/multigrid.wgsl): its grid and where its data lives.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct Grid {
+    /// 0 for the cloth.
+    pub level: u32,
+    /// Nodes per row.
+    pub nx: u32,
+    /// Nodes per column.
+    pub ny: u32,
+    /// First of its ω D⁻¹ blocks in the operators buffer.
+    pub smoothers_at: u32,
+    /// First of its stencil blocks in the operators buffer (coarse levels).
+    pub stencil_at: u32,
+    /// First of its right-hand side's `vec4`s in the vectors buffer.
+    pub rhs_at: u32,
+    /// First of its correction's `vec4`s in the vectors buffer.
+    pub correction_at: u32,
+    /// Padding to the WGSL layout.
+    pub pad: u32,
+}
+
+/// A pair of adjacent levels, what one multigrid dispatch works between
+/// (mirrors `Hop` in wgsl/multigrid.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct Hop {
+    /// The finer level.
+    pub fine: Grid,
+    /// The next coarser one (unused when `fine` is the coarsest).
+    pub coarse: Grid,
 }
 
 /// The static connectivity of the cloth and the body as one `u32` buffer
@@ -362,7 +409,8 @@ mod tests {
         assert_eq!(size_of::<Sym3>(), 32);
         assert_eq!(size_of::<Contact>(), 64);
         assert_eq!(size_of::<Response>(), 48);
-        assert_eq!(size_of::<Scalars>(), 32);
+        assert_eq!(size_of::<Scalars>(), 32 + 12 * MAX_LEVELS as usize);
+        assert_eq!(size_of::<Hop>(), 64);
         assert_eq!(size_of::<RigidFrame>(), 48);
         assert_eq!(size_of::<BvhNode>(), 32);
         assert_eq!(std::mem::offset_of!(Params, gravity), 64);

@@ -10,13 +10,14 @@ use wgpu::naga;
 use crate::gpu::constants;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 11] = [
+pub const STAGES: [(&str, &str); 12] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
     ("springs", include_str!("../../wgsl/springs.wgsl")),
     ("assemble", include_str!("../../wgsl/assemble.wgsl")),
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
+    ("multigrid", include_str!("../../wgsl/multigrid.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
     ("measure", include_str!("../../wgsl/measure.wgsl")),
     ("batch", include_str!("../../wgsl/batch.wgsl")),
@@ -30,7 +31,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 2] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 3] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -40,6 +41,7 @@ pub const INCLUDES: [(&str, &str, &[&str]); 2] = [
             "springs",
             "assemble",
             "pcg",
+            "multigrid",
             "integrate",
             "measure",
         ],
@@ -48,6 +50,11 @@ pub const INCLUDES: [(&str, &str, &[&str]); 2] = [
         "bvh",
         include_str!("../../wgsl/bvh.wgsl"),
         &["collide", "measure"],
+    ),
+    (
+        "partials",
+        include_str!("../../wgsl/partials.wgsl"),
+        &["pcg", "multigrid"],
     ),
 ];
 
@@ -203,7 +210,8 @@ mod tests {
 
     #[test]
     fn shared_constants_come_from_the_prelude_alone() {
-        for (name, _) in constants::SHARED {
+        let names = constants::SHARED.iter().map(|(name, _)| *name);
+        for name in names.chain(constants::SHARED_F32.iter().map(|(name, _)| *name)) {
             let declaration = format!("const {name}:");
             let mut used = false;
             for (file, text) in files() {

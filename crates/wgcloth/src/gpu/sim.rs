@@ -120,7 +120,7 @@ impl GpuSim {
         Ok(GpuSim {
             device: device.clone(),
             queue: queue.clone(),
-            stages: Stages::new(kernels, device, &buffers, network),
+            stages: Stages::new(kernels, device, &buffers, scene, network),
             params,
             buffers,
             timer,

@@ -10,6 +10,7 @@ pub mod contact;
 pub mod integrate;
 pub mod lines;
 pub mod measure;
+pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
 pub mod springs;
@@ -17,6 +18,7 @@ pub mod springs;
 use crate::gpu::buffers::Buffers;
 use crate::gpu::kernels::Kernels;
 use crate::gpu::mlp::GpuMlp;
+use crate::scene::Scene;
 
 /// Every stage of a step, bound to one scene's buffers.
 pub(crate) struct Stages {
@@ -43,6 +45,7 @@ impl Stages {
         kernels: &Kernels,
         device: &wgpu::Device,
         b: &Buffers,
+        scene: &Scene,
         network: Option<GpuMlp>,
     ) -> Stages {
         Stages {
@@ -52,7 +55,7 @@ impl Stages {
             contact: contact::Contact::new(kernels, device, b, network),
             springs: springs::Springs::new(kernels, device, b),
             assemble: assemble::Assemble::new(kernels, device, b),
-            pcg: pcg::Pcg::new(kernels, device, b),
+            pcg: pcg::Pcg::new(kernels, device, b, scene),
             integrate: integrate::Integrate::new(kernels, device, b),
             measure: measure::Measure::new(kernels, device, b),
             lines: lines::Lines::new(kernels, device, b),

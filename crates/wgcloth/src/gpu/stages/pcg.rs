@@ -1,11 +1,15 @@
-//! Stage "pcg" (wgsl/pcg.wgsl; CPU twin cpu/pcg.rs): Jacobi-preconditioned
-//! CG on A v' = b with pinned rows filtered, its scalars and convergence
-//! test on the GPU, two dispatches per iteration.
+//! Stage "pcg" (wgsl/pcg.wgsl; CPU twin cpu/pcg.rs): preconditioned CG on
+//! A v' = b with pinned rows filtered, its scalars and convergence test on
+//! the GPU. An iteration is two dispatches with Jacobi, and the V-cycle's
+//! besides with multigrid; all but `next` are sized by the GPU, so the
+//! iterations recorded after convergence dispatch nothing.
 
-use crate::gpu::buffers::Buffers;
+use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
+use crate::gpu::layout::{Params, Scalars};
+use crate::gpu::stages::multigrid::Multigrid;
+use crate::scene::Scene;
 
 /// The kernels bound with the ping-pong buffers one way round: scalars
 /// `[k]` and direction `[k]` as this iteration's (`spmv` writes the first
@@ -15,6 +19,7 @@ struct Side {
     init_scalars: Bound,
     spmv: Bound,
     update: Bound,
+    advance: Bound,
     next: Bound,
     conclude: Bound,
     finish: Bound,
@@ -23,10 +28,19 @@ struct Side {
 pub(crate) struct Pcg {
     /// The scalars and the direction ping-pong between two buffers each.
     sides: [Side; 2],
+    /// The scalars, which hold each iteration's dispatch sizes.
+    scalars: [wgpu::Buffer; 2],
+    /// The V-cycle, when multigrid preconditions.
+    multigrid: Option<Multigrid>,
 }
 
 impl Pcg {
-    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Pcg {
+    pub(crate) fn new(
+        kernels: &Kernels,
+        device: &wgpu::Device,
+        b: &Buffers,
+        scene: &Scene,
+    ) -> Pcg {
         let side = |k: usize| {
             let buffers = [
                 ("matrix", &b.matrix),
@@ -49,6 +63,7 @@ impl Pcg {
                 init_scalars: bind(Entry::PcgInitScalars),
                 spmv: bind(Entry::PcgSpmv),
                 update: bind(Entry::PcgUpdate),
+                advance: bind(Entry::PcgAdvance),
                 next: bind(Entry::PcgNext),
                 conclude: bind(Entry::PcgConclude),
                 finish: bind(Entry::PcgFinish),
@@ -56,32 +71,55 @@ impl Pcg {
         };
         Pcg {
             sides: [side(0), side(1)],
+            scalars: b.scalars.clone(),
+            multigrid: Multigrid::new(kernels, device, b, &multigrid_grids(scene)),
         }
     }
 
-    /// `cg_max_iters` iterations; converged kernels return at once.
-    /// Iteration `it` reads side `it % 2`: `next` ends iteration `it − 1`
-    /// (side `(it − 1) % 2`) and starts `it`.
+    /// `cg_max_iters` iterations; once converged, `next` and `conclude`
+    /// carry the scalars and the rest dispatch no workgroups. Iteration
+    /// `it` reads side `it % 2`: `next` ends iteration `it − 1` (side
+    /// `(it − 1) % 2`) and starts `it`. Returns the dispatches recorded.
     pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
         let n = p.n_vertices;
         let iters = p.cg_max_iters as usize;
+        let mut count = 3;
+        if let Some(mg) = &self.multigrid {
+            count += mg.encode_setup(pass);
+        }
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
+        if let Some(mg) = &self.multigrid {
+            count += mg.encode_cycle(pass, None);
+        }
         // Writes scalars[0], which iteration 0 reads.
         self.sides[1].init_scalars.dispatch(pass, 1, 1);
+        // Iteration `it`'s x, r and z, sized by the scalars it reads.
+        let update = |pass: &mut wgpu::ComputePass, it: usize| {
+            let (side, args) = (&self.sides[it % 2], &self.scalars[it % 2]);
+            match &self.multigrid {
+                Some(mg) => {
+                    side.advance
+                        .dispatch_indirect(pass, args, Scalars::groups_offset(0));
+                    1 + mg.encode_cycle(pass, Some(args))
+                }
+                None => {
+                    side.update
+                        .dispatch_indirect(pass, args, Scalars::groups_offset(0));
+                    1
+                }
+            }
+        };
         if iters > 0 {
             self.sides[0].spmv.dispatch(pass, n, WORKGROUP);
-            self.sides[0].update.dispatch(pass, n, WORKGROUP);
+            count += 2 + update(pass, 0);
             for it in 1..iters {
                 self.sides[(it - 1) % 2].next.dispatch(pass, n, WORKGROUP);
-                self.sides[it % 2].update.dispatch(pass, n, WORKGROUP);
+                count += 1 + update(pass, it);
             }
             self.sides[(iters - 1) % 2].conclude.dispatch(pass, 1, 1);
         }
         // The last iteration wrote scalars[iters % 2].
         self.sides[iters % 2].finish.dispatch(pass, 1, 1);
-        match iters {
-            0 => 3,
-            _ => 4 + 2 * iters as u32,
-        }
+        count
     }
 }

@@ -1,0 +1,275 @@
+//! The multigrid preconditioner of stage "pcg": one symmetric V(1,1)-cycle
+//! of damped block Jacobi on the grid hierarchy of [`crate::multigrid`],
+//! Galerkin coarse operators rebuilt every step, the coarsest level solved
+//! by a fixed number of sweeps. A fixed symmetric positive definite linear
+//! operator, so CG stays CG. Mirrors wgsl/multigrid.wgsl kernel by kernel.
+//!
+//! Pinned vertices are filtered as in the fine solve: the interpolation
+//! P̃ = S P never reaches them, so every level solves for free motion only.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::cpu::GRAIN;
+use crate::cpu::pcg::BlockMatrix;
+use crate::multigrid::{
+    COARSE_SWEEPS, Level, SMOOTH_WEIGHT, STENCIL, levels, parents, stencil_slot, weight,
+};
+use crate::scene::Cloth;
+
+/// The hierarchy's operators and work vectors, kept between steps.
+#[derive(Clone, Debug)]
+pub struct Multigrid {
+    levels: Vec<Level>,
+    /// Per coarse level (index l − 1): [`STENCIL`] blocks per node.
+    stencils: Vec<Vec<Mat3>>,
+    /// Per level: ω D⁻¹, zero where D is singular (a pinned node, or a coarse
+    /// node whose fine nodes are all pinned).
+    smoothers: Vec<Vec<Mat3>>,
+    /// Per coarse level: its right-hand side (the restricted residual).
+    rhs: Vec<Vec<Vec3>>,
+    /// Per coarse level: its correction after the up-leg's smoothing.
+    correction: Vec<Vec<Vec3>>,
+}
+
+/// ω D⁻¹ of a diagonal block, or zero if D is not invertible.
+fn smoother(d: Mat3) -> Mat3 {
+    let det = d.determinant();
+    if det.is_finite() && det.abs() > f32::MIN_POSITIVE {
+        SMOOTH_WEIGHT * d.inverse()
+    } else {
+        Mat3::ZERO
+    }
+}
+
+/// Grid coordinates of node `i` of `level`.
+fn coords(level: Level, i: usize) -> (u32, u32) {
+    ((i % level.nx as usize) as u32, (i / level.nx as usize) as u32)
+}
+
+impl Multigrid {
+    /// The hierarchy of `cloth`'s grid, operators zero until [`setup`](Self::setup).
+    pub fn new(cloth: &Cloth) -> Multigrid {
+        let levels = levels(cloth.nx, cloth.ny);
+        let coarse = || levels[1..].iter().map(|l| vec![Vec3::ZERO; l.nodes()]);
+        Multigrid {
+            stencils: levels[1..]
+                .iter()
+                .map(|l| vec![Mat3::ZERO; l.nodes() * STENCIL as usize])
+                .collect(),
+            smoothers: levels.iter().map(|l| vec![Mat3::ZERO; l.nodes()]).collect(),
+            rhs: coarse().collect(),
+            correction: coarse().collect(),
+            levels,
+        }
+    }
+
+    /// The grid levels, the cloth first.
+    pub fn levels(&self) -> &[Level] {
+        &self.levels
+    }
+
+    /// Coarse level `l`'s stencil blocks (`l` ≥ 1), [`STENCIL`] per node.
+    pub fn stencil(&self, l: usize) -> &[Mat3] {
+        &self.stencils[l - 1]
+    }
+
+    /// Calls `f(j, A_ij)` for every block of row `i` of level `l`'s operator.
+    fn row_entries(
+        &self,
+        a: &BlockMatrix,
+        cloth: &Cloth,
+        l: usize,
+        i: usize,
+        mut f: impl FnMut(usize, Mat3),
+    ) {
+        if l == 0 {
+            f(i, a.diag[i]);
+            let adj = &cloth.adjacency;
+            for k in adj.range(i) {
+                f(adj.other[k] as usize, a.off[adj.spring[k] as usize]);
+            }
+            return;
+        }
+        let level = self.levels[l];
+        let (c, r) = coords(level, i);
+        let stencil = &self.stencils[l - 1][i * STENCIL as usize..][..STENCIL as usize];
+        for dy in -2..=2i32 {
+            for dx in -2..=2i32 {
+                let (cj, rj) = (c as i32 + dx, r as i32 + dy);
+                if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
+                    let j = rj as usize * level.nx as usize + cj as usize;
+                    f(j, stencil[stencil_slot(dx, dy)]);
+                }
+            }
+        }
+    }
+
+    /// Row `i` of level `l`'s operator times the vector `x(j)`.
+    fn row(
+        &self,
+        a: &BlockMatrix,
+        cloth: &Cloth,
+        l: usize,
+        i: usize,
+        x: impl Fn(usize) -> Vec3,
+    ) -> Vec3 {
+        let mut acc = Vec3::ZERO;
+        self.row_entries(a, cloth, l, i, |j, block| acc += block * x(j));
+        acc
+    }
+
+    /// The weight of fine node `i` (level `l`) in coarse node `(cc, rc)`,
+    /// zero at a pinned vertex (P̃ = S P).
+    fn fine_weight(&self, cloth: &Cloth, l: usize, i: usize, coarse: (u32, u32)) -> f32 {
+        if l == 0 && cloth.pinned[i] {
+            return 0.0;
+        }
+        let (fine, next) = (self.levels[l], self.levels[l + 1]);
+        let (c, r) = coords(fine, i);
+        weight(c, coarse.0, next.nx) * weight(r, coarse.1, next.ny)
+    }
+
+    /// The fine nodes coarse node `(cc, rc)` gathers from: up to 3 × 3.
+    fn children(fine: Level, (cc, rc): (u32, u32)) -> impl Iterator<Item = usize> {
+        let span = |k: u32, n: u32| (2 * k).saturating_sub(1)..(2 * k + 2).min(n);
+        span(rc, fine.ny).flat_map(move |r| {
+            span(cc, fine.nx).map(move |c| r as usize * fine.nx as usize + c as usize)
+        })
+    }
+
+    /// Σ over coarse parents (level `l` + 1) of fine node `i`, weighted.
+    fn interpolate(&self, cloth: &Cloth, l: usize, i: usize, coarse: &[Vec3]) -> Vec3 {
+        if l == 0 && cloth.pinned[i] {
+            return Vec3::ZERO;
+        }
+        let (fine, next) = (self.levels[l], self.levels[l + 1]);
+        let (c, r) = coords(fine, i);
+        let mut acc = Vec3::ZERO;
+        for (pr, wr) in parents(r, next.ny) {
+            for (pc, wc) in parents(c, next.nx) {
+                acc += (wr * wc) * coarse[pr as usize * next.nx as usize + pc as usize];
+            }
+        }
+        acc
+    }
+
+    /// Rebuilds every level's smoother and coarse operator from this step's
+    /// A (kernels `mg_galerkin_fine`, `mg_galerkin`).
+    pub fn setup(&mut self, a: &BlockMatrix, cloth: &Cloth) {
+        let fine: Vec<Mat3> = (0..cloth.vertex_count())
+            .into_par_iter()
+            .with_min_len(GRAIN)
+            .map(|i| {
+                if cloth.pinned[i] {
+                    Mat3::ZERO
+                } else {
+                    smoother(a.diag[i])
+                }
+            })
+            .collect();
+        self.smoothers[0] = fine;
+        for l in 0..self.levels.len() - 1 {
+            let (from, to) = (self.levels[l], self.levels[l + 1]);
+            let mut stencil = std::mem::take(&mut self.stencils[l]);
+            stencil
+                .par_chunks_mut(STENCIL as usize)
+                .with_min_len(GRAIN / STENCIL as usize)
+                .enumerate()
+                .for_each(|(coarse, out)| {
+                    let (cc, rc) = coords(to, coarse);
+                    out.fill(Mat3::ZERO);
+                    for i in Self::children(from, (cc, rc)) {
+                        let wi = self.fine_weight(cloth, l, i, (cc, rc));
+                        if wi == 0.0 {
+                            continue;
+                        }
+                        self.row_entries(a, cloth, l, i, |j, block| {
+                            if l == 0 && cloth.pinned[j] {
+                                return;
+                            }
+                            let (c, r) = coords(from, j);
+                            for (pr, wr) in parents(r, to.ny) {
+                                for (pc, wc) in parents(c, to.nx) {
+                                    let w = wi * wr * wc;
+                                    if w != 0.0 {
+                                        let (dx, dy) = (pc as i32 - cc as i32, pr as i32 - rc as i32);
+                                        out[stencil_slot(dx, dy)] += w * block;
+                                    }
+                                }
+                            }
+                        });
+                    }
+                });
+            self.smoothers[l + 1] = stencil
+                .chunks(STENCIL as usize)
+                .map(|s| smoother(s[stencil_slot(0, 0)]))
+                .collect();
+            self.stencils[l] = stencil;
+        }
+    }
+
+    /// z = M⁻¹ r, one V-cycle, returning rᵀz. `r` is zero on pinned rows
+    /// and so is z.
+    pub fn apply(&mut self, a: &BlockMatrix, cloth: &Cloth, r: &[Vec3], z: &mut [Vec3]) -> f64 {
+        let last = self.levels.len() - 1;
+        // Down: each coarse right-hand side is the restricted residual of
+        // the level above after its pre-smoothing, a = ω D⁻¹ r (kernels
+        // `mg_restrict_fine`, `mg_restrict`).
+        for l in 0..last {
+            let (from, to) = (self.levels[l], self.levels[l + 1]);
+            let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
+            let smooth = &self.smoothers[l];
+            let pre = |j: usize| smooth[j] * fine_rhs[j];
+            let out: Vec<Vec3> = (0..to.nodes())
+                .into_par_iter()
+                .with_min_len(GRAIN)
+                .map(|coarse| {
+                    let cr = coords(to, coarse);
+                    Self::children(from, cr)
+                        .map(|i| {
+                            let w = self.fine_weight(cloth, l, i, cr);
+                            if w == 0.0 {
+                                return Vec3::ZERO;
+                            }
+                            w * (fine_rhs[i] - self.row(a, cloth, l, i, pre))
+                        })
+                        .sum()
+                })
+                .collect();
+            self.rhs[l] = out;
+        }
+        // The coarsest level: damped Jacobi sweeps from zero (`mg_coarse`).
+        let coarse_rhs = &self.rhs[last - 1];
+        let smooth = &self.smoothers[last];
+        let mut e: Vec<Vec3> = (0..coarse_rhs.len())
+            .map(|i| smooth[i] * coarse_rhs[i])
+            .collect();
+        for _ in 1..COARSE_SWEEPS {
+            e = (0..e.len())
+                .map(|i| e[i] + smooth[i] * (coarse_rhs[i] - self.row(a, cloth, last, i, |j| e[j])))
+                .collect();
+        }
+        self.correction[last - 1] = e;
+        // Up: each level's guess is its pre-smoothing plus the interpolated
+        // coarse correction, then one more smoothing sweep (kernels
+        // `mg_smooth_fine`, `mg_smooth`).
+        for l in (0..last).rev() {
+            let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
+            let smooth = &self.smoothers[l];
+            let coarse = &self.correction[l];
+            let guess = |j: usize| smooth[j] * fine_rhs[j] + self.interpolate(cloth, l, j, coarse);
+            let out: Vec<Vec3> = (0..self.levels[l].nodes())
+                .into_par_iter()
+                .with_min_len(GRAIN)
+                .map(|i| guess(i) + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, i, guess)))
+                .collect();
+            if l == 0 {
+                z.copy_from_slice(&out);
+            } else {
+                self.correction[l - 1] = out;
+            }
+        }
+        r.iter().zip(z.iter()).map(|(r, z)| r.dot(*z) as f64).sum()
+    }
+}

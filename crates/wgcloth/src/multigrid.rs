@@ -1,0 +1,118 @@
+//! The grid hierarchy of the multigrid preconditioner, shared by the CPU
+//! twin (`cpu::multigrid`) and the kernels (wgsl/multigrid.wgsl).
+//!
+//! The cloth is a regular grid, so its coarse levels are too: level l + 1
+//! keeps every second node of level l along each axis (⌈n / 2⌉ of n), and a
+//! node between two kept ones takes half of each (bilinear interpolation
+//! P). Each coarse operator is the Galerkin product Pᵀ A P, whose blocks are
+//! weighted sums of symmetric blocks and so symmetric themselves: the
+//! springs reach two nodes (bend springs), and so does every coarse level's
+//! 5 × 5 stencil.
+
+/// Blocks in a coarse node's stencil: offsets −2..=2 along each axis.
+pub const STENCIL: u32 = 25;
+/// Stop coarsening once a level has at most this many nodes; the coarsest
+/// is then solved by [`COARSE_SWEEPS`] Jacobi sweeps in one workgroup.
+pub const COARSEST_NODES: u32 = 16;
+/// Damped block-Jacobi sweeps on the coarsest level.
+pub const COARSE_SWEEPS: u32 = 12;
+/// The most levels a hierarchy has (a 2²⁶-particle cloth needs 23).
+pub const MAX_LEVELS: u32 = 24;
+/// ω of the damped block-Jacobi smoother, ω D⁻¹.
+pub const SMOOTH_WEIGHT: f32 = 0.8;
+
+/// One level's grid: `nx × ny` nodes, node (c, r) at index r · nx + c.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Level {
+    /// Nodes per row.
+    pub nx: u32,
+    /// Nodes per column.
+    pub ny: u32,
+}
+
+impl Level {
+    /// nx · ny.
+    pub fn nodes(self) -> usize {
+        self.nx as usize * self.ny as usize
+    }
+
+    /// The next coarser level.
+    pub fn coarser(self) -> Level {
+        Level {
+            nx: self.nx.div_ceil(2),
+            ny: self.ny.div_ceil(2),
+        }
+    }
+}
+
+/// The levels of an `nx × ny` cloth, finest (the cloth) first: at least
+/// one coarse level, the last with at most [`COARSEST_NODES`] nodes.
+pub fn levels(nx: u32, ny: u32) -> Vec<Level> {
+    let mut out = vec![Level { nx, ny }];
+    let mut last = out[0];
+    while out.len() == 1 || last.nodes() > COARSEST_NODES as usize {
+        last = last.coarser();
+        out.push(last);
+    }
+    out
+}
+
+/// The coarse nodes fine coordinate `c` interpolates from along one axis,
+/// with their weights (`n_coarse` nodes on the coarse axis): the coarse node
+/// itself for an even `c`, else its two neighbours half each (the one to
+/// its left alone at an even-length axis's end). The second weight is 0
+/// when there is one parent.
+pub fn parents(c: u32, n_coarse: u32) -> [(u32, f32); 2] {
+    let left = c / 2;
+    if c % 2 == 0 {
+        [(left, 1.0), (left, 0.0)]
+    } else if left + 1 < n_coarse {
+        [(left, 0.5), (left + 1, 0.5)]
+    } else {
+        [(left, 1.0), (left, 0.0)]
+    }
+}
+
+/// The weight of coarse node `coarse` at fine coordinate `c` (0 if it is
+/// not one of its parents).
+pub fn weight(c: u32, coarse: u32, n_coarse: u32) -> f32 {
+    parents(c, n_coarse)
+        .iter()
+        .filter(|&&(p, _)| p == coarse)
+        .map(|&(_, w)| w)
+        .sum()
+}
+
+/// Index into a stencil of the offset (dx, dy), each in −2..=2.
+pub fn stencil_slot(dx: i32, dy: i32) -> usize {
+    ((dy + 2) * 5 + dx + 2) as usize
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_halve_to_the_coarsest() {
+        let l = levels(32, 32);
+        let sides: Vec<u32> = l.iter().map(|l| l.nx).collect();
+        assert_eq!(sides, [32, 16, 8, 4]);
+        assert_eq!(levels(2, 2).len(), 2);
+        let odd = levels(33, 5);
+        assert_eq!(odd[1], Level { nx: 17, ny: 3 });
+        assert!(odd.last().unwrap().nodes() <= COARSEST_NODES as usize);
+        let tall = levels(2, 1 << 25);
+        assert!(tall.len() <= MAX_LEVELS as usize, "{}", tall.len());
+    }
+
+    #[test]
+    fn interpolation_is_a_partition_of_unity() {
+        for n_fine in [2u32, 5, 8, 33] {
+            let n_coarse = n_fine.div_ceil(2);
+            for c in 0..n_fine {
+                let total: f32 = (0..n_coarse).map(|k| weight(c, k, n_coarse)).sum();
+                assert_eq!(total, 1.0, "fine {c} of {n_fine}");
+            }
+        }
+    }
+}

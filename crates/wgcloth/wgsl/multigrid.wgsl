@@ -1,0 +1,355 @@
+// Stage "pcg", its multigrid preconditioner: one symmetric V(1,1)-cycle of
+// damped block Jacobi on the cloth grid's hierarchy (src/multigrid.rs), the
+// Galerkin coarse operators Pᵀ A P rebuilt every step. CPU twin:
+// src/cpu/multigrid.rs, function by function.
+//
+// Each dispatch works between two levels, `hop.fine` and `hop.coarse`,
+// bound per dispatch; level 0 is the cloth, whose operator is A itself
+// (diagonal blocks and spring blocks), its pinned vertices filtered out of
+// the interpolation (P̃ = S P). No level stores its pre-smoothing
+// a = ω D⁻¹ r: every kernel that needs it recomputes it where it reads it.
+
+// One level's grid and where its data lives.
+struct Grid {
+    level: u32,
+    nx: u32,
+    ny: u32,
+    // ω D⁻¹ blocks, one per node, in `operators`.
+    smoothers_at: u32,
+    // STENCIL blocks per node (coarse levels), in `operators`.
+    stencil_at: u32,
+    // Right-hand side and correction, one vec4 per node each, in `vectors`.
+    rhs_at: u32,
+    correction_at: u32,
+    pad: u32,
+}
+
+struct Hop {
+    fine: Grid,
+    coarse: Grid,
+}
+
+@group(1) @binding(0) var<storage, read> hop: Hop;
+// A of the cloth: its diagonal blocks (one per vertex), then one per spring.
+@group(1) @binding(1) var<storage, read> matrix: array<Sym3>;
+// Every level's smoother blocks and every coarse level's stencils.
+@group(1) @binding(2) var<storage, read_write> operators: array<Sym3>;
+// Every coarse level's right-hand side and correction.
+@group(1) @binding(3) var<storage, read_write> vectors: array<vec4<f32>>;
+// The PCG residual, level 0's right-hand side.
+@group(1) @binding(4) var<storage, read> r: array<vec4<f32>>;
+// z = P⁻¹ r, the V-cycle's result (and q, which it leaves alone).
+@group(1) @binding(5) var<storage, read_write> zq: array<vec4<f32>>;
+
+fn nodes(g: Grid) -> u32 {
+    return g.nx * g.ny;
+}
+
+fn coords(g: Grid, i: u32) -> vec2<u32> {
+    return vec2<u32>(i % g.nx, i / g.nx);
+}
+
+// Index of the node at `c` + (dx, dy), or -1 outside the grid.
+fn neighbour(g: Grid, c: vec2<u32>, dx: i32, dy: i32) -> i32 {
+    let x = i32(c.x) + dx;
+    let y = i32(c.y) + dy;
+    if x < 0 || y < 0 || x >= i32(g.nx) || y >= i32(g.ny) {
+        return -1;
+    }
+    return y * i32(g.nx) + x;
+}
+
+fn stencil_slot(dx: i32, dy: i32) -> u32 {
+    return u32((dy + 2) * 5 + dx + 2);
+}
+
+// The coarse parents of fine coordinate c and their weights (multigrid::parents).
+struct Parents {
+    at: vec2<u32>,
+    w: vec2<f32>,
+}
+
+fn parents(c: u32, n_coarse: u32) -> Parents {
+    let left = c / 2u;
+    if c % 2u == 0u {
+        return Parents(vec2<u32>(left), vec2<f32>(1.0, 0.0));
+    }
+    if left + 1u < n_coarse {
+        return Parents(vec2<u32>(left, left + 1u), vec2<f32>(0.5));
+    }
+    return Parents(vec2<u32>(left), vec2<f32>(1.0, 0.0));
+}
+
+fn axis_weight(c: u32, coarse: u32, n_coarse: u32) -> f32 {
+    let p = parents(c, n_coarse);
+    return select(0.0, p.w.x, p.at.x == coarse) + select(0.0, p.w.y, p.at.y == coarse);
+}
+
+// Whether node i of `hop.fine` is a pinned cloth vertex.
+fn filtered(i: u32) -> bool {
+    return hop.fine.level == 0u && is_pinned(i);
+}
+
+// The weight of fine node i in coarse node `cc` (0 at a pinned vertex).
+fn fine_weight(i: u32, cc: vec2<u32>) -> f32 {
+    if filtered(i) {
+        return 0.0;
+    }
+    let c = coords(hop.fine, i);
+    return axis_weight(c.x, cc.x, hop.coarse.nx) * axis_weight(c.y, cc.y, hop.coarse.ny);
+}
+
+// ω D⁻¹ of a diagonal block, zero if D is singular.
+fn smoother(d: Sym3) -> Sym3 {
+    let a = d.a;
+    let b = d.b;
+    // Cofactors of [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]].
+    let cxx = a.y * a.z - b.y * b.y;
+    let cyy = a.x * a.z - b.x * b.x;
+    let czz = a.x * a.y - a.w * a.w;
+    let cxy = b.x * b.y - a.w * a.z;
+    let cxz = a.w * b.y - a.y * b.x;
+    let cyz = a.w * b.x - a.x * b.y;
+    let det = a.x * cxx + a.w * cxy + b.x * cxz;
+    if !(abs(det) > 1.17549435e-38 && abs(det) < 3.0e38) {
+        return sym_zero();
+    }
+    let s = SMOOTH_WEIGHT / det;
+    return Sym3(vec4<f32>(cxx, cyy, czz, cxy) * s, vec4<f32>(cxz, cyz, 0.0, 0.0) * s);
+}
+
+fn fine_rhs(j: u32) -> vec3<f32> {
+    if hop.fine.level == 0u {
+        return r[j].xyz;
+    }
+    return vectors[hop.fine.rhs_at + j].xyz;
+}
+
+// The interpolated coarse correction at fine node j.
+fn interpolate(j: u32) -> vec3<f32> {
+    if filtered(j) {
+        return vec3<f32>(0.0);
+    }
+    let c = coords(hop.fine, j);
+    let px = parents(c.x, hop.coarse.nx);
+    let py = parents(c.y, hop.coarse.ny);
+    var acc = vec3<f32>(0.0);
+    for (var b = 0u; b < 2u; b++) {
+        for (var a = 0u; a < 2u; a++) {
+            let at = py.at[b] * hop.coarse.nx + px.at[a];
+            acc += (px.w[a] * py.w[b]) * vectors[hop.coarse.correction_at + at].xyz;
+        }
+    }
+    return acc;
+}
+
+// The fine level's guess at node j: its pre-smoothing ω D⁻¹ r, plus the
+// interpolated coarse correction on the way up.
+fn guess(j: u32, up: bool) -> vec3<f32> {
+    var e = sym_mul(operators[hop.fine.smoothers_at + j], fine_rhs(j));
+    if up {
+        e += interpolate(j);
+    }
+    return e;
+}
+
+// Row i of the fine level's operator times its guess.
+fn row_guess(i: u32, up: bool) -> vec3<f32> {
+    let g = hop.fine;
+    if g.level == 0u {
+        var acc = sym_mul(matrix[i], guess(i, up));
+        for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
+            acc += sym_mul(matrix[params.n_vertices + adjacent_spring(k)], guess(adjacent_vertex(k), up));
+        }
+        return acc;
+    }
+    let c = coords(g, i);
+    var acc = vec3<f32>(0.0);
+    for (var dy = -2; dy <= 2; dy++) {
+        for (var dx = -2; dx <= 2; dx++) {
+            let j = neighbour(g, c, dx, dy);
+            if j >= 0 {
+                let block = operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)];
+                acc += sym_mul(block, guess(u32(j), up));
+            }
+        }
+    }
+    return acc;
+}
+
+// The fine nodes coarse node cc gathers from: 2 cc − 1 ..= 2 cc + 1 per
+// axis, within the grid (as `first`, `end`).
+fn children(cc: u32, n_fine: u32) -> vec2<u32> {
+    return vec2<u32>(max(2u * cc, 1u) - 1u, min(2u * cc + 2u, n_fine));
+}
+
+var<private> acc: array<Sym3, STENCIL>;
+
+// Adds w_i A_ij w_j to the coarse stencil of node cc for every parent of
+// fine node j.
+fn add_entry(cc: vec2<u32>, wi: f32, j: u32, block: Sym3) {
+    if filtered(j) {
+        return;
+    }
+    let c = coords(hop.fine, j);
+    let px = parents(c.x, hop.coarse.nx);
+    let py = parents(c.y, hop.coarse.ny);
+    for (var b = 0u; b < 2u; b++) {
+        for (var a = 0u; a < 2u; a++) {
+            let w = wi * px.w[a] * py.w[b];
+            if w != 0.0 {
+                let slot = stencil_slot(i32(px.at[a]) - i32(cc.x), i32(py.at[b]) - i32(cc.y));
+                acc[slot] = sym_add(acc[slot], sym_scale(block, w));
+            }
+        }
+    }
+}
+
+// The coarse level's stencil and smoother, per coarse node: the Galerkin
+// product gathered over its children's rows. On the first hop it also
+// writes the smoothers of the cloth vertices it owns, (2 cc + {0, 1}).
+@compute @workgroup_size(WORKGROUP)
+fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
+    let I = id.x;
+    if I >= nodes(hop.coarse) {
+        return;
+    }
+    let g = hop.fine;
+    let cc = coords(hop.coarse, I);
+    for (var k = 0u; k < STENCIL; k++) {
+        acc[k] = sym_zero();
+    }
+    let xs = children(cc.x, g.nx);
+    let ys = children(cc.y, g.ny);
+    for (var y = ys.x; y < ys.y; y++) {
+        for (var x = xs.x; x < xs.y; x++) {
+            let i = y * g.nx + x;
+            let wi = fine_weight(i, cc);
+            if wi == 0.0 {
+                continue;
+            }
+            if g.level == 0u {
+                add_entry(cc, wi, i, matrix[i]);
+                for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
+                    add_entry(cc, wi, adjacent_vertex(k), matrix[params.n_vertices + adjacent_spring(k)]);
+                }
+            } else {
+                let c = vec2<u32>(x, y);
+                for (var dy = -2; dy <= 2; dy++) {
+                    for (var dx = -2; dx <= 2; dx++) {
+                        let j = neighbour(g, c, dx, dy);
+                        if j >= 0 {
+                            add_entry(cc, wi, u32(j), operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for (var k = 0u; k < STENCIL; k++) {
+        operators[hop.coarse.stencil_at + I * STENCIL + k] = acc[k];
+    }
+    operators[hop.coarse.smoothers_at + I] = smoother(acc[stencil_slot(0, 0)]);
+    if g.level == 0u {
+        for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
+            for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
+                let i = y * g.nx + x;
+                var m = sym_zero();
+                if !is_pinned(i) {
+                    m = smoother(matrix[i]);
+                }
+                operators[g.smoothers_at + i] = m;
+            }
+        }
+    }
+}
+
+// Down one level: the coarse right-hand side is the restricted residual of
+// the fine level after its pre-smoothing, Pᵀ (r − A ω D⁻¹ r).
+@compute @workgroup_size(WORKGROUP)
+fn down(@builtin(global_invocation_id) id: vec3<u32>) {
+    let I = id.x;
+    if I >= nodes(hop.coarse) {
+        return;
+    }
+    let g = hop.fine;
+    let cc = coords(hop.coarse, I);
+    let xs = children(cc.x, g.nx);
+    let ys = children(cc.y, g.ny);
+    var sum = vec3<f32>(0.0);
+    for (var y = ys.x; y < ys.y; y++) {
+        for (var x = xs.x; x < xs.y; x++) {
+            let i = y * g.nx + x;
+            let w = fine_weight(i, cc);
+            if w != 0.0 {
+                sum += w * (fine_rhs(i) - row_guess(i, false));
+            }
+        }
+    }
+    vectors[hop.coarse.rhs_at + I] = vec4<f32>(sum, 0.0);
+}
+
+var<workgroup> sweep: array<vec4<f32>, COARSEST_NODES>;
+
+// The coarsest level (`hop.fine`, at most COARSEST_NODES nodes), in one
+// workgroup: COARSE_SWEEPS damped Jacobi sweeps from zero.
+@compute @workgroup_size(WORKGROUP)
+fn coarse(@builtin(local_invocation_index) lid: u32) {
+    let g = hop.fine;
+    let mine = lid < nodes(g);
+    var e = vec3<f32>(0.0);
+    if mine {
+        e = sym_mul(operators[g.smoothers_at + lid], vectors[g.rhs_at + lid].xyz);
+        sweep[lid] = vec4<f32>(e, 0.0);
+    }
+    workgroupBarrier();
+    for (var k = 1u; k < COARSE_SWEEPS; k++) {
+        if mine {
+            let c = coords(g, lid);
+            var row = vec3<f32>(0.0);
+            for (var dy = -2; dy <= 2; dy++) {
+                for (var dx = -2; dx <= 2; dx++) {
+                    let j = neighbour(g, c, dx, dy);
+                    if j >= 0 {
+                        let block = operators[g.stencil_at + lid * STENCIL + stencil_slot(dx, dy)];
+                        row += sym_mul(block, sweep[j].xyz);
+                    }
+                }
+            }
+            e += sym_mul(operators[g.smoothers_at + lid], vectors[g.rhs_at + lid].xyz - row);
+        }
+        workgroupBarrier();
+        if mine {
+            sweep[lid] = vec4<f32>(e, 0.0);
+        }
+        workgroupBarrier();
+    }
+    if mine {
+        vectors[g.correction_at + lid] = vec4<f32>(e, 0.0);
+    }
+}
+
+// Up one level: the fine guess (pre-smoothing plus interpolated coarse
+// correction), then one more damped Jacobi sweep. On the cloth this is
+// z = P⁻¹ r, with its partial rᵀz for PCG.
+@compute @workgroup_size(WORKGROUP)
+fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+          @builtin(workgroup_id) wg: vec3<u32>) {
+    let i = id.x;
+    let g = hop.fine;
+    var rz = 0.0;
+    if i < nodes(g) {
+        let ri = fine_rhs(i);
+        let zi = guess(i, true) + sym_mul(operators[g.smoothers_at + i], ri - row_guess(i, true));
+        if g.level == 0u {
+            zq[i] = vec4<f32>(zi, 0.0);
+            rz = dot(ri, zi);
+        } else {
+            vectors[g.correction_at + i] = vec4<f32>(zi, 0.0);
+        }
+    }
+    let s = workgroup_sum(lid, rz);
+    if g.level == 0u && lid == 0u {
+        store_partial(RZ, wg.x, s);
+    }
+}
