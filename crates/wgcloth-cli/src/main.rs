@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use wgcloth::config::{ModelKind, SceneKind, Shape};
+use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Shape};
 use wgcloth::gpu::GpuContext;
 use wgcloth::nn::weights::NetKind;
 use wgcloth::{Config, Error, Result, Scene};
@@ -223,9 +223,12 @@ struct SceneArgs {
     /// Maximum PCG iterations per step.
     #[arg(long, value_name = "I", allow_negative_numbers = true)]
     cg_iters: Option<u32>,
-    /// PCG relative tolerance; 0 runs every iteration.
+    /// PCG relative tolerance |S r| / |S b|; 0 runs every iteration.
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     cg_tol: Option<f32>,
+    /// PCG preconditioner [default: multigrid; the thesis's: jacobi].
+    #[arg(long, value_parser = choice(&Preconditioner::ALL, Preconditioner::name))]
+    preconditioner: Option<Preconditioner>,
     /// Speed (m/s) beyond which a vertex stops the run as diverging.
     #[arg(long, value_name = "M", allow_negative_numbers = true)]
     max_speed: Option<f32>,
@@ -268,6 +271,9 @@ impl SceneArgs {
         }
         if let Some(t) = self.cg_tol {
             c.solver.cg_tol = t;
+        }
+        if let Some(p) = self.preconditioner {
+            c.solver.preconditioner = p;
         }
         if let Some(m) = self.max_speed {
             c.solver.max_speed = m;

@@ -32,6 +32,9 @@ pub enum Preconditioner {
 }
 
 impl Preconditioner {
+    /// Every preconditioner.
+    pub const ALL: [Preconditioner; 2] = [Preconditioner::Multigrid, Preconditioner::Jacobi];
+
     /// The name used in configs and on the command line.
     pub fn name(self) -> &'static str {
         match self {

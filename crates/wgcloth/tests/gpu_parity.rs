@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use common::sphere;
 use glam::{Mat3, Vec3};
-use wgcloth::config::{ModelKind, SceneKind};
+use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
 use wgcloth::cpu::{CpuSim, springs};
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::{Config, Scene};
@@ -40,11 +40,17 @@ fn mat_dev(a: &[Mat3], b: &[Mat3]) -> (f32, f32) {
 }
 
 fn hang(grid: u32) -> Scene {
+    hang_solved(grid, Preconditioner::default(), 100, 1e-3)
+}
+
+fn hang_solved(grid: u32, preconditioner: Preconditioner, iters: u32, tol: f32) -> Scene {
     let mut c = Config {
         scene: SceneKind::Hang,
         ..Default::default()
     };
     c.cloth.grid = [grid, grid];
+    c.solver.preconditioner = preconditioner;
+    (c.solver.cg_iters, c.solver.cg_tol) = (iters, tol);
     Scene::new(&c).unwrap()
 }
 
@@ -100,23 +106,29 @@ fn springs_and_assembly_match_the_cpu_on_the_same_state() {
 #[test]
 fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let scene = hang(16);
-    let cpu = cpu_after(&scene, 60);
-    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    for _ in 0..60 {
-        gpu.step();
-    }
-    let x = gpu.read_positions().unwrap();
-    let dev = max_dev(&x, &cpu.state.x);
-    let state = gpu.read_state().unwrap();
-    eprintln!("60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}");
-    assert_eq!(state.steps, 60);
-    assert_eq!(state.cg_iterations_total, 60 * 25);
-    assert!((state.time - 0.6).abs() < 1e-5);
-    assert!(dev < 1e-4, "GPU and CPU drifted {dev} m apart");
-    for (i, p) in scene.cloth.pinned.iter().enumerate() {
-        if *p {
-            assert_eq!(x[i], scene.cloth.rest_positions[i]);
+    // A fixed iteration count on both sides (tolerance 0): the thesis's 25
+    // Jacobi iterations, and 5 multigrid V-cycles, about what 1e-3 takes.
+    for (preconditioner, iters) in [(Preconditioner::Jacobi, 25), (Preconditioner::Multigrid, 5)] {
+        let scene = hang_solved(16, preconditioner, iters, 0.0);
+        let cpu = cpu_after(&scene, 60);
+        let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        for _ in 0..60 {
+            gpu.step();
+        }
+        let x = gpu.read_positions().unwrap();
+        let dev = max_dev(&x, &cpu.state.x);
+        let state = gpu.read_state().unwrap();
+        eprintln!(
+            "{preconditioner:?}, 60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}"
+        );
+        assert_eq!(state.steps, 60);
+        assert_eq!(state.cg_iterations_total, 60 * iters);
+        assert!((state.time - 0.6).abs() < 1e-5);
+        assert!(dev < 1e-4, "{preconditioner:?}: GPU and CPU drifted {dev} m apart");
+        for (i, p) in scene.cloth.pinned.iter().enumerate() {
+            if *p {
+                assert_eq!(x[i], scene.cloth.rest_positions[i]);
+            }
         }
     }
 }
@@ -343,7 +355,17 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
     ctx.queue.submit([encoder.finish()]);
     ctx.finish().unwrap();
-    assert_eq!(dispatches, 50 * (15 + 2 * 25), "dispatches per step");
+    // 11 outside the solve; PCG's init, init_scalars, spmv, conclude and
+    // finish; per iteration `next` (but the first) and `advance`; the
+    // multigrid setup (one per coarse level L) and a V-cycle (2 L + 1) at
+    // the start and in every iteration.
+    let (iters, coarse) = (
+        scene.config.solver.cg_iters,
+        wgcloth::multigrid::levels(12, 12).len() as u32 - 1,
+    );
+    let cycle = 2 * coarse + 1;
+    let pcg = 5 + (iters - 1) + iters * (1 + cycle) + coarse + cycle;
+    assert_eq!(dispatches, 50 * (11 + pcg), "dispatches per step");
     assert_eq!(
         embedded.read_positions().unwrap(),
         separate.read_positions().unwrap()
@@ -385,27 +407,39 @@ fn a_lost_device_is_an_error_not_a_panic_or_a_hang() {
 #[test]
 fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let mut c = Config {
-        scene: SceneKind::Hang,
-        ..Default::default()
-    };
-    c.cloth.grid = [16, 16];
-    (c.solver.cg_iters, c.solver.cg_tol) = (300, 1e-4);
-    let scene = Scene::new(&c).unwrap();
-    let mut cpu = CpuSim::new(scene.clone());
-    let cpu_iters: u32 = (0..20).map(|_| cpu.step().pcg.iterations).sum();
-    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    for _ in 0..20 {
-        gpu.step();
+    for preconditioner in Preconditioner::ALL {
+        let scene = hang_solved(24, preconditioner, 300, 1e-4);
+        let mut cpu = CpuSim::new(scene.clone());
+        let mut cpu_iters = 0;
+        let mut cpu_worst = 0.0f32;
+        for _ in 0..20 {
+            let out = cpu.step().pcg;
+            cpu_iters += out.iterations;
+            cpu_worst = cpu_worst.max(out.relative_residual);
+        }
+        let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        for _ in 0..20 {
+            gpu.step();
+        }
+        let state = gpu.read_state().unwrap();
+        let gpu_iters = state.cg_iterations_total;
+        eprintln!(
+            "{preconditioner:?}: PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} \
+             (cap 6000); worst residual GPU {:.2e}, CPU {cpu_worst:.2e}",
+            state.cg_residual_max
+        );
+        assert!(
+            cpu_iters < 20 * 150,
+            "the CPU solve should converge well before the cap"
+        );
+        assert!(state.cg_residual_max <= 1e-4 && cpu_worst <= 1e-4);
+        assert_eq!(state.cg_breakdowns, 0);
+        // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
+        assert!(
+            (gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0,
+            "{preconditioner:?}: GPU {gpu_iters}, CPU {cpu_iters}"
+        );
     }
-    let gpu_iters = gpu.read_state().unwrap().cg_iterations_total;
-    eprintln!("PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} (cap 6000)");
-    assert!(
-        cpu_iters < 20 * 150,
-        "the CPU solve should converge well before the cap"
-    );
-    // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
-    assert!((gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0);
 }
 
 /// A random network with the given layer sizes (deterministic).

@@ -8,7 +8,7 @@ use common::Rng;
 use glam::{Mat3, Vec3};
 use wgcloth::config::ModelKind;
 use wgcloth::cpu::CpuSim;
-use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, solve};
+use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, Preconditioner, SolveSettings, solve};
 use wgcloth::scene::Cloth;
 use wgcloth::{Config, Scene};
 
@@ -105,23 +105,32 @@ fn cholesky_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
     b
 }
 
-/// Runs PCG to tight tolerance and compares with the direct solution.
+/// Runs PCG with each preconditioner to tight tolerance and compares with
+/// the direct solution.
 fn check_against_direct(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], guess: &[Vec3]) {
+    for preconditioner in [Preconditioner::Jacobi, Preconditioner::Multigrid] {
+        check_one(a, cloth, b, guess, preconditioner);
+    }
+}
+
+fn check_one(
+    a: &BlockMatrix,
+    cloth: &Cloth,
+    b: &[Vec3],
+    guess: &[Vec3],
+    preconditioner: Preconditioner,
+) {
     let (free, dense, rhs) = dense_free_system(a, cloth, b, guess);
     let exact = cholesky_solve(dense, rhs);
     let mut x = guess.to_vec();
-    let out = solve(
-        a,
-        &cloth.adjacency,
-        &cloth.pinned,
-        b,
-        &mut x,
-        2000,
-        1e-6,
-        &mut PcgScratch::default(),
-    );
-    assert!(!out.breakdown);
-    assert!(out.relative_residual <= 1e-6, "{out:?}");
+    let settings = SolveSettings {
+        max_iters: 2000,
+        tol: 1e-6,
+        preconditioner,
+    };
+    let out = solve(a, cloth, b, &mut x, settings, &mut PcgScratch::default());
+    assert!(!out.breakdown, "{preconditioner:?}");
+    assert!(out.relative_residual <= 1e-6, "{preconditioner:?}: {out:?}");
     let norm: f64 = exact.iter().map(|e| e * e).sum::<f64>().sqrt();
     let err: f64 = free
         .iter()
@@ -132,7 +141,7 @@ fn check_against_direct(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], guess: &[Vec
         .sqrt();
     assert!(
         err <= 1e-4 * norm,
-        "PCG {err:.3e} from the direct solve (|x| = {norm:.3e}), {out:?}"
+        "{preconditioner:?} PCG {err:.3e} from the direct solve (|x| = {norm:.3e}), {out:?}"
     );
     for i in 0..cloth.vertex_count() {
         if cloth.pinned[i] {

@@ -99,8 +99,8 @@ fn fine_weight(i: u32, cc: vec2<u32>) -> f32 {
     return axis_weight(c.x, cc.x, hop.coarse.nx) * axis_weight(c.y, cc.y, hop.coarse.ny);
 }
 
-// ω D⁻¹ of a diagonal block, zero if D is singular.
-fn smoother(d: Sym3) -> Sym3 {
+// D⁻¹ of a diagonal block, zero if D is singular.
+fn inverse(d: Sym3) -> Sym3 {
     let a = d.a;
     let b = d.b;
     // Cofactors of [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]].
@@ -114,8 +114,20 @@ fn smoother(d: Sym3) -> Sym3 {
     if !(abs(det) > 1.17549435e-38 && abs(det) < 3.0e38) {
         return sym_zero();
     }
-    let s = SMOOTH_WEIGHT / det;
-    return Sym3(vec4<f32>(cxx, cyy, czz, cxy) * s, vec4<f32>(cxz, cyz, 0.0, 0.0) * s);
+    return Sym3(vec4<f32>(cxx, cyy, czz, cxy) / det, vec4<f32>(cxz, cyz, 0.0, 0.0) / det);
+}
+
+// |D⁻¹ B| (Frobenius) for symmetric B, column by column.
+fn scaled_norm(inverse: Sym3, block: Sym3) -> f32 {
+    let c0 = sym_mul(inverse, vec3<f32>(block.a.x, block.a.w, block.b.x));
+    let c1 = sym_mul(inverse, vec3<f32>(block.a.w, block.a.y, block.b.y));
+    let c2 = sym_mul(inverse, vec3<f32>(block.b.x, block.b.y, block.a.z));
+    return sqrt(dot(c0, c0) + dot(c1, c1) + dot(c2, c2));
+}
+
+// ω_i D⁻¹ from D⁻¹ and s_i = Σ_j |D_i⁻¹ A_ij| (multigrid::row_weight).
+fn smoother(inverse: Sym3, spread: f32) -> Sym3 {
+    return sym_scale(inverse, min(SMOOTH_WEIGHT, 2.0 * SMOOTH_MARGIN / (1.0 + spread)));
 }
 
 fn fine_rhs(j: u32) -> vec3<f32> {
@@ -249,14 +261,26 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var k = 0u; k < STENCIL; k++) {
         operators[hop.coarse.stencil_at + I * STENCIL + k] = acc[k];
     }
-    operators[hop.coarse.smoothers_at + I] = smoother(acc[stencil_slot(0, 0)]);
+    let centre = inverse(acc[stencil_slot(0, 0)]);
+    var spread = 0.0;
+    for (var k = 0u; k < STENCIL; k++) {
+        if k != stencil_slot(0, 0) {
+            spread += scaled_norm(centre, acc[k]);
+        }
+    }
+    operators[hop.coarse.smoothers_at + I] = smoother(centre, spread);
     if g.level == 0u {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
             for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
                 let i = y * g.nx + x;
                 var m = sym_zero();
                 if !is_pinned(i) {
-                    m = smoother(matrix[i]);
+                    let d = inverse(matrix[i]);
+                    var spread = 0.0;
+                    for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
+                        spread += scaled_norm(d, matrix[params.n_vertices + adjacent_spring(k)]);
+                    }
+                    m = smoother(d, spread);
                 }
                 operators[g.smoothers_at + i] = m;
             }

@@ -128,6 +128,12 @@ fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
     return rr > threshold && delta > 0.0;
 }
 
+// A non-finite scalar, or rᵀz ≤ 0 above the goal (a preconditioner that is
+// not positive definite): a breakdown, never convergence.
+fn stalled(rr: f32, delta: f32, threshold: f32) -> bool {
+    return !(delta == delta && rr == rr) || (rr > threshold && !(delta > 0.0));
+}
+
 // The starting scalars (one workgroup), and every level's dispatch size
 // (the levels of multigrid::levels, halving from the cloth's grid).
 @compute @workgroup_size(WORKGROUP)
@@ -143,6 +149,7 @@ fn init_scalars(@builtin(local_invocation_index) lid: u32) {
         s.threshold = params.cg_tol * params.cg_tol * bb;
         let on = going_on(rr, delta, s.threshold);
         s.done = u32(!on);
+        s.breakdown = u32(stalled(rr, delta, s.threshold));
         var nx = params.cells_x + 1u;
         var ny = params.cells_y + 1u;
         for (var l = 0u; l < MAX_LEVELS; l++) {
@@ -269,7 +276,7 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
         s.rr = rr;
         s.iterations += 1u;
         s.done = u32(!on);
-        s.breakdown = u32(!(delta == delta && rr == rr));
+        s.breakdown = u32(stalled(rr, delta, scalars_in.threshold));
         if !on {
             for (var l = 0u; l < MAX_LEVELS; l++) {
                 s.groups[3u * l] = 0u;

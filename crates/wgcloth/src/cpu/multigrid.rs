@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
 use crate::multigrid::{
-    COARSE_SWEEPS, Level, SMOOTH_WEIGHT, STENCIL, levels, parents, stencil_slot, weight,
+    COARSE_SWEEPS, Level, STENCIL, levels, parents, row_weight, stencil_slot, weight,
 };
 use crate::scene::Cloth;
 
@@ -32,14 +32,20 @@ pub struct Multigrid {
     correction: Vec<Vec<Vec3>>,
 }
 
-/// ω D⁻¹ of a diagonal block, or zero if D is not invertible.
-fn smoother(d: Mat3) -> Mat3 {
+/// ω_i D⁻¹ of a row with diagonal block `d` and off-diagonal blocks `off`
+/// ([`row_weight`]), or zero if D is not invertible.
+fn smoother(d: Mat3, off: impl Iterator<Item = Mat3>) -> Mat3 {
     let det = d.determinant();
-    if det.is_finite() && det.abs() > f32::MIN_POSITIVE {
-        SMOOTH_WEIGHT * d.inverse()
-    } else {
-        Mat3::ZERO
+    if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+        return Mat3::ZERO;
     }
+    let inverse = d.inverse();
+    let spread = off.map(|block| frobenius(inverse * block)).sum();
+    row_weight(spread) * inverse
+}
+
+fn frobenius(m: Mat3) -> f32 {
+    m.to_cols_array().iter().map(|e| e * e).sum::<f32>().sqrt()
 }
 
 /// Grid coordinates of node `i` of `level`.
@@ -162,10 +168,10 @@ impl Multigrid {
             .with_min_len(GRAIN)
             .map(|i| {
                 if cloth.pinned[i] {
-                    Mat3::ZERO
-                } else {
-                    smoother(a.diag[i])
+                    return Mat3::ZERO;
                 }
+                let adj = &cloth.adjacency;
+                smoother(a.diag[i], adj.range(i).map(|k| a.off[adj.spring[k] as usize]))
             })
             .collect();
         self.smoothers[0] = fine;
@@ -203,7 +209,11 @@ impl Multigrid {
                 });
             self.smoothers[l + 1] = stencil
                 .chunks(STENCIL as usize)
-                .map(|s| smoother(s[stencil_slot(0, 0)]))
+                .map(|s| {
+                    let centre = stencil_slot(0, 0);
+                    let off = s.iter().enumerate().filter(|&(k, _)| k != centre);
+                    smoother(s[centre], off.map(|(_, block)| *block))
+                })
                 .collect();
             self.stencils[l] = stencil;
         }

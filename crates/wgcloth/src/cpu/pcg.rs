@@ -199,7 +199,10 @@ pub fn solve(
         delta = delta_new;
         out.iterations += 1;
     }
-    out.breakdown |= !(delta.is_finite() && rr.is_finite());
+    // A preconditioner that is not positive definite (rᵀz ≤ 0 with the
+    // residual above the goal) ends the solve as a breakdown, never as
+    // convergence.
+    out.breakdown |= !(delta.is_finite() && rr.is_finite()) || (rr > threshold && delta <= 0.0);
     out.relative_residual = if bb > 0.0 {
         (rr.max(0.0) / bb).sqrt() as f32
     } else {

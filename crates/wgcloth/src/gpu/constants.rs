@@ -76,7 +76,10 @@ pub const SHARED: [(&str, u32); 20] = [
 ];
 
 /// The `f32` constants the kernels read, by their WGSL names.
-pub const SHARED_F32: [(&str, f32); 1] = [("SMOOTH_WEIGHT", multigrid::SMOOTH_WEIGHT)];
+pub const SHARED_F32: [(&str, f32); 2] = [
+    ("SMOOTH_WEIGHT", multigrid::SMOOTH_WEIGHT),
+    ("SMOOTH_MARGIN", multigrid::SMOOTH_MARGIN),
+];
 
 /// The WGSL declarations of [`SHARED`] and [`SHARED_F32`], with the
 /// network tile's threads per edge chosen for the device.
