@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::frames::Recording;
 use crate::monitor::Monitor;
-use wgcloth::config::{ModelKind, SceneKind};
+use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
 use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::mlp::NetworkKernel;
@@ -123,7 +123,11 @@ pub struct Report {
     /// A GPU fault the run survived by finishing on the CPU (`auto`); the
     /// statistics then cover the CPU's steps.
     pub device_fault: Option<DeviceFault>,
+    /// The PCG preconditioner, and the iterations per step.
+    pub preconditioner: Preconditioner,
     pub cg_iterations_mean: f64,
+    /// The most iterations one step's solve took.
+    pub cg_iterations_max: u32,
     /// The worst and the median of the steps' end-of-solve relative
     /// residuals, and how many steps ended above [`RESIDUAL_GOAL`].
     pub cg_residual_max: f32,
@@ -146,10 +150,12 @@ struct Residuals {
     sample: Series,
     max: f32,
     above_goal: u64,
+    most_iterations: u32,
 }
 
 impl Residuals {
-    fn push(&mut self, residual: f32) {
+    fn push(&mut self, residual: f32, iterations: u32) {
+        self.most_iterations = self.most_iterations.max(iterations);
         self.sample.push(residual as f64);
         self.max = self.max.max(residual);
         // A NaN residual counts as above.
@@ -370,7 +376,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_iters += s.pcg.iterations as u64;
         contacts += s.contacts as u64;
         breakdowns += s.pcg.breakdown as u64;
-        residuals.push(s.pcg.relative_residual);
+        residuals.push(s.pcg.relative_residual, s.pcg.iterations);
         max_penetration = max_penetration.max(s.max_penetration);
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
         if health::failed(flags, s.pcg.breakdown) {
@@ -419,7 +425,9 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         last_good: divergence.is_some().then_some(last_good),
         divergence,
         device_fault: None,
+        preconditioner: config.solver.preconditioner,
         cg_iterations_mean: cg_iters as f64 / done,
+        cg_iterations_max: residuals.most_iterations,
         cg_residual_max: residuals.max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
@@ -489,7 +497,7 @@ fn run_gpu(
             timings.push(wall, stages);
         }
         let state = sim.read_state()?;
-        residuals.push(state.last_residual);
+        residuals.push(state.last_residual, state.last_iterations);
         let breakdown = state.cg_breakdowns > breakdowns;
         breakdowns = state.cg_breakdowns;
         if health::failed(state.health, breakdown) {
@@ -562,7 +570,9 @@ fn run_gpu(
         divergence,
         last_good,
         device_fault: None,
+        preconditioner: config.solver.preconditioner,
         cg_iterations_mean: state.cg_iterations_total as f64 / done,
+        cg_iterations_max: residuals.most_iterations,
         cg_residual_max: state.cg_residual_max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
@@ -662,7 +672,7 @@ impl Report {
              ms/step      {:.3} (median{dispatches})\n\
              {memory}\
              stages (ms)  {}\n\
-             pcg          {:.1} iterations/step, relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} breakdowns\n\
+             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} breakdowns\n\
              contacts     {:.1} per step\n\
              penetration  {:.4} m deepest (thickness not counted)\n\
              state        {} (final energy {:.4} J)",
@@ -684,7 +694,9 @@ impl Report {
             } else {
                 stages.join(", ")
             },
+            self.preconditioner.name(),
             self.cg_iterations_mean,
+            self.cg_iterations_max,
             self.cg_residual_median,
             self.cg_residual_max,
             self.cg_steps_above_goal,

@@ -9,7 +9,7 @@ use wgcloth::config::ModelKind;
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::stage::Stage;
 use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
-use wgcloth_cli::bench::{BenchOptions, VARIANTS, bench};
+use wgcloth_cli::bench::{BenchOptions, Solve, VARIANTS, bench};
 use wgcloth_cli::run::Steps;
 
 fn tiny() -> BenchOptions {
@@ -124,7 +124,42 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
         );
     }
 
-    assert_eq!(report.periods.len(), backends.len() * VARIANTS.len());
+    // Every converged row reached the goal at every step, and is set
+    // against its model's thesis-solve row.
+    let converged = VARIANTS.iter().filter(|v| v.solve != Solve::Thesis).count();
+    assert!(converged >= 2);
+    assert_eq!(
+        report.converged.len(),
+        backends.len() * grids.len() * converged
+    );
+    for c in &report.converged {
+        assert_eq!(c.steps_above_goal, 0, "{c:?}");
+        assert!(c.residual_max <= 1e-3 && c.iterations_mean >= 1.0, "{c:?}");
+        assert!(c.iterations_max as f64 >= c.iterations_mean, "{c:?}");
+        let row = report
+            .rows
+            .iter()
+            .find(|r| {
+                r.label == c.label && r.report.backend == c.backend && r.report.grid[0] == c.grid
+            })
+            .expect("the converged row");
+        assert_eq!(row.report.preconditioner, c.preconditioner, "{c:?}");
+        let thesis = report
+            .rows
+            .iter()
+            .find(|r| {
+                !r.converged
+                    && r.label == row.report.model.name()
+                    && r.report.backend == c.backend
+                    && r.report.grid[0] == c.grid
+            })
+            .expect("the thesis-solve row");
+        let ratio = row.report.ms_per_step / thesis.report.ms_per_step;
+        assert!((c.times_thesis_step.unwrap() - ratio).abs() < 1e-9, "{c:?}");
+    }
+
+    let thesis_variants = VARIANTS.iter().filter(|v| v.solve == Solve::Thesis).count();
+    assert_eq!(report.periods.len(), backends.len() * thesis_variants);
     for p in &report.periods {
         assert!(p.seconds > 0.0, "{p:?}");
         let analytic = match p.model {

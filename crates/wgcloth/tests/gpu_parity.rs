@@ -124,7 +124,10 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
         assert_eq!(state.steps, 60);
         assert_eq!(state.cg_iterations_total, 60 * iters);
         assert!((state.time - 0.6).abs() < 1e-5);
-        assert!(dev < 1e-4, "{preconditioner:?}: GPU and CPU drifted {dev} m apart");
+        assert!(
+            dev < 1e-4,
+            "{preconditioner:?}: GPU and CPU drifted {dev} m apart"
+        );
         for (i, p) in scene.cloth.pinned.iter().enumerate() {
             if *p {
                 assert_eq!(x[i], scene.cloth.rest_positions[i]);

@@ -44,7 +44,10 @@ fn interpolation(fine: Level, coarse: Level, filtered: &dyn Fn(usize) -> bool) -
             let (c, r) = ((i % fine.nx as usize) as u32, (i / fine.nx as usize) as u32);
             (0..coarse.nodes())
                 .map(|k| {
-                    let (cc, rc) = ((k % coarse.nx as usize) as u32, (k / coarse.nx as usize) as u32);
+                    let (cc, rc) = (
+                        (k % coarse.nx as usize) as u32,
+                        (k / coarse.nx as usize) as u32,
+                    );
                     if filtered(i) {
                         0.0
                     } else {
@@ -87,7 +90,11 @@ fn check_galerkin(
             } else {
                 Mat3::ZERO
             };
-            let scale = expected.abs().to_cols_array().iter().fold(1.0f32, |m, v| m.max(*v));
+            let scale = expected
+                .abs()
+                .to_cols_array()
+                .iter()
+                .fold(1.0f32, |m, v| m.max(*v));
             let diff = (got - expected).abs().to_cols_array();
             let worst = diff.iter().fold(0.0f32, |m, v| m.max(*v));
             assert!(
@@ -147,7 +154,8 @@ fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
     for _ in 0..4 {
         vectors.push((0..n).map(|i| free(i, rng.vec3(-1.0, 1.0))).collect());
     }
-    let dot = |x: &[Vec3], y: &[Vec3]| -> f64 { x.iter().zip(y).map(|(x, y)| x.dot(*y) as f64).sum() };
+    let dot =
+        |x: &[Vec3], y: &[Vec3]| -> f64 { x.iter().zip(y).map(|(x, y)| x.dot(*y) as f64).sum() };
     let norm = |x: &[Vec3]| dot(x, x).sqrt();
     let applied: Vec<Vec<Vec3>> = vectors
         .iter()
@@ -164,7 +172,10 @@ fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
                 assert_eq!(*z, Vec3::ZERO, "pinned vertex {i} preconditioned");
             }
         }
-        let (v, mv) = (&vectors[(k + 1) % vectors.len()], &applied[(k + 1) % vectors.len()]);
+        let (v, mv) = (
+            &vectors[(k + 1) % vectors.len()],
+            &applied[(k + 1) % vectors.len()],
+        );
         let (uv, vu) = (dot(u, mv), dot(v, mu));
         assert!(
             (uv - vu).abs() <= 1e-4 * norm(u) * norm(mv),
@@ -177,7 +188,9 @@ fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
 fn the_v_cycle_is_symmetric_positive_definite() {
     let mut rng = Rng(11);
     let cloth = Cloth::grid(12, 7, 1.0, 1.0, &[0, 11], |u, v| Vec3::new(u, -v, 0.0));
-    let b: Vec<Vec3> = (0..cloth.vertex_count()).map(|_| rng.vec3(-1.0, 1.0)).collect();
+    let b: Vec<Vec3> = (0..cloth.vertex_count())
+        .map(|_| rng.vec3(-1.0, 1.0))
+        .collect();
     check_spd(&random_system(&cloth, &mut rng), &cloth, &b, &mut rng);
 
     // Real steps' systems as the sphere meets the cloth: a face contact's
@@ -194,7 +207,10 @@ fn the_v_cycle_is_symmetric_positive_definite() {
             checked += 1;
         }
     }
-    assert!(checked > 30, "the sphere should touch the cloth ({checked} steps)");
+    assert!(
+        checked > 30,
+        "the sphere should touch the cloth ({checked} steps)"
+    );
 }
 
 /// Mean and most PCG iterations per step to |S r| ≤ 1e-3 |S b| over a
@@ -234,5 +250,8 @@ fn multigrid_iterations_stay_nearly_flat_as_the_grid_grows() {
     assert!(jacobi[1].0 >= 2.0 * jacobi[0].0, "Jacobi {jacobi:?}");
     assert!(mg[2].0 <= 1.5 * mg[0].0 + 2.0, "multigrid {mg:?}");
     assert!(mg[2].1 <= mg[0].1 + 8, "multigrid {mg:?}");
-    assert!(mg[2].0 * 4.0 <= jacobi[1].0, "multigrid {mg:?}, Jacobi {jacobi:?}");
+    assert!(
+        mg[2].0 * 4.0 <= jacobi[1].0,
+        "multigrid {mg:?}, Jacobi {jacobi:?}"
+    );
 }

@@ -1,7 +1,10 @@
 //! `wgcloth bench` (DESIGN "Command line"): one row per backend × model ×
-//! grid with the median ms/step after a warm-up, the per-stage medians,
-//! contacts and CG iterations; the networks' throughput over batches of
-//! contacts; and the thesis's headline measure, seconds per sphere period
+//! solve × grid with the median ms/step after a warm-up, the per-stage
+//! medians, contacts and CG iterations. The headline is the converged step
+//! (every solve to a relative residual of 1e-3, multigrid against Jacobi,
+//! with the iterations each took); the thesis's fixed 25 Jacobi iterations
+//! stay for comparison. Then the networks' throughput over batches of
+//! contacts, and the thesis's headline measure, seconds per sphere period
 //! with the analytic force against each network on the same backend.
 //! [`traffic`] sets each PCG iteration against its memory-traffic floor;
 //! [`plot`] draws the figure.
@@ -14,8 +17,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::run::{self, Chosen, Report, Steps, median};
-use wgcloth::config::{Config, ModelKind, SceneKind};
+use crate::run::{self, Chosen, RESIDUAL_GOAL, Report, Steps, median};
+use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind};
 use wgcloth::error::Result;
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
 use wgcloth::gpu::{GpuContext, Kernels, context::describe};
@@ -24,12 +27,35 @@ use wgcloth::scene::Scene;
 use wgcloth::stage::Stage;
 use wgcloth_learn::domain::{Rng, uniform_inputs};
 
-/// A model and, for a network model, the shipped network it runs instead
-/// of its default one.
+/// How a row's steps are solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solve {
+    /// The thesis's: 25 Jacobi-PCG iterations at tolerance 0, the same
+    /// solver work for every model.
+    Thesis,
+    /// Every step to |S r| ≤ [`RESIDUAL_GOAL`] |S b| with this preconditioner.
+    Converged(Preconditioner),
+}
+
+impl Solve {
+    /// The most iterations a converged solve may take: far above what
+    /// multigrid needs, and enough for Jacobi up to 256².
+    pub fn cap(self) -> u32 {
+        match self {
+            Solve::Thesis => 25,
+            Solve::Converged(Preconditioner::Multigrid) => 100,
+            Solve::Converged(Preconditioner::Jacobi) => 3000,
+        }
+    }
+}
+
+/// A model, for a network model the shipped network it runs instead of its
+/// default one, and how its steps are solved.
 #[derive(Clone, Copy, Debug)]
 pub struct Variant {
     pub model: ModelKind,
     pub network: Option<Shipped>,
+    pub solve: Solve,
 }
 
 impl Variant {
@@ -37,12 +63,22 @@ impl Variant {
         Variant {
             model,
             network: None,
+            solve: Solve::Thesis,
         }
     }
 
-    /// The model's name, and the network's file stem when not the default.
+    const fn converged(model: ModelKind, preconditioner: Preconditioner) -> Variant {
+        Variant {
+            model,
+            network: None,
+            solve: Solve::Converged(preconditioner),
+        }
+    }
+
+    /// The model's name, the network's file stem when not the default, and
+    /// the preconditioner of a converged solve.
     pub fn label(&self) -> String {
-        match self.network {
+        let model = match self.network {
             None => self.model.name().into(),
             Some(net) => {
                 let stem = net.path.rsplit('/').next().unwrap_or(net.path);
@@ -52,12 +88,21 @@ impl Variant {
                     stem.trim_end_matches(".safetensors")
                 )
             }
+        };
+        match self.solve {
+            Solve::Thesis => model,
+            Solve::Converged(p) => format!("{model} → 1e-3 {}", p.name()),
         }
     }
 
-    /// The sphere scene at N×N with this variant's network.
+    /// The sphere scene at N×N with this variant's network and solve.
     pub fn scene(&self, grid: u32) -> Result<Scene> {
         let mut scene = scene(SceneKind::Sphere, self.model, grid)?;
+        if let Solve::Converged(p) = self.solve {
+            let solver = &mut scene.config.solver;
+            solver.preconditioner = p;
+            (solver.cg_iters, solver.cg_tol) = (self.solve.cap(), RESIDUAL_GOAL);
+        }
         if let Some(net) = self.network {
             scene.network = Some(Arc::new(net.read()?.network()));
             // Names the network in the report.
@@ -67,9 +112,14 @@ impl Variant {
     }
 }
 
-/// Every model with its default network, and the friction model with the
-/// thesis-size network too.
-pub const VARIANTS: [Variant; 5] = [
+/// The default run: friction-net, every step solved with multigrid.
+pub const HEADLINE: Variant = Variant::converged(ModelKind::FrictionNet, Preconditioner::Multigrid);
+
+/// Every model with its default network and the friction model with the
+/// thesis-size network too, solved as the thesis did; then the default
+/// model and the analytic one solved to the goal with multigrid, and the
+/// default model with Jacobi.
+pub const VARIANTS: [Variant; 8] = [
     Variant::of(ModelKind::Naive),
     Variant::of(ModelKind::Friction),
     Variant::of(ModelKind::NaiveNet),
@@ -77,7 +127,11 @@ pub const VARIANTS: [Variant; 5] = [
     Variant {
         model: ModelKind::FrictionNet,
         network: Some(weights::FRICTION_THESIS),
+        solve: Solve::Thesis,
     },
+    HEADLINE,
+    Variant::converged(ModelKind::Friction, Preconditioner::Multigrid),
+    Variant::converged(ModelKind::FrictionNet, Preconditioner::Jacobi),
 ];
 
 /// Steps before the timed ones: the sphere reaches the cloth and pushes it
@@ -141,7 +195,7 @@ impl BenchOptions {
     }
 }
 
-/// A benchmark scene: N×N cloth and the thesis's solver, 25 PCG
+/// A benchmark scene: N×N cloth and the thesis's solver, 25 Jacobi-PCG
 /// iterations at tolerance 0, so every model does the same solver work.
 pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Result<Scene> {
     let mut c = Config {
@@ -150,8 +204,9 @@ pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Result<Scene> {
         ..Default::default()
     };
     c.cloth.grid = [grid, grid];
-    c.solver.cg_iters = 25;
+    c.solver.cg_iters = Solve::Thesis.cap();
     c.solver.cg_tol = 0.0;
+    c.solver.preconditioner = Preconditioner::Jacobi;
     Scene::new(&c)
 }
 
@@ -175,6 +230,9 @@ pub struct NetworkRow {
 #[derive(Clone, Debug, Serialize)]
 pub struct StepRow {
     pub label: String,
+    /// Whether every step was solved to the goal (else the thesis's 25
+    /// Jacobi iterations).
+    pub converged: bool,
     /// Cloth vertices (grid²) and springs.
     pub particles: usize,
     pub springs: usize,
@@ -225,6 +283,24 @@ pub struct TrafficRow {
     pub times_floor: f64,
 }
 
+/// A converged row's solve: the iterations its steps took to the goal,
+/// against the same model's row with the thesis's 25 Jacobi iterations.
+#[derive(Clone, Debug, Serialize)]
+pub struct ConvergedRow {
+    pub backend: String,
+    pub label: String,
+    pub grid: u32,
+    pub preconditioner: Preconditioner,
+    pub ms_per_step: f64,
+    pub iterations_mean: f64,
+    pub iterations_max: u32,
+    pub residual_max: f32,
+    pub steps_above_goal: u64,
+    /// This row's ms/step over the thesis-solve row's (same backend, model
+    /// and grid; not solved to any tolerance).
+    pub times_thesis_step: Option<f64>,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
     pub quick: bool,
@@ -234,6 +310,7 @@ pub struct BenchReport {
     /// The GPU adapter, or why there are no GPU rows.
     pub gpu: String,
     pub rows: Vec<StepRow>,
+    pub converged: Vec<ConvergedRow>,
     pub scaling: Vec<ScalingRow>,
     pub bandwidth: Vec<traffic::Bandwidth>,
     pub cg_traffic: Vec<TrafficRow>,
@@ -268,6 +345,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                 let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
                 rows.push(StepRow {
                     label,
+                    converged: v.solve != Solve::Thesis,
                     particles,
                     springs,
                     stage_coverage,
@@ -286,7 +364,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     let mut periods = Vec::new();
     for backend in &chosen {
         let mut seconds = Vec::new();
-        for v in VARIANTS {
+        for v in VARIANTS.into_iter().filter(|v| v.solve == Solve::Thesis) {
             progress(&format!("period {} {}", name(backend), v.label()));
             let scene = v.scene(opts.period_grid)?;
             let steps = Steps::all(opts.period_steps);
@@ -326,6 +404,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
             rayon::current_num_threads()
         ),
         gpu: gpu_note,
+        converged: converged(&rows),
         scaling: scaling(&rows),
         cg_traffic: cg_traffic(&rows, &bandwidth),
         bandwidth,
@@ -333,6 +412,34 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         networks,
         periods,
     })
+}
+
+/// The converged rows' solves, each against its thesis-solve twin.
+fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
+    rows.iter()
+        .filter(|r| r.converged)
+        .map(|r| {
+            let (report, grid) = (&r.report, r.report.grid[0]);
+            let thesis = rows.iter().find(|t| {
+                !t.converged
+                    && t.label == report.model.name()
+                    && t.report.backend == report.backend
+                    && t.report.grid[0] == grid
+            });
+            ConvergedRow {
+                backend: report.backend.clone(),
+                label: r.label.clone(),
+                grid,
+                preconditioner: report.preconditioner,
+                ms_per_step: report.ms_per_step,
+                iterations_mean: report.cg_iterations_mean,
+                iterations_max: report.cg_iterations_max,
+                residual_max: report.cg_residual_max,
+                steps_above_goal: report.cg_steps_above_goal,
+                times_thesis_step: thesis.map(|t| report.ms_per_step / t.report.ms_per_step),
+            }
+        })
+        .collect()
 }
 
 /// The grids a backend runs: the hardware-GPU ones only on a hardware GPU.
@@ -562,6 +669,26 @@ impl BenchReport {
                 }
             }
             out += "\n";
+        }
+        out += &format!(
+            "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>10}\n",
+            "backend", "model", "grid", "ms/step", "iters", "most", "worst", "above", "× thesis"
+        );
+        for c in &self.converged {
+            out += &format!(
+                "{:<8}{:<32}{:>6}{:>11.3}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
+                c.backend,
+                c.label,
+                c.grid,
+                c.ms_per_step,
+                c.iterations_mean,
+                c.iterations_max,
+                c.residual_max,
+                c.steps_above_goal,
+                c.times_thesis_step
+                    .map(|r| format!("{r:.2}"))
+                    .unwrap_or_default()
+            );
         }
         out += "\nstep growth, ms/step ∝ particles^exponent\n";
         for g in &self.scaling {

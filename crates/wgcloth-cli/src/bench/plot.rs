@@ -1,13 +1,13 @@
 //! `bench --plot`: ms/step against particle count on log-log axes, one
 //! line per backend × model (GPU solid, CPU dashed) with a linear-growth
-//! guide; beside it each stage's share of the step for the default network
-//! model, one bar per backend × grid.
+//! guide; beside it each stage's share of the default run's step
+//! (friction-net solved with multigrid), one bar per backend × grid.
 
 use std::path::Path;
 
 use image::Rgb;
 
-use crate::bench::{BenchReport, StepRow, VARIANTS};
+use crate::bench::{BenchReport, HEADLINE, StepRow, VARIANTS};
 use crate::plot::{Canvas, GRID, INK, LogAxis, decade_label};
 use wgcloth::config::ModelKind;
 use wgcloth::error::{Error, Result};
@@ -20,6 +20,9 @@ pub const VARIANT_COLORS: [Rgb<u8>; VARIANTS.len()] = [
     Rgb([230, 150, 30]),
     Rgb([200, 40, 40]),
     Rgb([120, 60, 170]),
+    Rgb([20, 150, 80]),
+    Rgb([90, 200, 220]),
+    Rgb([240, 110, 170]),
 ];
 
 /// One colour per entry of [`Stage::ALL`].
@@ -155,7 +158,7 @@ fn step_lines(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) -
 /// The per-stage panel between x = left and right, legend beyond it.
 fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
     let (top, bottom) = (40.0, c.height() - 66.0);
-    let model = ModelKind::FrictionNet.name();
+    let model = HEADLINE.label();
     c.text(
         left - 40.0,
         16.0,

@@ -50,7 +50,10 @@ fn frobenius(m: Mat3) -> f32 {
 
 /// Grid coordinates of node `i` of `level`.
 fn coords(level: Level, i: usize) -> (u32, u32) {
-    ((i % level.nx as usize) as u32, (i / level.nx as usize) as u32)
+    (
+        (i % level.nx as usize) as u32,
+        (i / level.nx as usize) as u32,
+    )
 }
 
 impl Multigrid {
@@ -171,7 +174,10 @@ impl Multigrid {
                     return Mat3::ZERO;
                 }
                 let adj = &cloth.adjacency;
-                smoother(a.diag[i], adj.range(i).map(|k| a.off[adj.spring[k] as usize]))
+                smoother(
+                    a.diag[i],
+                    adj.range(i).map(|k| a.off[adj.spring[k] as usize]),
+                )
             })
             .collect();
         self.smoothers[0] = fine;
@@ -199,7 +205,8 @@ impl Multigrid {
                                 for (pc, wc) in parents(c, to.nx) {
                                     let w = wi * wr * wc;
                                     if w != 0.0 {
-                                        let (dx, dy) = (pc as i32 - cc as i32, pr as i32 - rc as i32);
+                                        let (dx, dy) =
+                                            (pc as i32 - cc as i32, pr as i32 - rc as i32);
                                         out[stencil_slot(dx, dy)] += w * block;
                                     }
                                 }

@@ -220,16 +220,16 @@ fn precondition(
 ) -> f64 {
     match (preconditioner, &mut s.multigrid) {
         (Preconditioner::Multigrid, Some(mg)) => mg.apply(a, cloth, &s.r, &mut s.z),
-        _ => s
-            .z
-            .par_iter_mut()
-            .with_min_len(GRAIN)
-            .zip(&s.r)
-            .zip(&s.inv_diag)
-            .map(|((z, r), m)| {
-                *z = *r * *m;
-                r.dot(*z) as f64
-            })
-            .sum(),
+        _ => {
+            s.z.par_iter_mut()
+                .with_min_len(GRAIN)
+                .zip(&s.r)
+                .zip(&s.inv_diag)
+                .map(|((z, r), m)| {
+                    *z = *r * *m;
+                    r.dot(*z) as f64
+                })
+                .sum()
+        }
     }
 }

@@ -262,7 +262,10 @@ impl Sizes {
         let (operators, vectors) = match grids.last() {
             Some(last) => {
                 let n = last.nx as u64 * last.ny as u64;
-                (last.stencil_at as u64 + n * STENCIL as u64, last.correction_at as u64 + n)
+                (
+                    last.stencil_at as u64 + n * STENCIL as u64,
+                    last.correction_at as u64 + n,
+                )
             }
             None => (1, 1),
         };

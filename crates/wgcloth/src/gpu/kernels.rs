@@ -178,7 +178,12 @@ impl Bound {
 
     /// Records a dispatch whose workgroup counts the GPU wrote at `offset`
     /// of `args` (three `u32`s).
-    pub fn dispatch_indirect(&self, pass: &mut wgpu::ComputePass, args: &wgpu::Buffer, offset: u64) {
+    pub fn dispatch_indirect(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        args: &wgpu::Buffer,
+        offset: u64,
+    ) {
         self.set(pass);
         pass.dispatch_workgroups_indirect(args, offset);
     }

@@ -35,12 +35,7 @@ pub(crate) struct Pcg {
 }
 
 impl Pcg {
-    pub(crate) fn new(
-        kernels: &Kernels,
-        device: &wgpu::Device,
-        b: &Buffers,
-        scene: &Scene,
-    ) -> Pcg {
+    pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers, scene: &Scene) -> Pcg {
         let side = |k: usize| {
             let buffers = [
                 ("matrix", &b.matrix),
