@@ -77,7 +77,7 @@ pub fn levels(nx: u32, ny: u32) -> Vec<Level> {
 /// when there is one parent.
 pub fn parents(c: u32, n_coarse: u32) -> [(u32, f32); 2] {
     let left = c / 2;
-    if c % 2 == 0 {
+    if c.is_multiple_of(2) {
         [(left, 1.0), (left, 0.0)]
     } else if left + 1 < n_coarse {
         [(left, 0.5), (left + 1, 0.5)]
