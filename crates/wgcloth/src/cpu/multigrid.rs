@@ -7,6 +7,8 @@
 //! Pinned vertices are filtered as in the fine solve: the interpolation
 //! P̃ = S P never reaches them, so every level solves for free motion only.
 
+use std::mem::take;
+
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
@@ -30,6 +32,10 @@ pub struct Multigrid {
     rhs: Vec<Vec<Vec3>>,
     /// Per coarse level: its correction after the up-leg's smoothing.
     correction: Vec<Vec<Vec3>>,
+    /// Per level but the coarsest: its pre-smoothing ω D⁻¹ r, and room for
+    /// its residual on the way down and its guess on the way up.
+    pre: Vec<Vec<Vec3>>,
+    work: Vec<Vec<Vec3>>,
 }
 
 /// ω_i D⁻¹ of a row with diagonal block `d` and off-diagonal blocks `off`
@@ -61,6 +67,11 @@ impl Multigrid {
     pub fn new(cloth: &Cloth) -> Multigrid {
         let levels = levels(cloth.nx, cloth.ny);
         let coarse = || levels[1..].iter().map(|l| vec![Vec3::ZERO; l.nodes()]);
+        let upper = || {
+            levels[..levels.len() - 1]
+                .iter()
+                .map(|l| vec![Vec3::ZERO; l.nodes()])
+        };
         Multigrid {
             stencils: levels[1..]
                 .iter()
@@ -69,6 +80,8 @@ impl Multigrid {
             smoothers: levels.iter().map(|l| vec![Mat3::ZERO; l.nodes()]).collect(),
             rhs: coarse().collect(),
             correction: coarse().collect(),
+            pre: upper().collect(),
+            work: upper().collect(),
             levels,
         }
     }
@@ -227,36 +240,40 @@ impl Multigrid {
     }
 
     /// z = M⁻¹ r, one V-cycle, returning rᵀz. `r` is zero on pinned rows
-    /// and so is z.
+    /// and so is z. The same operator as the kernels, which recompute what
+    /// this keeps (each level's pre-smoothing, residual and guess) where
+    /// they read it.
     pub fn apply(&mut self, a: &BlockMatrix, cloth: &Cloth, r: &[Vec3], z: &mut [Vec3]) -> f64 {
         let last = self.levels.len() - 1;
-        // Down: each coarse right-hand side is the restricted residual of
-        // the level above after its pre-smoothing, a = ω D⁻¹ r (kernels
-        // `mg_restrict_fine`, `mg_restrict`).
+        // Down: pre-smooth a = ω D⁻¹ r, then restrict the residual r − A a
+        // (kernel `down`).
         for l in 0..last {
-            let (from, to) = (self.levels[l], self.levels[l + 1]);
+            let (mut pre, mut residual) = (take(&mut self.pre[l]), take(&mut self.work[l]));
+            let mut out = take(&mut self.rhs[l]);
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
             let smooth = &self.smoothers[l];
-            let pre = |j: usize| smooth[j] * fine_rhs[j];
-            let out: Vec<Vec3> = (0..to.nodes())
-                .into_par_iter()
+            pre.par_iter_mut()
                 .with_min_len(GRAIN)
-                .map(|coarse| {
+                .enumerate()
+                .for_each(|(i, a_i)| *a_i = smooth[i] * fine_rhs[i]);
+            residual
+                .par_iter_mut()
+                .with_min_len(GRAIN)
+                .enumerate()
+                .for_each(|(i, t)| *t = fine_rhs[i] - self.row(a, cloth, l, i, |j| pre[j]));
+            let to = self.levels[l + 1];
+            out.par_iter_mut()
+                .with_min_len(GRAIN)
+                .enumerate()
+                .for_each(|(coarse, sum)| {
                     let cr = coords(to, coarse);
-                    Self::children(from, cr)
-                        .map(|i| {
-                            let w = self.fine_weight(cloth, l, i, cr);
-                            if w == 0.0 {
-                                return Vec3::ZERO;
-                            }
-                            w * (fine_rhs[i] - self.row(a, cloth, l, i, pre))
-                        })
-                        .sum()
-                })
-                .collect();
-            self.rhs[l] = out;
+                    *sum = Self::children(self.levels[l], cr)
+                        .map(|i| self.fine_weight(cloth, l, i, cr) * residual[i])
+                        .sum();
+                });
+            (self.pre[l], self.work[l], self.rhs[l]) = (pre, residual, out);
         }
-        // The coarsest level: damped Jacobi sweeps from zero (`mg_coarse`).
+        // The coarsest level: damped Jacobi sweeps from zero (`coarse`).
         let coarse_rhs = &self.rhs[last - 1];
         let smooth = &self.smoothers[last];
         let mut e: Vec<Vec3> = (0..coarse_rhs.len())
@@ -268,25 +285,42 @@ impl Multigrid {
                 .collect();
         }
         self.correction[last - 1] = e;
-        // Up: each level's guess is its pre-smoothing plus the interpolated
-        // coarse correction, then one more smoothing sweep (kernels
-        // `mg_smooth_fine`, `mg_smooth`).
+        // Up: the guess is the pre-smoothing plus the interpolated coarse
+        // correction, then one more sweep (kernel `up`).
         for l in (0..last).rev() {
+            let mut guess = take(&mut self.work[l]);
+            let mut out = match l {
+                0 => Vec::new(),
+                _ => take(&mut self.correction[l - 1]),
+            };
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
-            let smooth = &self.smoothers[l];
-            let coarse = &self.correction[l];
-            let guess = |j: usize| smooth[j] * fine_rhs[j] + self.interpolate(cloth, l, j, coarse);
-            let out: Vec<Vec3> = (0..self.levels[l].nodes())
-                .into_par_iter()
+            let (smooth, coarse, pre) = (&self.smoothers[l], &self.correction[l], &self.pre[l]);
+            guess
+                .par_iter_mut()
                 .with_min_len(GRAIN)
-                .map(|i| guess(i) + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, i, guess)))
-                .collect();
+                .enumerate()
+                .for_each(|(i, e)| *e = pre[i] + self.interpolate(cloth, l, i, coarse));
+            let post = |i: usize| {
+                guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, i, |j| guess[j]))
+            };
             if l == 0 {
-                z.copy_from_slice(&out);
+                z.par_iter_mut()
+                    .with_min_len(GRAIN)
+                    .enumerate()
+                    .for_each(|(i, zi)| *zi = post(i));
             } else {
+                out.par_iter_mut()
+                    .with_min_len(GRAIN)
+                    .enumerate()
+                    .for_each(|(i, o)| *o = post(i));
                 self.correction[l - 1] = out;
             }
+            self.work[l] = guess;
         }
-        r.iter().zip(z.iter()).map(|(r, z)| r.dot(*z) as f64).sum()
+        r.par_iter()
+            .with_min_len(GRAIN)
+            .zip(z.par_iter())
+            .map(|(r, z)| r.dot(*z) as f64)
+            .sum()
     }
 }
