@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod frames;
+pub mod in_flight;
 pub mod loss_plot;
 pub mod monitor;
 pub mod plot;

@@ -8,10 +8,12 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use crate::frames::Recording;
+use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
 use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
+use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::mlp::NetworkKernel;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
@@ -459,8 +461,54 @@ fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<Stri
     ))
 }
 
-/// Runs `scene` on the GPU. With a `checkpoint` the state is copied to
-/// it every [`CHECKPOINT_INTERVAL`] for the CPU to resume from.
+/// How many PCG iterations the next GPU step records: enough for twice
+/// the most any of the last [`Budget::WINDOW`] steps took, never more
+/// than `solver.cg_iters`; a step that ran out before the tolerance sends
+/// the next ones back to the whole cap. Converged iterations dispatch no
+/// work, but each recorded one costs its dispatches' overhead (about 90 µs
+/// each on lavapipe).
+struct Budget {
+    cap: u32,
+    tol: f32,
+    recent: std::collections::VecDeque<u32>,
+}
+
+impl Budget {
+    const WINDOW: usize = 32;
+    const LEAST: u32 = 12;
+
+    fn new(cap: u32, tol: f32) -> Budget {
+        Budget {
+            cap,
+            tol,
+            recent: Default::default(),
+        }
+    }
+
+    fn next(&self) -> u32 {
+        match self.recent.iter().max() {
+            Some(&most) => (2 * most).max(Self::LEAST).min(self.cap),
+            None => self.cap,
+        }
+    }
+
+    /// A step that took `iterations` of a budget of `budget` and ended at
+    /// relative residual `residual`.
+    fn observe(&mut self, iterations: u32, budget: u32, residual: f32) {
+        let ran_out = iterations >= budget && residual > self.tol;
+        if self.recent.len() == Self::WINDOW {
+            self.recent.pop_front();
+        }
+        self.recent
+            .push_back(if ran_out { self.cap } else { iterations });
+    }
+}
+
+/// Runs `scene` on the GPU with up to [`in_flight::DEPTH`] steps in
+/// flight, each step's statistics read asynchronously; the host waits for
+/// a step only when the ring is full, or to draw, monitor or checkpoint
+/// it. With a `checkpoint` the state is copied to it every
+/// [`CHECKPOINT_INTERVAL`] for the CPU to resume from.
 fn run_gpu(
     ctx: &GpuContext,
     scene: &Scene,
@@ -478,79 +526,116 @@ fn run_gpu(
         let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
         m.record(0, scene, &x, &v, Some(&ctx.device))?;
     }
-    let dt = scene.config.solver.dt as f64;
+    let config = &scene.config;
+    let dt = config.solver.dt as f64;
     let mut timings = Timings::default();
-    let mut dispatches = 0;
     let (mut divergence, mut last_good) = (None, None);
-    let mut breakdowns = 0;
     let mut residuals = Residuals::default();
-    for k in 0..steps.total {
-        let start = Instant::now();
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        sim.record_checkpoint(&mut encoder);
-        dispatches = sim.encode_step(&mut encoder);
-        ctx.queue.submit([encoder.finish()]);
-        ctx.finish()?;
-        let wall = start.elapsed().as_secs_f64() * 1e3;
-        let stages = sim.read_stage_ms()?.unwrap_or_default();
-        if k >= steps.untimed {
-            timings.push(wall, stages);
+    let mut budget = Budget::new(config.solver.cg_iters, config.solver.cg_tol);
+    let mut flight = InFlight::new(&ctx.device, &sim);
+    let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
+    let (mut cg_iterations, mut contacts) = (0u64, 0u64);
+    let mut since = Instant::now();
+    while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
+        let mut finished = Vec::new();
+        // Whether the host needs the state after the step just submitted.
+        let mut synced = false;
+        if submitted < steps.total {
+            sim.set_cg_budget(budget.next());
+            finished.extend(flight.submit(ctx, &sim, submitted)?);
+            submitted += 1;
+            synced = obs.recording.as_ref().is_some_and(|r| r.due(submitted))
+                || obs.monitor.as_ref().is_some_and(|m| m.due(submitted))
+                || checkpoint
+                    .as_ref()
+                    .is_some_and(|c| c.taken.elapsed() >= CHECKPOINT_INTERVAL);
         }
-        let state = sim.read_state()?;
-        residuals.push(state.last_residual, state.last_iterations);
-        let breakdown = state.cg_breakdowns > breakdowns;
-        breakdowns = state.cg_breakdowns;
-        if health::failed(state.health, breakdown) {
-            let (diag, _, b) = sim.read_system()?;
-            let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
-            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
-            divergence = Some(health::diagnose(&FailedStep {
-                step: k + 1,
-                flags: state.health,
-                breakdown,
-                diag: &diag,
-                b: &b,
-                x: &x,
-                v: &v,
-                max_speed: scene.config.solver.max_speed,
-            }));
-            let (x, v) = sim.read_kept()?;
-            last_good = Some(State {
-                x,
-                v,
-                time: k as f64 * dt,
-                step: k,
-            });
-            break;
+        let wait = synced || submitted == steps.total;
+        while let Some(f) = flight.next(ctx, &sim, wait)? {
+            finished.push(f);
+        }
+        for f in finished {
+            // With the ring full the host waits for each step in turn, so
+            // the time between completions is the step's.
+            let now = Instant::now();
+            if f.step >= steps.untimed {
+                timings.push(
+                    (now - since).as_secs_f64() * 1e3,
+                    f.stage_ms.iter().copied(),
+                );
+            }
+            since = now;
+            let state = f.state;
+            residuals.push(state.last_residual, state.last_iterations);
+            budget.observe(state.last_iterations, f.budget, state.last_residual);
+            cg_iterations += state.last_iterations as u64;
+            contacts += state.contacts_last as u64;
+            let breakdown = state.cg_breakdowns > breakdowns;
+            (breakdowns, last) = (state.cg_breakdowns, state);
+            if let Some(c) = checkpoint.as_deref_mut() {
+                c.reached = f.step + 1;
+            }
+            if health::failed(state.health, breakdown) {
+                // Run the step again from the state it started from, to
+                // name what failed in its own system.
+                while flight.next(ctx, &sim, true)?.is_some() {}
+                let (x0, v0) = flight.start_of(&sim, &f)?;
+                let time = f.step as f64 * dt;
+                sim.upload_state(&x0, &v0, time as f32);
+                sim.set_cg_budget(f.budget);
+                sim.step();
+                ctx.finish()?;
+                let (diag, _, b) = sim.read_system()?;
+                let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
+                let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+                divergence = Some(health::diagnose(&FailedStep {
+                    step: f.step + 1,
+                    flags: state.health,
+                    breakdown,
+                    diag: &diag,
+                    b: &b,
+                    x: &x,
+                    v: &v,
+                    max_speed: config.solver.max_speed,
+                }));
+                last_good = Some(State {
+                    x: x0,
+                    v: v0,
+                    time,
+                    step: f.step,
+                });
+                break;
+            }
+            obs.progress(f.step + 1);
+        }
+        if !synced || divergence.is_some() {
+            continue;
         }
         if let Some(r) = obs.recording.as_deref_mut() {
-            r.gpu(k + 1, &sim, scene)?;
+            r.gpu(submitted, &sim, scene)?;
         }
-        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(k + 1)) {
+        if let Some(m) = obs.monitor.as_deref_mut().filter(|m| m.due(submitted)) {
             let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
-            m.record(k + 1, scene, &x, &v, Some(&ctx.device))?;
+            m.record(submitted, scene, &x, &v, Some(&ctx.device))?;
         }
-        if let Some(c) = checkpoint.as_deref_mut() {
-            c.reached = k + 1;
-            if c.taken.elapsed() >= CHECKPOINT_INTERVAL {
-                let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
-                c.state = State {
-                    x,
-                    v,
-                    time: (k + 1) as f64 * dt,
-                    step: k + 1,
-                };
-                c.taken = Instant::now();
-            }
+        if let Some(c) = checkpoint.as_deref_mut()
+            && c.taken.elapsed() >= CHECKPOINT_INTERVAL
+        {
+            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
+            c.state = State {
+                x,
+                v,
+                time: submitted as f64 * dt,
+                step: submitted,
+            };
+            c.taken = Instant::now();
         }
-        obs.progress(k + 1);
     }
-    let state = sim.read_state()?;
+    ctx.finish()?;
     let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
     let finite = x.iter().chain(&v).all(|p| p.is_finite());
-    let done = state.steps.max(1) as f64;
+    let done = last.steps.max(1) as f64;
     let (ms_per_step, stage_ms) = timings.medians();
-    let config = &scene.config;
     Ok(Report {
         backend: "gpu".into(),
         adapter: describe(&ctx.adapter),
@@ -558,26 +643,26 @@ fn run_gpu(
         network: describe_network(scene, sim.network_kernel()),
         scene: config.scene,
         grid: config.cloth.grid,
-        steps: state.steps as u64,
+        steps: last.steps as u64,
         dt: config.solver.dt,
         ms_per_step,
         stage_ms,
-        dispatches_per_step: Some(dispatches),
+        dispatches_per_step: Some(flight.dispatches),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
-        max_penetration: f32::from_bits(state.max_penetration_bits),
+        max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,
         divergence,
         last_good,
         device_fault: None,
         preconditioner: config.solver.preconditioner,
-        cg_iterations_mean: state.cg_iterations_total as f64 / done,
+        cg_iterations_mean: cg_iterations as f64 / done,
         cg_iterations_max: residuals.most_iterations,
-        cg_residual_max: state.cg_residual_max,
+        cg_residual_max: last.cg_residual_max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
-        cg_breakdowns: state.cg_breakdowns as u64,
-        contacts_mean: state.contacts_total as f64 / done,
+        cg_breakdowns: last.cg_breakdowns as u64,
+        contacts_mean: contacts as f64 / done,
         energy_final: cpu::energy(scene, &x, &v).total(),
     })
 }
@@ -771,5 +856,33 @@ mod tests {
             (sampled - all_median).abs() <= series.stride as f64,
             "{sampled} vs {all_median}"
         );
+    }
+
+    /// The budget records twice the recent most, within [LEAST, cap]; a step
+    /// that ran out sends the next back to the cap, and the window forgets.
+    #[test]
+    fn the_iteration_budget_follows_recent_steps() {
+        let mut b = Budget::new(100, 1e-3);
+        assert_eq!(b.next(), 100, "no step seen yet");
+        b.observe(3, 100, 5e-4);
+        assert_eq!(b.next(), Budget::LEAST);
+        b.observe(20, 100, 9e-4);
+        assert_eq!(b.next(), 40);
+        // Out of budget above the tolerance: the whole cap.
+        b.observe(40, 40, 2e-3);
+        assert_eq!(b.next(), 100);
+        // Converged on the budget's last iteration is not running out.
+        let mut b = Budget::new(100, 1e-3);
+        b.observe(30, 30, 8e-4);
+        assert_eq!(b.next(), 60);
+        // Only the last WINDOW steps count.
+        for _ in 0..Budget::WINDOW {
+            b.observe(5, 60, 1e-4);
+        }
+        assert_eq!(b.next(), Budget::LEAST);
+        // The thesis's solve (tolerance 0) never converges early: the cap.
+        let mut b = Budget::new(25, 0.0);
+        b.observe(25, 25, 0.1);
+        assert_eq!(b.next(), 25);
     }
 }

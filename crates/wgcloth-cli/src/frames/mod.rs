@@ -108,7 +108,8 @@ impl<'a> Recording<'a> {
         })
     }
 
-    fn due(&self, step: u64) -> bool {
+    /// Whether the state after step `step` is drawn.
+    pub fn due(&self, step: u64) -> bool {
         step.is_multiple_of(self.every)
     }
 

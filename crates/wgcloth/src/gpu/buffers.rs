@@ -37,9 +37,6 @@ pub(crate) struct Buffers {
     pub(crate) params: wgpu::Buffer,
     pub(crate) x: wgpu::Buffer,
     pub(crate) v: wgpu::Buffer,
-    /// Positions and velocities as `record_checkpoint` last copied them.
-    pub(crate) x_kept: wgpu::Buffer,
-    pub(crate) v_kept: wgpu::Buffer,
     pub(crate) rest: wgpu::Buffer,
     pub(crate) topology: wgpu::Buffer,
     pub(crate) sections: Sections,
@@ -390,8 +387,6 @@ impl Buffers {
                 wgpu::BufferUsages::VERTEX,
             ),
             v: zeroed("velocities", sizes.per_vertex),
-            x_kept: zeroed("kept positions", sizes.per_vertex),
-            v_kept: zeroed("kept velocities", sizes.per_vertex),
             rest: storage(
                 "rest positions",
                 bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),

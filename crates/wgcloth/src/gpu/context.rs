@@ -115,6 +115,12 @@ impl GpuContext {
     /// Waits for submitted work and reports any fault the device recorded.
     pub fn finish(&self) -> Result<()> {
         wait(&self.device)?;
+        self.fault()
+    }
+
+    /// Any fault the device has recorded so far (a lost device, an
+    /// uncaptured error), without waiting.
+    pub fn fault(&self) -> Result<()> {
         match self
             .fault
             .lock()

@@ -4,6 +4,8 @@
 //! [`GpuSim::indices`] directly. It ties the scene's buffers
 //! (`gpu::buffers`) to the stages that record the step (`gpu::stages`).
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use bytemuck::Pod;
 use glam::Vec3;
 
@@ -36,6 +38,8 @@ pub struct GpuSim {
     buffers: Buffers,
     stages: Stages,
     timer: Option<Timer>,
+    /// PCG iterations a step records ([`GpuSim::set_cg_budget`]).
+    cg_budget: AtomicU32,
 }
 
 impl GpuSim {
@@ -121,6 +125,7 @@ impl GpuSim {
             device: device.clone(),
             queue: queue.clone(),
             stages: Stages::new(kernels, device, &buffers, scene, network),
+            cg_budget: AtomicU32::new(params.cg_max_iters),
             params,
             buffers,
             timer,
@@ -168,6 +173,54 @@ impl GpuSim {
     /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
     pub fn positions(&self) -> &wgpu::Buffer {
         &self.buffers.x
+    }
+
+    /// Cloth velocities, one `vec4<f32>` (w = 0) per vertex.
+    pub fn velocities(&self) -> &wgpu::Buffer {
+        &self.buffers.v
+    }
+
+    /// The clock and run statistics ([`StepState`]), for an app to copy
+    /// into its own staging buffers after each step.
+    pub fn statistics(&self) -> &wgpu::Buffer {
+        &self.buffers.state
+    }
+
+    /// Where each recorded step leaves its passes' timestamps (two `u64`
+    /// ticks per [`Stage::ALL`] entry; [`Self::stage_ms`] reads them), when
+    /// the adapter has timestamp queries.
+    pub fn timestamps(&self) -> Option<&wgpu::Buffer> {
+        self.timer.as_ref().map(|t| &t.resolve)
+    }
+
+    /// Milliseconds of each pass from a copy of [`Self::timestamps`].
+    pub fn stage_ms(&self, ticks: &[u64]) -> Vec<(&'static str, f64)> {
+        let period = self.timer.as_ref().map_or(1.0, |t| t.period_ns) as f64;
+        self.active_passes()
+            .map(|stage| {
+                let k = stage.index();
+                let dt = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
+                (stage.name(), dt as f64 * period * 1e-6)
+            })
+            .collect()
+    }
+
+    /// The PCG iterations each step records (`solver.cg_iters` unless
+    /// [`Self::set_cg_budget`] set fewer). Converged
+    /// iterations dispatch no work, but each recorded one still costs its
+    /// dispatches' overhead, which is large on software adapters: an app
+    /// that knows roughly how many iterations its steps take can record
+    /// fewer. A step that runs out before the tolerance reports it
+    /// ([`StepState::last_residual`] above `solver.cg_tol`).
+    pub fn cg_budget(&self) -> u32 {
+        self.cg_budget.load(Ordering::Relaxed)
+    }
+
+    /// Records at most `iterations` PCG iterations (at least 1, at most
+    /// `solver.cg_iters`) in the steps encoded from now on ([`Self::cg_budget`]).
+    pub fn set_cg_budget(&self, iterations: u32) {
+        let budget = iterations.clamp(1, self.params.cg_max_iters.max(1));
+        self.cg_budget.store(budget, Ordering::Relaxed);
     }
 
     /// Cloth triangles as `u32` indices into [`Self::positions`]: an index
@@ -247,7 +300,9 @@ impl GpuSim {
             Stage::Contact => s.contact.encode(&mut pass, p, &s.params),
             Stage::Springs => s.springs.encode(&mut pass, p),
             Stage::Assemble => s.assemble.encode(&mut pass, p),
-            Stage::Pcg => s.pcg.encode(&mut pass, p),
+            Stage::Pcg => s
+                .pcg
+                .encode(&mut pass, p, self.cg_budget.load(Ordering::Relaxed)),
             Stage::Integrate => s.integrate.encode(&mut pass, p),
             Stage::Measure => s.measure.encode(&mut pass, p),
         }
@@ -267,22 +322,6 @@ impl GpuSim {
             .write_buffer(&self.buffers.state, health, bytemuck::bytes_of(&0u32));
     }
 
-    /// Records a copy of the positions and velocities: the last good state
-    /// to return to when the next step diverges ([`GpuSim::read_kept`]).
-    pub fn record_checkpoint(&self, encoder: &mut wgpu::CommandEncoder) {
-        let b = &self.buffers;
-        encoder.copy_buffer_to_buffer(&b.x, 0, &b.x_kept, 0, b.x.size());
-        encoder.copy_buffer_to_buffer(&b.v, 0, &b.v_kept, 0, b.v.size());
-    }
-
-    /// The positions and velocities of the last checkpoint.
-    pub fn read_kept(&self) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
-        Ok((
-            self.read_vec3(&self.buffers.x_kept)?,
-            self.read_vec3(&self.buffers.v_kept)?,
-        ))
-    }
-
     /// Records and submits one step; returns its dispatch count.
     pub fn step(&self) -> u32 {
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -295,7 +334,9 @@ impl GpuSim {
         read_buffer(&self.device, &self.queue, buffer)
     }
 
-    fn read_vec3(&self, buffer: &wgpu::Buffer) -> Result<Vec<Vec3>> {
+    /// A buffer of one `vec4<f32>` per vertex (positions, velocities or a
+    /// copy of either), read back (blocks until the GPU is done).
+    pub fn read_vec3(&self, buffer: &wgpu::Buffer) -> Result<Vec<Vec3>> {
         let raw: Vec<[f32; 4]> = self.read(buffer)?;
         Ok(raw[..self.params.n_vertices as usize]
             .iter()
@@ -361,15 +402,7 @@ impl GpuSim {
             return Ok(None);
         };
         let ticks: Vec<u64> = self.read(&t.resolve)?;
-        Ok(Some(
-            self.active_passes()
-                .map(|stage| {
-                    let k = stage.index();
-                    let dt = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
-                    (stage.name(), dt as f64 * t.period_ns as f64 * 1e-6)
-                })
-                .collect(),
-        ))
+        Ok(Some(self.stage_ms(&ticks)))
     }
 }
 

@@ -71,13 +71,13 @@ impl Pcg {
         }
     }
 
-    /// `cg_max_iters` iterations; once converged, `next` and `conclude`
+    /// `iterations` iterations (at most `cg_max_iters`); once converged, `next` and `conclude`
     /// carry the scalars and the rest dispatch no workgroups. Iteration
     /// `it` reads side `it % 2`: `next` ends iteration `it − 1` (side
     /// `(it − 1) % 2`) and starts `it`. Returns the dispatches recorded.
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params, iterations: u32) -> u32 {
         let n = p.n_vertices;
-        let iters = p.cg_max_iters as usize;
+        let iters = iterations.min(p.cg_max_iters) as usize;
         let mut count = 3;
         if let Some(mg) = &self.multigrid {
             count += mg.encode_setup(pass);

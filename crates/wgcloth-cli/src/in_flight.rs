@@ -1,0 +1,204 @@
+//! The GPU run loop's steps in flight: each step is submitted with a copy
+//! of its statistics and timestamps into a reused staging buffer, mapped
+//! asynchronously, so the host waits only when [`DEPTH`] steps are already
+//! in flight (for the oldest) and never creates a buffer per step. Each
+//! step's starting positions and velocities are kept on the GPU in a ring
+//! one deeper than the steps in flight, so a step found diverging a few
+//! steps late still has the state before it.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use wgcloth::error::{Error, Result};
+use wgcloth::gpu::context::WATCHDOG;
+use wgcloth::gpu::layout::StepState;
+use wgcloth::gpu::{GpuContext, GpuSim};
+
+/// Steps submitted and not yet read.
+pub const DEPTH: usize = 3;
+
+const MAPPING: u8 = 1;
+const READY: u8 = 2;
+const FAILED: u8 = 3;
+
+/// Where the timestamps start in a staging buffer (after the statistics).
+const TICKS_AT: u64 = 256;
+
+struct Slot {
+    staging: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    x: wgpu::Buffer,
+    v: wgpu::Buffer,
+}
+
+struct Pending {
+    step: u64,
+    budget: u32,
+    slot: usize,
+    submission: wgpu::SubmissionIndex,
+}
+
+/// A step read back: its statistics, its passes' times, and the slot that
+/// holds the state it started from ([`InFlight::start_of`]).
+pub struct Finished {
+    pub step: u64,
+    /// The PCG iterations the step recorded.
+    pub budget: u32,
+    pub state: StepState,
+    pub stage_ms: Vec<(&'static str, f64)>,
+    slot: usize,
+}
+
+pub struct InFlight {
+    slots: Vec<Slot>,
+    pending: VecDeque<Pending>,
+    /// Dispatches the last submitted step recorded.
+    pub dispatches: u32,
+}
+
+impl InFlight {
+    pub fn new(device: &wgpu::Device, sim: &GpuSim) -> InFlight {
+        let ticks = sim.timestamps().map_or(0, |t| t.size());
+        let vectors = sim.positions().size();
+        let buffer = |label, size, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let kept = wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
+        let slots = (0..=DEPTH)
+            .map(|_| Slot {
+                staging: buffer(
+                    "step statistics",
+                    TICKS_AT + ticks,
+                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                ),
+                state: Arc::new(AtomicU8::new(0)),
+                x: buffer("kept positions", vectors, kept),
+                v: buffer("kept velocities", vectors, kept),
+            })
+            .collect();
+        InFlight {
+            slots,
+            pending: VecDeque::new(),
+            dispatches: 0,
+        }
+    }
+
+    /// Whether no step is in flight.
+    pub fn is_empty(&self) -> bool {
+        self.pending.is_empty()
+    }
+
+    /// Submits step `step` (its state kept first, its statistics copied
+    /// after it); when [`DEPTH`] steps are already in flight, first waits
+    /// for the oldest and returns it.
+    pub fn submit(
+        &mut self,
+        ctx: &GpuContext,
+        sim: &GpuSim,
+        step: u64,
+    ) -> Result<Option<Finished>> {
+        let oldest = match self.pending.len() >= DEPTH {
+            true => self.next(ctx, sim, true)?,
+            false => None,
+        };
+        let k = step as usize % self.slots.len();
+        let slot = &self.slots[k];
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let size = sim.positions().size();
+        encoder.copy_buffer_to_buffer(sim.positions(), 0, &slot.x, 0, size);
+        encoder.copy_buffer_to_buffer(sim.velocities(), 0, &slot.v, 0, size);
+        self.dispatches = sim.encode_step(&mut encoder);
+        let stats = sim.statistics();
+        encoder.copy_buffer_to_buffer(stats, 0, &slot.staging, 0, stats.size());
+        if let Some(t) = sim.timestamps() {
+            encoder.copy_buffer_to_buffer(t, 0, &slot.staging, TICKS_AT, t.size());
+        }
+        let submission = ctx.queue.submit([encoder.finish()]);
+        slot.state.store(MAPPING, Ordering::Release);
+        let state = slot.state.clone();
+        slot.staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
+        });
+        self.pending.push_back(Pending {
+            step,
+            budget: sim.cg_budget(),
+            slot: k,
+            submission,
+        });
+        Ok(oldest)
+    }
+
+    /// The oldest step in flight once it is read: waiting for it when
+    /// `wait`, else only if it has already finished.
+    pub fn next(&mut self, ctx: &GpuContext, sim: &GpuSim, wait: bool) -> Result<Option<Finished>> {
+        let Some(oldest) = self.pending.front() else {
+            return Ok(None);
+        };
+        let poll = match wait {
+            true => wgpu::PollType::Wait {
+                submission_index: Some(oldest.submission.clone()),
+                timeout: Some(WATCHDOG),
+            },
+            false => wgpu::PollType::Poll,
+        };
+        ctx.device.poll(poll).map_err(|e| {
+            Error::Gpu(format!(
+                "waiting for step {} failed (hung or lost device): {e}",
+                oldest.step + 1
+            ))
+        })?;
+        ctx.fault()?;
+        let slot = &self.slots[oldest.slot];
+        match slot.state.load(Ordering::Acquire) {
+            READY => {}
+            FAILED => {
+                return Err(Error::Gpu(format!(
+                    "reading step {}'s statistics failed",
+                    oldest.step + 1
+                )));
+            }
+            _ if wait => {
+                return Err(Error::Gpu(format!(
+                    "step {}'s statistics never arrived",
+                    oldest.step + 1
+                )));
+            }
+            _ => return Ok(None),
+        }
+        let oldest = self.pending.pop_front().expect("checked above");
+        let view = slot
+            .staging
+            .get_mapped_range(..)
+            .map_err(|e| Error::Gpu(format!("reading step statistics: {e}")))?;
+        let state: StepState = bytemuck::pod_read_unaligned(&view[..size_of::<StepState>()]);
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&view[TICKS_AT as usize..]);
+        drop(view);
+        slot.staging.unmap();
+        Ok(Some(Finished {
+            step: oldest.step,
+            budget: oldest.budget,
+            state,
+            stage_ms: match ticks.is_empty() {
+                true => Vec::new(),
+                false => sim.stage_ms(&ticks),
+            },
+            slot: oldest.slot,
+        }))
+    }
+
+    /// The positions and velocities `finished`'s step started from.
+    pub fn start_of(
+        &self,
+        sim: &GpuSim,
+        finished: &Finished,
+    ) -> Result<(Vec<glam::Vec3>, Vec<glam::Vec3>)> {
+        let slot = &self.slots[finished.slot];
+        Ok((sim.read_vec3(&slot.x)?, sim.read_vec3(&slot.v)?))
+    }
+}
