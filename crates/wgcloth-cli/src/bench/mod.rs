@@ -91,7 +91,7 @@ impl Variant {
         };
         match self.solve {
             Solve::Thesis => model,
-            Solve::Converged(p) => format!("{model} → 1e-3 {}", p.name()),
+            Solve::Converged(p) => format!("{model}, 1e-3 {}", p.name()),
         }
     }
 
