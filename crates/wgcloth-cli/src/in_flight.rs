@@ -42,14 +42,18 @@ struct Pending {
 /// A step read back: its statistics, its passes' times, and the slot that
 /// holds the state it started from ([`InFlight::start_of`]).
 pub struct Finished {
+    /// The step's index from 0.
     pub step: u64,
     /// The PCG iterations the step recorded.
     pub budget: u32,
+    /// The clock and statistics right after the step.
     pub state: StepState,
+    /// Each pass's time, empty without timestamp queries.
     pub stage_ms: Vec<(&'static str, f64)>,
     slot: usize,
 }
 
+/// The ring of steps in flight and their kept start states.
 pub struct InFlight {
     slots: Vec<Slot>,
     pending: VecDeque<Pending>,
@@ -58,6 +62,7 @@ pub struct InFlight {
 }
 
 impl InFlight {
+    /// Staging and kept-state buffers for `sim`'s steps, [`DEPTH`] + 1 of each.
     pub fn new(device: &wgpu::Device, sim: &GpuSim) -> InFlight {
         let ticks = sim.timestamps().map_or(0, |t| t.size());
         let vectors = sim.positions().size();

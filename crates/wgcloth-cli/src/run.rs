@@ -135,6 +135,9 @@ pub struct Report {
     pub cg_residual_max: f32,
     pub cg_residual_median: f32,
     pub cg_steps_above_goal: u64,
+    /// GPU steps whose solve the run loop's iteration budget cut short of
+    /// `solver.cg_tol` (`GpuSim::set_cg_budget`; always 0 on the CPU).
+    pub cg_steps_cut: u64,
     pub cg_breakdowns: u64,
     pub contacts_mean: f64,
     /// Total energy (kinetic + gravitational + elastic) at the end, J.
@@ -433,6 +436,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_residual_max: residuals.max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
+        cg_steps_cut: 0,
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
@@ -493,14 +497,16 @@ impl Budget {
     }
 
     /// A step that took `iterations` of a budget of `budget` and ended at
-    /// relative residual `residual`.
-    fn observe(&mut self, iterations: u32, budget: u32, residual: f32) {
+    /// relative residual `residual`; true when the budget cut it short of
+    /// the tolerance (a budget at the cap cuts nothing).
+    fn observe(&mut self, iterations: u32, budget: u32, residual: f32) -> bool {
         let ran_out = iterations >= budget && residual > self.tol;
         if self.recent.len() == Self::WINDOW {
             self.recent.pop_front();
         }
         self.recent
             .push_back(if ran_out { self.cap } else { iterations });
+        ran_out && budget < self.cap
     }
 }
 
@@ -534,7 +540,9 @@ fn run_gpu(
     let mut budget = Budget::new(config.solver.cg_iters, config.solver.cg_tol);
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
-    let (mut cg_iterations, mut contacts) = (0u64, 0u64);
+    let (mut cg_iterations, mut contacts, mut cut) = (0u64, 0u64, 0u64);
+    // The GPU clock (an f32 sum) at the start of the next step read.
+    let mut start_time = 0.0f32;
     let mut since = Instant::now();
     while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
         let mut finished = Vec::new();
@@ -567,21 +575,17 @@ fn run_gpu(
             since = now;
             let state = f.state;
             residuals.push(state.last_residual, state.last_iterations);
-            budget.observe(state.last_iterations, f.budget, state.last_residual);
+            cut += u64::from(budget.observe(state.last_iterations, f.budget, state.last_residual));
             cg_iterations += state.last_iterations as u64;
             contacts += state.contacts_last as u64;
             let breakdown = state.cg_breakdowns > breakdowns;
             (breakdowns, last) = (state.cg_breakdowns, state);
-            if let Some(c) = checkpoint.as_deref_mut() {
-                c.reached = f.step + 1;
-            }
             if health::failed(state.health, breakdown) {
                 // Run the step again from the state it started from, to
                 // name what failed in its own system.
                 while flight.next(ctx, &sim, true)?.is_some() {}
                 let (x0, v0) = flight.start_of(&sim, &f)?;
-                let time = f.step as f64 * dt;
-                sim.upload_state(&x0, &v0, time as f32);
+                sim.upload_state(&x0, &v0, start_time);
                 sim.set_cg_budget(f.budget);
                 sim.step();
                 ctx.finish()?;
@@ -601,10 +605,14 @@ fn run_gpu(
                 last_good = Some(State {
                     x: x0,
                     v: v0,
-                    time,
+                    time: f.step as f64 * dt,
                     step: f.step,
                 });
                 break;
+            }
+            start_time = state.time;
+            if let Some(c) = checkpoint.as_deref_mut() {
+                c.reached = f.step + 1;
             }
             obs.progress(f.step + 1);
         }
@@ -630,6 +638,8 @@ fn run_gpu(
             };
             c.taken = Instant::now();
         }
+        // The next step's time starts after the host's own work.
+        since = Instant::now();
     }
     ctx.finish()?;
     let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
@@ -661,6 +671,7 @@ fn run_gpu(
         cg_residual_max: last.cg_residual_max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
+        cg_steps_cut: cut,
         cg_breakdowns: last.cg_breakdowns as u64,
         contacts_mean: contacts as f64 / done,
         energy_final: cpu::energy(scene, &x, &v).total(),
@@ -757,7 +768,7 @@ impl Report {
              ms/step      {:.3} (median{dispatches})\n\
              {memory}\
              stages (ms)  {}\n\
-             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} breakdowns\n\
+             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} cut by the iteration budget, {} breakdowns\n\
              contacts     {:.1} per step\n\
              penetration  {:.4} m deepest (thickness not counted)\n\
              state        {} (final energy {:.4} J)",
@@ -785,6 +796,7 @@ impl Report {
             self.cg_residual_median,
             self.cg_residual_max,
             self.cg_steps_above_goal,
+            self.cg_steps_cut,
             self.cg_breakdowns,
             self.contacts_mean,
             self.max_penetration,
@@ -864,16 +876,16 @@ mod tests {
     fn the_iteration_budget_follows_recent_steps() {
         let mut b = Budget::new(100, 1e-3);
         assert_eq!(b.next(), 100, "no step seen yet");
-        b.observe(3, 100, 5e-4);
+        assert!(!b.observe(3, 100, 5e-4));
         assert_eq!(b.next(), Budget::LEAST);
         b.observe(20, 100, 9e-4);
         assert_eq!(b.next(), 40);
         // Out of budget above the tolerance: the whole cap.
-        b.observe(40, 40, 2e-3);
+        assert!(b.observe(40, 40, 2e-3), "a cut step");
         assert_eq!(b.next(), 100);
         // Converged on the budget's last iteration is not running out.
         let mut b = Budget::new(100, 1e-3);
-        b.observe(30, 30, 8e-4);
+        assert!(!b.observe(30, 30, 8e-4));
         assert_eq!(b.next(), 60);
         // Only the last WINDOW steps count.
         for _ in 0..Budget::WINDOW {
@@ -882,7 +894,7 @@ mod tests {
         assert_eq!(b.next(), Budget::LEAST);
         // The thesis's solve (tolerance 0) never converges early: the cap.
         let mut b = Budget::new(25, 0.0);
-        b.observe(25, 25, 0.1);
+        assert!(!b.observe(25, 25, 0.1), "the cap cuts nothing");
         assert_eq!(b.next(), 25);
     }
 }

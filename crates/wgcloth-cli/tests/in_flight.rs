@@ -38,6 +38,7 @@ fn steps_in_flight_count_every_step_and_end_where_a_plain_loop_does() {
     .expect("runs");
     assert_eq!(report.steps, steps, "{}", report.summary());
     assert_eq!(report.cg_steps_above_goal, 0, "{}", report.summary());
+    assert_eq!(report.cg_steps_cut, 0, "{}", report.summary());
 
     // The same steps, each waited for and read before the next.
     let ctx = chosen.context().expect("a GPU");

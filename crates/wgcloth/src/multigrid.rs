@@ -29,7 +29,7 @@ pub const SMOOTH_MARGIN: f32 = 0.95;
 /// the smoothed operator diag(ω_i D_i⁻¹) A lies below max_i ω_i (1 + s_i) < 2,
 /// so every sweep converges and the V-cycle is positive definite, whatever
 /// the contacts put in A (a face contact's β_k β_l blocks can take a row's
-/// D⁻¹A past 2, where a fixed ω = 0.8 would make the V-cycle indefinite).
+/// D⁻¹A past 2, where a fixed ω would make the V-cycle indefinite).
 pub fn row_weight(spread: f32) -> f32 {
     SMOOTH_WEIGHT.min(2.0 * SMOOTH_MARGIN / (1.0 + spread))
 }
@@ -47,6 +47,14 @@ impl Level {
     /// nx · ny.
     pub fn nodes(self) -> usize {
         self.nx as usize * self.ny as usize
+    }
+
+    /// The cloth's own grid, level 0.
+    pub fn of(cloth: &crate::scene::Cloth) -> Level {
+        Level {
+            nx: cloth.nx,
+            ny: cloth.ny,
+        }
     }
 
     /// The next coarser level.

@@ -128,6 +128,16 @@ fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
     return rr > threshold && delta > 0.0;
 }
 
+// `s` with the solve over: later iterations dispatch no workgroups.
+fn stopped(s: Scalars) -> Scalars {
+    var out = s;
+    out.done = 1u;
+    for (var l = 0u; l < MAX_LEVELS; l++) {
+        out.groups[3u * l] = 0u;
+    }
+    return out;
+}
+
 // A non-finite scalar, or rᵀz ≤ 0 above the goal (a preconditioner that is
 // not positive definite): a breakdown, never convergence.
 fn stalled(rr: f32, delta: f32, threshold: f32) -> bool {
@@ -257,12 +267,8 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
     let pq = total(lid, pq_segment(scalars_in.iterations));
     if !(pq > 0.0) {
         if leader {
-            var s = scalars_in;
-            s.done = 1u;
+            var s = stopped(scalars_in);
             s.breakdown = 1u;
-            for (var l = 0u; l < MAX_LEVELS; l++) {
-                s.groups[3u * l] = 0u;
-            }
             scalars_next = s;
         }
         return Ending(false, 0.0);
@@ -275,12 +281,9 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
         s.delta = delta;
         s.rr = rr;
         s.iterations += 1u;
-        s.done = u32(!on);
         s.breakdown = u32(stalled(rr, delta, scalars_in.threshold));
         if !on {
-            for (var l = 0u; l < MAX_LEVELS; l++) {
-                s.groups[3u * l] = 0u;
-            }
+            s = stopped(s);
         }
         scalars_next = s;
     }

@@ -177,7 +177,7 @@ impl Multigrid {
     }
 
     /// Rebuilds every level's smoother and coarse operator from this step's
-    /// A (kernels `mg_galerkin_fine`, `mg_galerkin`).
+    /// A (kernel `galerkin`).
     pub fn setup(&mut self, a: &BlockMatrix, cloth: &Cloth) {
         let fine: Vec<Mat3> = (0..cloth.vertex_count())
             .into_par_iter()

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 pub use crate::config::Preconditioner;
 use crate::cpu::GRAIN;
 use crate::cpu::multigrid::Multigrid;
+use crate::multigrid::Level;
 use crate::scene::Cloth;
 use crate::scene::cloth::Adjacency;
 
@@ -35,7 +36,7 @@ impl BlockMatrix {
     }
 
     /// Row i of A x, gathered over the vertex's springs.
-    pub(crate) fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
+    fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
         let mut acc = self.diag[i] * x[i];
         for k in adj.range(i) {
             acc += self.off[adj.spring[k] as usize] * x[adj.other[k] as usize];
@@ -82,7 +83,7 @@ pub struct PcgOutcome {
     /// |S r| / |S b| at exit: the relative residual of the free rows, the
     /// same measure whichever preconditioner ran.
     pub relative_residual: f32,
-    /// pᵀAp ≤ 0 or a non-finite scalar stopped the iteration.
+    /// PᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite) stopped the iteration.
     pub breakdown: bool,
 }
 
@@ -130,25 +131,32 @@ pub fn solve(
     for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
         v.resize(n, Vec3::ZERO);
     }
-    let multigrid = settings.preconditioner == Preconditioner::Multigrid;
-    if multigrid {
-        s.multigrid
-            .get_or_insert_with(|| Multigrid::new(cloth))
-            .setup(a, cloth);
+    match settings.preconditioner {
+        Preconditioner::Multigrid => {
+            // A hierarchy built for another cloth is rebuilt.
+            let fits = |mg: &Multigrid| mg.levels()[0] == Level::of(cloth);
+            if !s.multigrid.as_ref().is_some_and(fits) {
+                s.multigrid = Some(Multigrid::new(cloth));
+            }
+            if let Some(mg) = &mut s.multigrid {
+                mg.setup(a, cloth);
+            }
+        }
+        // The diagonal; zero on pinned rows, which is the filter S.
+        Preconditioner::Jacobi => s
+            .inv_diag
+            .par_iter_mut()
+            .with_min_len(GRAIN)
+            .enumerate()
+            .for_each(|(i, m)| {
+                let d = a.diag[i];
+                *m = if pinned[i] {
+                    Vec3::ZERO
+                } else {
+                    Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
+                };
+            }),
     }
-    // Jacobi preconditioner; zero on pinned rows, which is the filter S.
-    s.inv_diag
-        .par_iter_mut()
-        .with_min_len(GRAIN)
-        .enumerate()
-        .for_each(|(i, m)| {
-            let d = a.diag[i];
-            *m = if pinned[i] {
-                Vec3::ZERO
-            } else {
-                Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
-            };
-        });
     let bb = b
         .par_iter()
         .with_min_len(GRAIN)

@@ -121,9 +121,9 @@ pub struct StepState {
     pub steps: u32,
     /// PCG iterations summed over every step.
     pub cg_iterations_total: u32,
-    /// Steps whose PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
+    /// Steps whose PCG broke down (pᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite)).
     pub cg_breakdowns: u32,
-    /// The largest relative residual √(δ/δ₀) any step's PCG ended at.
+    /// The largest relative residual |S r| / |S b| any step's PCG ended at.
     pub cg_residual_max: f32,
     /// Contacts summed over every step (stage "measure" adds `contacts_last`).
     pub contacts_total: u32,
@@ -134,7 +134,7 @@ pub struct StepState {
     pub max_penetration_bits: u32,
     /// PCG iterations of the last step.
     pub last_iterations: u32,
-    /// Relative residual √(δ/δ₀) the last step's PCG ended at.
+    /// Relative residual |S r| / |S b| the last step's PCG ended at.
     pub last_residual: f32,
     /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
     /// pass and kept until the state is replaced.
@@ -259,7 +259,7 @@ pub struct Scalars {
     pub iterations: u32,
     /// Nonzero once converged or broken down: later kernels return at once.
     pub done: u32,
-    /// Nonzero when PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
+    /// Nonzero when PCG broke down (pᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite)).
     pub breakdown: u32,
     /// rᵀr of the current iterate.
     pub rr: f32,

@@ -1,8 +1,9 @@
 //! Stage "pcg" (wgsl/pcg.wgsl; CPU twin cpu/pcg.rs): preconditioned CG on
 //! A v' = b with pinned rows filtered, its scalars and convergence test on
 //! the GPU. An iteration is two dispatches with Jacobi, and the V-cycle's
-//! besides with multigrid; all but `next` are sized by the GPU, so the
-//! iterations recorded after convergence dispatch nothing.
+//! besides with multigrid; each iteration's are sized by the GPU but
+//! `next`, which returns at once after convergence, so the iterations
+//! recorded after convergence do no work.
 
 use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
