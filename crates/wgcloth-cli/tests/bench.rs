@@ -158,6 +158,53 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
         assert!((c.times_thesis_step.unwrap() - ratio).abs() < 1e-9, "{c:?}");
     }
 
+    // Each friction-net thesis row's stages against their floors: every
+    // stage that sweeps the cloth or the body, and contact where there were
+    // contacts.
+    for backend in backends {
+        for &grid in grids {
+            let of: Vec<&str> = report
+                .stage_traffic
+                .iter()
+                .filter(|t| t.backend == *backend && t.grid == grid)
+                .map(|t| t.stage)
+                .collect();
+            for stage in [
+                "rigid",
+                "collide",
+                "springs",
+                "assemble",
+                "integrate",
+                "measure",
+            ] {
+                assert!(of.contains(&stage), "{backend} {grid}²: {of:?}");
+            }
+            assert!(!of.contains(&"pcg"), "{of:?}");
+        }
+    }
+    for t in &report.stage_traffic {
+        let row = report
+            .rows
+            .iter()
+            .find(|r| {
+                !r.converged
+                    && r.label == "friction-net"
+                    && r.report.backend == t.backend
+                    && r.report.grid[0] == t.grid
+            })
+            .expect("the friction-net row");
+        assert_eq!(t.measured_ms, row.report.stage_ms[t.stage], "{t:?}");
+        // The stages that sweep the cloth move at least one vector per vertex.
+        if ["collide", "springs", "assemble", "integrate", "measure"].contains(&t.stage) {
+            assert!(t.bytes >= 12 * row.particles as u64, "{t:?}");
+        }
+        assert!(t.bytes > 0 && t.floor_ms > 0.0, "{t:?}");
+        assert!(
+            (t.times_floor - t.measured_ms / t.floor_ms).abs() < 1e-9 * t.times_floor,
+            "{t:?}"
+        );
+    }
+
     let thesis_variants = VARIANTS.iter().filter(|v| v.solve == Solve::Thesis).count();
     assert_eq!(report.periods.len(), backends.len() * thesis_variants);
     for p in &report.periods {

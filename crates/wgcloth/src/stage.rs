@@ -15,7 +15,7 @@ pub enum Stage {
     Springs,
     /// The backward Euler system A v' = b.
     Assemble,
-    /// Jacobi-preconditioned CG.
+    /// Preconditioned CG (multigrid or Jacobi).
     Pcg,
     /// x' = x + h v'.
     Integrate,

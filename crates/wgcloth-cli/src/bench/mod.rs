@@ -234,9 +234,11 @@ pub struct StepRow {
     /// Whether every step was solved to the goal (else the thesis's 25
     /// Jacobi iterations).
     pub converged: bool,
-    /// Cloth vertices (grid²) and springs.
+    /// Cloth vertices (grid²), springs and triangles, and the body's vertices.
     pub particles: usize,
     pub springs: usize,
+    pub triangles: usize,
+    pub body_vertices: usize,
     /// Σ stage_ms / ms_per_step: how much of the step the stages account
     /// for (on the GPU the rest is submission and waiting).
     pub stage_coverage: f64,
@@ -307,6 +309,22 @@ pub struct ConvergedRow {
     pub times_thesis_step: Option<f64>,
 }
 
+/// One stage of the default model's thesis-solve rows against its
+/// memory-traffic floor on the same backend.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageTrafficRow {
+    pub backend: String,
+    pub grid: u32,
+    pub stage: &'static str,
+    /// [`traffic::Layout::stage_bytes`] for this backend's layout.
+    pub bytes: u64,
+    /// Those bytes at the measured copy bandwidth.
+    pub floor_ms: f64,
+    /// The stage's median time in the row.
+    pub measured_ms: f64,
+    pub times_floor: f64,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
     pub quick: bool,
@@ -320,6 +338,7 @@ pub struct BenchReport {
     pub scaling: Vec<ScalingRow>,
     pub bandwidth: Vec<traffic::Bandwidth>,
     pub cg_traffic: Vec<TrafficRow>,
+    pub stage_traffic: Vec<StageTrafficRow>,
     pub networks: Vec<NetworkRow>,
     pub periods: Vec<PeriodRow>,
 }
@@ -347,6 +366,8 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                 progress(&format!("step {} {label} {grid}²", name(backend)));
                 let scene = v.scene(grid)?;
                 let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
+                let triangles = scene.cloth.triangles.len();
+                let body_vertices = scene.rigid.as_ref().map_or(0, |b| b.mesh.vertices.len());
                 let report = run::run(backend, scene, opts.steps, Default::default())?;
                 let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
                 rows.push(StepRow {
@@ -354,6 +375,8 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                     converged: v.solve != Solve::Thesis,
                     particles,
                     springs,
+                    triangles,
+                    body_vertices,
                     stage_coverage,
                     report,
                 });
@@ -413,6 +436,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         converged: converged(&rows),
         scaling: scaling(&rows),
         cg_traffic: cg_traffic(&rows, &bandwidth),
+        stage_traffic: stage_traffic(&rows, &bandwidth),
         bandwidth,
         rows,
         networks,
@@ -526,6 +550,56 @@ fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Traffic
             })
         })
         .collect()
+}
+
+/// Every stage but pcg (and but contact in a row without contacts) of the
+/// friction-net rows (thesis solve) against the floor of their backend.
+fn stage_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<StageTrafficRow> {
+    let mut out = Vec::new();
+    for r in rows
+        .iter()
+        .filter(|r| !r.converged && r.label == ModelKind::FrictionNet.name())
+    {
+        let backend = r.report.backend.as_str();
+        let Some(b) = bandwidth.iter().find(|b| b.backend == backend) else {
+            continue;
+        };
+        let layout = if backend == "gpu" {
+            traffic::GPU
+        } else {
+            traffic::CPU
+        };
+        let extent = traffic::Extent {
+            vertices: r.particles as u64,
+            springs: r.springs as u64,
+            triangles: r.triangles as u64,
+            body_vertices: r.body_vertices as u64,
+            contacts: r.report.contacts_mean,
+        };
+        for stage in Stage::ALL {
+            let (Some(bytes), Some(&measured_ms)) = (
+                layout.stage_bytes(stage, &extent),
+                r.report.stage_ms.get(stage.name()),
+            ) else {
+                continue;
+            };
+            // A stage with nothing to move (contact, before any contact).
+            if bytes == 0 {
+                continue;
+            }
+            let floor_ms = bytes as f64 / (b.gb_per_s * 1e9) * 1e3;
+            out.push(StageTrafficRow {
+                backend: backend.into(),
+                grid: r.report.grid[0],
+                stage: stage.name(),
+                bytes,
+                floor_ms,
+                measured_ms,
+                times_floor: measured_ms / floor_ms,
+            });
+        }
+    }
+    out
 }
 
 fn name(backend: &Chosen) -> &'static str {
@@ -717,6 +791,22 @@ impl BenchReport {
                 t.backend,
                 t.grid,
                 t.bytes_per_iteration as f64 * 1e-6,
+                t.floor_ms,
+                t.measured_ms,
+                t.times_floor
+            );
+        }
+        out += &format!(
+            "\neach other stage against its memory-traffic floor (friction-net rows)\n{:<8}{:>6}{:>11}{:>12}{:>12}{:>13}{:>9}\n",
+            "backend", "grid", "stage", "MB", "floor ms", "measured ms", "× floor"
+        );
+        for t in &self.stage_traffic {
+            out += &format!(
+                "{:<8}{:>6}{:>11}{:>12.3}{:>12.4}{:>13.4}{:>9.1}\n",
+                t.backend,
+                t.grid,
+                t.stage,
+                t.bytes as f64 * 1e-6,
                 t.floor_ms,
                 t.measured_ms,
                 t.times_floor

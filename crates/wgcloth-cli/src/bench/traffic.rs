@@ -1,8 +1,7 @@
-//! The memory-traffic floor of a PCG iteration: the bytes its passes
-//! (wgsl/pcg.wgsl `next` and `update`; the three fused loops `spmv`,
-//! `update`, `direction` in src/cpu/pcg.rs) must move between memory and
-//! the processor if every array they touch crosses once, and the copy
-//! bandwidth that moves them.
+//! Memory-traffic floors: the bytes a Jacobi PCG iteration (wgsl/pcg.wgsl
+//! `next` and `update`; the fused loops of src/cpu/pcg.rs) and each other
+//! stage of a step must move between memory and the processor if every
+//! array they touch crosses once, and the copy bandwidth that moves them.
 
 use std::time::Instant;
 
@@ -11,6 +10,7 @@ use serde::Serialize;
 
 use wgcloth::error::Result;
 use wgcloth::gpu::GpuContext;
+use wgcloth::stage::Stage;
 
 /// How a backend stores the solver's data, in bytes.
 #[derive(Clone, Copy, Debug)]
@@ -25,6 +25,21 @@ pub struct Layout {
     pub flag: u64,
     /// Vector entries one iteration reads or writes per vertex.
     pub vectors_per_iteration: u64,
+    /// A contact slot, its response, and a spring's force and block.
+    pub contact: u64,
+    pub response: u64,
+    pub spring_term: u64,
+}
+
+/// What one step's stages work over.
+#[derive(Clone, Copy, Debug)]
+pub struct Extent {
+    pub vertices: u64,
+    pub springs: u64,
+    pub triangles: u64,
+    pub body_vertices: u64,
+    /// Contacts per step (the row's mean).
+    pub contacts: f64,
 }
 
 /// wgsl/pcg.wgsl: `vec4<f32>` vectors, `Sym3` blocks (8 floats), u32 flags.
@@ -36,6 +51,9 @@ pub const GPU: Layout = Layout {
     off_block: 32,
     flag: 4,
     vectors_per_iteration: 12,
+    contact: 64,
+    response: 48,
+    spring_term: 48,
 };
 
 /// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags. Per vertex
@@ -48,6 +66,9 @@ pub const CPU: Layout = Layout {
     off_block: 36,
     flag: 1,
     vectors_per_iteration: 13,
+    contact: size_of::<wgcloth::cpu::collide::Contact>() as u64,
+    response: size_of::<wgcloth::cpu::contact::Response>() as u64,
+    spring_term: 12 + 36,
 };
 
 impl Layout {
@@ -60,6 +81,39 @@ impl Layout {
         let per_vertex = self.diag_block + self.flag + 4 + self.vectors_per_iteration * self.vector;
         let per_spring = self.off_block + 2 * 8;
         vertices * per_vertex + springs * per_spring
+    }
+
+    /// Bytes `stage` must move once per step over `e`, every array it
+    /// touches crossing once (`None` for pcg, whose floor is per iteration,
+    /// [`Self::iteration_bytes`]):
+    /// - rigid: each body vertex and normal read and written placed;
+    /// - collide: the positions read, a vertex–face slot written per cloth
+    ///   vertex, the cloth's triangles and the placed body read and a
+    ///   face–vertex slot written per body vertex;
+    /// - contact: each contact's slot read, its response written, the
+    ///   velocities of its three vertices read;
+    /// - springs: the positions read; per spring its ends and rest length
+    ///   read, its force and block written;
+    /// - assemble: per vertex v read, b and A's diagonal block written, its
+    ///   adjacency offset read; per spring its force and block and two
+    ///   adjacency entries read, its off-diagonal block written;
+    /// - integrate: x and v read, x written, the pinned flag read;
+    /// - measure: the positions read.
+    pub fn stage_bytes(&self, stage: Stage, e: &Extent) -> Option<u64> {
+        let (n, s, t, m) = (e.vertices, e.springs, e.triangles, e.body_vertices);
+        let v = self.vector;
+        Some(match stage {
+            Stage::Rigid => 4 * m * v,
+            Stage::Collide => n * (v + self.contact) + t * 12 + m * (2 * v + self.contact),
+            Stage::Contact => (e.contacts * (self.contact + self.response + 3 * v) as f64) as u64,
+            Stage::Springs => n * v + s * (12 + self.spring_term),
+            Stage::Assemble => {
+                n * (2 * v + self.diag_block + 4) + s * (self.spring_term + 16 + self.off_block)
+            }
+            Stage::Pcg => return None,
+            Stage::Integrate => n * (3 * v + self.flag),
+            Stage::Measure => n * v,
+        })
     }
 }
 
