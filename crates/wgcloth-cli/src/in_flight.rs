@@ -7,27 +7,21 @@
 //! steps late still has the state before it.
 
 use std::collections::VecDeque;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, Ordering};
 
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::context::WATCHDOG;
 use wgcloth::gpu::layout::StepState;
+use wgcloth::gpu::readback::{Mapped, Staging};
 use wgcloth::gpu::{GpuContext, GpuSim};
 
 /// Steps submitted and not yet read.
 pub const DEPTH: usize = 3;
 
-const MAPPING: u8 = 1;
-const READY: u8 = 2;
-const FAILED: u8 = 3;
-
 /// Where the timestamps start in a staging buffer (after the statistics).
 const TICKS_AT: u64 = 256;
 
 struct Slot {
-    staging: wgpu::Buffer,
-    state: Arc<AtomicU8>,
+    staging: Staging,
     x: wgpu::Buffer,
     v: wgpu::Buffer,
 }
@@ -77,12 +71,7 @@ impl InFlight {
         let kept = wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
         let slots = (0..=DEPTH)
             .map(|_| Slot {
-                staging: buffer(
-                    "step statistics",
-                    TICKS_AT + ticks,
-                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                ),
-                state: Arc::new(AtomicU8::new(0)),
+                staging: Staging::new(device, "step statistics", TICKS_AT + ticks),
                 x: buffer("kept positions", vectors, kept),
                 v: buffer("kept velocities", vectors, kept),
             })
@@ -119,17 +108,14 @@ impl InFlight {
         encoder.copy_buffer_to_buffer(sim.positions(), 0, &slot.x, 0, size);
         encoder.copy_buffer_to_buffer(sim.velocities(), 0, &slot.v, 0, size);
         self.dispatches = sim.encode_step(&mut encoder);
-        let stats = sim.statistics();
-        encoder.copy_buffer_to_buffer(stats, 0, &slot.staging, 0, stats.size());
+        let (stats, staging) = (sim.statistics(), slot.staging.buffer());
+        encoder.copy_buffer_to_buffer(stats, 0, staging, 0, stats.size());
         if let Some(t) = sim.timestamps() {
-            encoder.copy_buffer_to_buffer(t, 0, &slot.staging, TICKS_AT, t.size());
+            encoder.copy_buffer_to_buffer(t, 0, staging, TICKS_AT, t.size());
         }
+        slot.staging.copying();
         let submission = ctx.queue.submit([encoder.finish()]);
-        slot.state.store(MAPPING, Ordering::Release);
-        let state = slot.state.clone();
-        slot.staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            state.store(if r.is_ok() { READY } else { FAILED }, Ordering::Release);
-        });
+        slot.staging.map();
         self.pending.push_back(Pending {
             step,
             budget: sim.cg_budget(),
@@ -160,31 +146,29 @@ impl InFlight {
         })?;
         ctx.fault()?;
         let slot = &self.slots[oldest.slot];
-        match slot.state.load(Ordering::Acquire) {
-            READY => {}
-            FAILED => {
-                return Err(Error::Gpu(format!(
-                    "reading step {}'s statistics failed",
-                    oldest.step + 1
-                )));
-            }
-            _ if wait => {
-                return Err(Error::Gpu(format!(
-                    "step {}'s statistics never arrived",
-                    oldest.step + 1
-                )));
-            }
-            _ => return Ok(None),
+        let failed = |what: &str| {
+            Err(Error::Gpu(format!(
+                "step {}'s statistics {what}",
+                oldest.step + 1
+            )))
+        };
+        match slot.staging.mapped() {
+            Mapped::Ready => {}
+            Mapped::Failed => return failed("could not be read"),
+            Mapped::Pending if wait => return failed("never arrived"),
+            Mapped::Pending => return Ok(None),
         }
         let oldest = self.pending.pop_front().expect("checked above");
-        let view = slot
-            .staging
-            .get_mapped_range(..)
-            .map_err(|e| Error::Gpu(format!("reading step statistics: {e}")))?;
-        let state: StepState = bytemuck::pod_read_unaligned(&view[..size_of::<StepState>()]);
-        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&view[TICKS_AT as usize..]);
-        drop(view);
-        slot.staging.unmap();
+        let bytes: Vec<u8> = slot.staging.take(0).unwrap_or_default();
+        if bytes.len() < size_of::<StepState>() {
+            return Err(Error::Gpu(format!(
+                "reading step {}'s statistics",
+                oldest.step + 1
+            )));
+        }
+        let state: StepState = bytemuck::pod_read_unaligned(&bytes[..size_of::<StepState>()]);
+        let ticks: Vec<u64> =
+            bytemuck::pod_collect_to_vec(&bytes[(TICKS_AT as usize).min(bytes.len())..]);
         Ok(Some(Finished {
             step: oldest.step,
             budget: oldest.budget,

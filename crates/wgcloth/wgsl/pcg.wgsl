@@ -195,10 +195,15 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     }
 }
 
+// pᵀq > 0 and finite (as the CPU twin asks); anything else is a breakdown.
+fn usable(pq: f32) -> bool {
+    return pq > 0.0 && pq <= 3.4028235e38;
+}
+
 // α = δ / pᵀq, or 0 at a breakdown (which `next` or `conclude` records).
 fn step_length(lid: u32) -> f32 {
     let pq = total(lid, pq_segment(scalars_in.iterations));
-    return select(0.0, scalars_in.delta / pq, pq > 0.0);
+    return select(0.0, scalars_in.delta / pq, usable(pq));
 }
 
 // x += α p; r −= α q at vertex i, returning the new r.
@@ -265,7 +270,7 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
         return Ending(false, 0.0);
     }
     let pq = total(lid, pq_segment(scalars_in.iterations));
-    if !(pq > 0.0) {
+    if !usable(pq) {
         if leader {
             var s = stopped(scalars_in);
             s.breakdown = 1u;
