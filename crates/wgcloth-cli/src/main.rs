@@ -56,6 +56,10 @@ struct BenchArgs {
     /// Two grids and fewer repeats: a few minutes on lavapipe.
     #[arg(long)]
     quick: bool,
+    /// Only the CPU solver iteration of each preconditioner against its
+    /// memory-traffic floor, 128² to 1024² (a minute or two).
+    #[arg(long, conflicts_with = "quick")]
+    iterations: bool,
     /// Write the table as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -432,9 +436,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         wgcloth_cli::plot::check_png(plot)?;
     }
-    let options = match args.quick {
-        true => wgcloth_cli::bench::BenchOptions::quick(),
-        false => wgcloth_cli::bench::BenchOptions::full(),
+    let options = match (args.quick, args.iterations) {
+        (true, _) => wgcloth_cli::bench::BenchOptions::quick(),
+        (_, true) => wgcloth_cli::bench::BenchOptions::iterations(),
+        _ => wgcloth_cli::bench::BenchOptions::full(),
     };
     let spinner = ProgressBar::new_spinner();
     spinner.enable_steady_tick(std::time::Duration::from_millis(200));

@@ -113,6 +113,10 @@ pub struct Report {
     /// only), and per cloth vertex.
     pub gpu_state_bytes: Option<u64>,
     pub gpu_bytes_per_vertex: Option<f64>,
+    /// The process's peak resident memory, bytes (Linux `VmHWM`; absent
+    /// elsewhere): on the CPU path the simulation's memory plus the
+    /// program's own.
+    pub peak_resident_bytes: Option<u64>,
     /// Deepest any cloth vertex got inside the rigid surface, m (≥ 0).
     pub max_penetration: f32,
     pub finite: bool,
@@ -425,6 +429,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         dispatches_per_step: None,
         gpu_state_bytes: None,
         gpu_bytes_per_vertex: None,
+        peak_resident_bytes: peak_resident_bytes(),
         max_penetration,
         finite: sim.is_finite(),
         last_good: divergence.is_some().then_some(last_good),
@@ -660,6 +665,7 @@ fn run_gpu(
         dispatches_per_step: Some(flight.dispatches),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
+        peak_resident_bytes: peak_resident_bytes(),
         max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,
         divergence,
@@ -742,6 +748,14 @@ pub fn validate(
     })
 }
 
+/// The process's peak resident memory so far (Linux's `VmHWM`), bytes.
+fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 impl Report {
     /// The one-screen summary.
     pub fn summary(&self) -> String {
@@ -761,6 +775,18 @@ impl Report {
             ),
             _ => String::new(),
         };
+        let vertices = (self.grid[0] as u64 * self.grid[1] as u64) as f64;
+        let memory = memory
+            + &self
+                .peak_resident_bytes
+                .map(|bytes| {
+                    format!(
+                        "memory       {:.1} MiB peak resident (the whole process), {:.0} bytes per vertex\n",
+                        bytes as f64 / (1 << 20) as f64,
+                        bytes as f64 / vertices
+                    )
+                })
+                .unwrap_or_default();
         format!(
             "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
              backend      {} — {}\n\

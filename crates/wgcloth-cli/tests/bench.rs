@@ -5,7 +5,7 @@
 //! does, and the plot draws every series and stage. Speed itself is never
 //! asserted.
 
-use wgcloth::config::ModelKind;
+use wgcloth::config::{ModelKind, Preconditioner};
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::stage::Stage;
 use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
@@ -25,6 +25,7 @@ fn tiny() -> BenchOptions {
         period_steps: 3,
         batch_sizes: vec![7, 40],
         repeats: 2,
+        iteration_grids: vec![16],
     }
 }
 
@@ -123,6 +124,35 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             "{t:?}"
         );
     }
+
+    // Each preconditioner's CPU iteration, its floor counting at least A
+    // once and every vector it touches; multigrid's more (A three times,
+    // and the coarse levels).
+    let floors: Vec<_> = report
+        .iterations
+        .iter()
+        .map(|t| (t.grid, t.preconditioner))
+        .collect();
+    assert_eq!(
+        floors,
+        [
+            (16, Preconditioner::Multigrid),
+            (16, Preconditioner::Jacobi)
+        ]
+    );
+    for t in &report.iterations {
+        assert!(t.measured_ms.is_finite() && t.setup_ms.is_finite(), "{t:?}");
+        assert!(t.bytes_per_iteration >= 13 * 12 * 256, "{t:?}");
+        assert!(
+            (t.times_floor - t.measured_ms / t.floor_ms).abs() < 1e-9 * t.times_floor.abs(),
+            "{t:?}"
+        );
+    }
+    let (multigrid, jacobi) = (&report.iterations[0], &report.iterations[1]);
+    assert!(
+        multigrid.bytes_per_iteration > 3 * jacobi.bytes_per_iteration,
+        "{multigrid:?} {jacobi:?}"
+    );
 
     // Every converged row reached the goal at every step, and is set
     // against its model's thesis-solve row.

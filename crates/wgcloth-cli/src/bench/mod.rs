@@ -19,9 +19,12 @@ use serde::Serialize;
 
 use crate::run::{self, Chosen, RESIDUAL_GOAL, Report, Steps, median};
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind};
-use wgcloth::error::Result;
+use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
+use wgcloth::error::{Error, Result};
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
 use wgcloth::gpu::{GpuContext, Kernels, context::describe};
+use wgcloth::multigrid;
 use wgcloth::nn::weights::{self, Shipped};
 use wgcloth::scene::Scene;
 use wgcloth::stage::Stage;
@@ -159,6 +162,8 @@ pub struct BenchOptions {
     pub batch_sizes: Vec<usize>,
     /// Timed repeats of each batch and period.
     pub repeats: usize,
+    /// Grids of the CPU solver-iteration rows.
+    pub iteration_grids: Vec<u32>,
 }
 
 impl BenchOptions {
@@ -176,6 +181,7 @@ impl BenchOptions {
             period_steps: PERIOD_STEPS,
             batch_sizes: vec![1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000],
             repeats: 3,
+            iteration_grids: vec![128, 256, 512],
         }
     }
 
@@ -191,6 +197,22 @@ impl BenchOptions {
             },
             batch_sizes: vec![1_000, 16_000],
             repeats: 1,
+            iteration_grids: vec![128],
+            ..BenchOptions::full()
+        }
+    }
+}
+
+impl BenchOptions {
+    /// The CPU solver-iteration rows alone, 128² to 1024² (a minute or
+    /// two): no step, period or network rows.
+    pub fn iterations() -> BenchOptions {
+        BenchOptions {
+            grids: Vec::new(),
+            hardware_gpu_grids: Vec::new(),
+            period_steps: 0,
+            batch_sizes: Vec::new(),
+            iteration_grids: vec![128, 256, 512, 1024],
             ..BenchOptions::full()
         }
     }
@@ -286,6 +308,26 @@ pub struct TrafficRow {
     pub times_floor: f64,
 }
 
+/// One CPU solver iteration of each preconditioner on the hanging cloth's
+/// system after one step, timed apart from the solve's setup, against its
+/// memory-traffic floor.
+#[derive(Clone, Debug, Serialize)]
+pub struct IterationRow {
+    pub grid: u32,
+    pub preconditioner: Preconditioner,
+    /// [`traffic::Layout::iteration_bytes`] or
+    /// [`traffic::Layout::multigrid_iteration_bytes`] for the CPU layout.
+    pub bytes_per_iteration: u64,
+    /// Those bytes at the measured copy bandwidth.
+    pub floor_ms: f64,
+    /// (median time of 2k iterations − median time of k) / k.
+    pub measured_ms: f64,
+    pub times_floor: f64,
+    /// The rest of a k-iteration solve: the setup (multigrid's Galerkin
+    /// operators and smoothers; Jacobi's inverse diagonal) and r₀.
+    pub setup_ms: f64,
+}
+
 /// A converged row's solve: the iterations its steps took to the goal,
 /// against the same model's row with the thesis's 25 Jacobi iterations.
 #[derive(Clone, Debug, Serialize)]
@@ -338,6 +380,7 @@ pub struct BenchReport {
     pub scaling: Vec<ScalingRow>,
     pub bandwidth: Vec<traffic::Bandwidth>,
     pub cg_traffic: Vec<TrafficRow>,
+    pub iterations: Vec<IterationRow>,
     pub stage_traffic: Vec<StageTrafficRow>,
     pub networks: Vec<NetworkRow>,
     pub periods: Vec<PeriodRow>,
@@ -391,7 +434,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         }
     }
     let mut periods = Vec::new();
-    for backend in &chosen {
+    for backend in chosen.iter().filter(|_| opts.period_steps > 0) {
         let mut seconds = Vec::new();
         for v in VARIANTS.into_iter().filter(|v| v.solve == Solve::Thesis) {
             progress(&format!("period {} {}", name(backend), v.label()));
@@ -424,6 +467,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     }
     let gpu = chosen.iter().find_map(Chosen::context);
     let networks = network_rows(opts, gpu, &mut progress)?;
+    let iterations = solver_iterations(opts, &bandwidth[0], &mut progress)?;
     Ok(BenchReport {
         quick: opts.quick,
         period_grid: opts.period_grid,
@@ -436,6 +480,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         converged: converged(&rows),
         scaling: scaling(&rows),
         cg_traffic: cg_traffic(&rows, &bandwidth),
+        iterations,
         stage_traffic: stage_traffic(&rows, &bandwidth),
         bandwidth,
         rows,
@@ -550,6 +595,80 @@ fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Traffic
             })
         })
         .collect()
+}
+
+/// Timed repeats of each solve in the iteration rows: their medians are
+/// subtracted, so they need more repeats than a whole step's.
+const REPEATS_PER_SOLVE: usize = 9;
+
+/// Iterations per timed solve of each preconditioner (and twice as many):
+/// enough to dwarf the timer, few enough that neither reaches round-off.
+fn timed_iterations(preconditioner: Preconditioner) -> u32 {
+    match preconditioner {
+        Preconditioner::Multigrid => 8,
+        Preconditioner::Jacobi => 40,
+    }
+}
+
+/// The CPU's solver iteration per preconditioner at each iteration grid:
+/// the hanging cloth's system after one step, solved at tolerance 0 for k
+/// and for 2k iterations; the difference is k iterations without the setup.
+fn solver_iterations(
+    opts: &BenchOptions,
+    bandwidth: &traffic::Bandwidth,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<IterationRow>> {
+    let mut out = Vec::new();
+    for &grid in &opts.iteration_grids {
+        let mut sim = CpuSim::new(scene(SceneKind::Hang, ModelKind::Friction, grid)?);
+        sim.step();
+        let (a, b) = sim.system();
+        let (a, b, cloth) = (a.clone(), b.to_vec(), &sim.scene.cloth);
+        let springs = cloth.springs.len() as u64;
+        for preconditioner in [Preconditioner::Multigrid, Preconditioner::Jacobi] {
+            progress(&format!("solver iteration cpu {preconditioner:?} {grid}²"));
+            let mut scratch = PcgScratch::default();
+            let k = timed_iterations(preconditioner);
+            let mut solve_ms = |iterations: u32| {
+                let settings = SolveSettings {
+                    max_iters: iterations,
+                    tol: 0.0,
+                    preconditioner,
+                };
+                timed(REPEATS_PER_SOLVE, || {
+                    let mut x = sim.state.v.clone();
+                    let outcome = pcg::solve(&a, cloth, &b, &mut x, settings, &mut scratch);
+                    match outcome.iterations == iterations {
+                        true => Ok(()),
+                        false => Err(Error::Unsupported(format!(
+                            "bench: the {grid}² solve stopped after {} of {iterations} iterations",
+                            outcome.iterations
+                        ))),
+                    }
+                })
+            };
+            let (once, twice) = (solve_ms(k)?, solve_ms(2 * k)?);
+            let measured_ms = (twice - once) / k as f64;
+            let bytes = match preconditioner {
+                Preconditioner::Multigrid => traffic::CPU
+                    .multigrid_iteration_bytes(&multigrid::levels(cloth.nx, cloth.ny), springs),
+                Preconditioner::Jacobi => {
+                    traffic::CPU.iteration_bytes(cloth.vertex_count() as u64, springs)
+                }
+            };
+            let floor_ms = bytes as f64 / (bandwidth.gb_per_s * 1e9) * 1e3;
+            out.push(IterationRow {
+                grid,
+                preconditioner,
+                bytes_per_iteration: bytes,
+                floor_ms,
+                measured_ms,
+                times_floor: measured_ms / floor_ms,
+                setup_ms: once - k as f64 * measured_ms,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// Every stage but pcg (and but contact in a row without contacts) of the
@@ -713,26 +832,36 @@ fn timed(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     Ok(median(&mut ms))
 }
 
+/// Appends a table, its header and a line per row, where it has rows.
+fn section<T>(out: &mut String, rows: &[T], header: String, line: impl Fn(&T) -> String) {
+    if rows.is_empty() {
+        return;
+    }
+    *out += &header;
+    for row in rows {
+        *out += &line(row);
+    }
+}
+
 impl BenchReport {
-    /// The terminal tables.
+    /// The terminal tables (those a run measured).
     pub fn table(&self) -> String {
-        let mut out = format!("cpu: {}\ngpu: {}\n\n", self.cpu, self.gpu);
+        let mut out = format!("cpu: {}\ngpu: {}\n", self.cpu, self.gpu);
         let stages: Vec<&str> = Stage::ALL
             .iter()
             .map(|s| s.name())
             .filter(|s| self.rows.iter().any(|r| r.report.stage_ms.contains_key(*s)))
             .collect();
-        out += &format!(
-            "{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}{:>7}",
+        let mut header = format!(
+            "\n{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}{:>7}",
             "backend", "model", "grid", "ms/step", "contacts", "cg", "staged"
         );
         for s in &stages {
-            out += &format!("{:>11}", s);
+            header += &format!("{:>11}", s);
         }
-        out += "\n";
-        for row in &self.rows {
+        section(&mut out, &self.rows, header + "\n", |row| {
             let r = &row.report;
-            out += &format!(
+            let mut line = format!(
                 "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}{:>6.0}%",
                 r.backend,
                 row.label,
@@ -744,99 +873,165 @@ impl BenchReport {
             );
             for s in &stages {
                 match r.stage_ms.get(*s) {
-                    Some(ms) => out += &format!("{ms:>11.3}"),
-                    None => out += &format!("{:>11}", "-"),
+                    Some(ms) => line += &format!("{ms:>11.3}"),
+                    None => line += &format!("{:>11}", "-"),
                 }
             }
-            out += "\n";
-        }
-        out += &format!(
-            "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>10}\n",
-            "backend", "model", "grid", "ms/step", "iters", "most", "worst", "above", "× thesis"
+            line + "\n"
+        });
+        section(
+            &mut out,
+            &self.converged,
+            format!(
+                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>10}\n",
+                "backend",
+                "model",
+                "grid",
+                "ms/step",
+                "iters",
+                "most",
+                "worst",
+                "above",
+                "× thesis"
+            ),
+            |c| {
+                format!(
+                    "{:<8}{:<32}{:>6}{:>11.3}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
+                    c.backend,
+                    c.label,
+                    c.grid,
+                    c.ms_per_step,
+                    c.iterations_mean,
+                    c.iterations_max,
+                    c.residual_max,
+                    c.steps_above_goal,
+                    c.times_thesis_step
+                        .map(|r| format!("{r:.2}"))
+                        .unwrap_or_default()
+                )
+            },
         );
-        for c in &self.converged {
-            out += &format!(
-                "{:<8}{:<32}{:>6}{:>11.3}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
-                c.backend,
-                c.label,
-                c.grid,
-                c.ms_per_step,
-                c.iterations_mean,
-                c.iterations_max,
-                c.residual_max,
-                c.steps_above_goal,
-                c.times_thesis_step
-                    .map(|r| format!("{r:.2}"))
-                    .unwrap_or_default()
-            );
-        }
-        out += "\nstep growth, ms/step ∝ particles^exponent\n";
-        for g in &self.scaling {
-            out += &format!(
-                "{:<8}{:<32}{:>4}² → {:>4}²{:>8.2}\n",
-                g.backend, g.label, g.from_grid, g.to_grid, g.exponent
-            );
-        }
-        out += "\ncopy bandwidth\n";
-        for b in &self.bandwidth {
-            out += &format!("{:<8}{:>8.1} GB/s  {}\n", b.backend, b.gb_per_s, b.method);
-        }
-        out += &format!(
-            "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
-            "backend", "grid", "MB/iter", "floor ms", "measured ms", "× floor"
+        section(
+            &mut out,
+            &self.scaling,
+            "\nstep growth, ms/step ∝ particles^exponent\n".into(),
+            |g| {
+                format!(
+                    "{:<8}{:<32}{:>4}² → {:>4}²{:>8.2}\n",
+                    g.backend, g.label, g.from_grid, g.to_grid, g.exponent
+                )
+            },
         );
-        for t in &self.cg_traffic {
-            out += &format!(
-                "{:<8}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.1}\n",
-                t.backend,
-                t.grid,
-                t.bytes_per_iteration as f64 * 1e-6,
-                t.floor_ms,
-                t.measured_ms,
-                t.times_floor
-            );
-        }
-        out += &format!(
-            "\neach other stage against its memory-traffic floor (friction-net rows)\n{:<8}{:>6}{:>11}{:>12}{:>12}{:>13}{:>9}\n",
-            "backend", "grid", "stage", "MB", "floor ms", "measured ms", "× floor"
+        section(
+            &mut out,
+            &self.bandwidth,
+            "\ncopy bandwidth\n".into(),
+            |b| format!("{:<8}{:>8.1} GB/s  {}\n", b.backend, b.gb_per_s, b.method),
         );
-        for t in &self.stage_traffic {
-            out += &format!(
-                "{:<8}{:>6}{:>11}{:>12.3}{:>12.4}{:>13.4}{:>9.1}\n",
-                t.backend,
-                t.grid,
-                t.stage,
-                t.bytes as f64 * 1e-6,
-                t.floor_ms,
-                t.measured_ms,
-                t.times_floor
-            );
-        }
-        out += &format!(
-            "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",
-            self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
+        section(
+            &mut out,
+            &self.cg_traffic,
+            format!(
+                "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
+                "backend", "grid", "MB/iter", "floor ms", "measured ms", "× floor"
+            ),
+            |t| {
+                format!(
+                    "{:<8}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.1}\n",
+                    t.backend,
+                    t.grid,
+                    t.bytes_per_iteration as f64 * 1e-6,
+                    t.floor_ms,
+                    t.measured_ms,
+                    t.times_floor
+                )
+            },
         );
-        for p in &self.periods {
-            out += &format!(
-                "{:<8}{:<32}{:>10.3}{:>14}\n",
-                p.backend,
-                p.label,
-                p.seconds,
-                p.ratio_to_analytic
-                    .map(|r| format!("{r:.2}"))
-                    .unwrap_or_default()
-            );
-        }
-        out += &format!(
-            "\nnetwork and input Jacobian over a batch\n{:<40}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
-            "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
+        section(
+            &mut out,
+            &self.iterations,
+            format!(
+                "\nCPU solver iteration against its memory-traffic floor (hanging cloth, after one step)\n{:<16}{:>6}{:>12}{:>12}{:>13}{:>9}{:>11}\n",
+                "preconditioner",
+                "grid",
+                "MB/iter",
+                "floor ms",
+                "measured ms",
+                "× floor",
+                "setup ms"
+            ),
+            |t| {
+                format!(
+                    "{:<16}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.2}{:>11.3}\n",
+                    format!("{:?}", t.preconditioner).to_lowercase(),
+                    t.grid,
+                    t.bytes_per_iteration as f64 * 1e-6,
+                    t.floor_ms,
+                    t.measured_ms,
+                    t.times_floor,
+                    t.setup_ms
+                )
+            },
         );
-        for n in &self.networks {
-            out += &format!(
-                "{:<40}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
-                n.network, n.backend, n.kernel, n.contacts, n.ms, n.contacts_per_s, n.gflop_per_s
-            );
-        }
+        section(
+            &mut out,
+            &self.stage_traffic,
+            format!(
+                "\neach other stage against its memory-traffic floor (friction-net rows)\n{:<8}{:>6}{:>11}{:>12}{:>12}{:>13}{:>9}\n",
+                "backend", "grid", "stage", "MB", "floor ms", "measured ms", "× floor"
+            ),
+            |t| {
+                format!(
+                    "{:<8}{:>6}{:>11}{:>12.3}{:>12.4}{:>13.4}{:>9.1}\n",
+                    t.backend,
+                    t.grid,
+                    t.stage,
+                    t.bytes as f64 * 1e-6,
+                    t.floor_ms,
+                    t.measured_ms,
+                    t.times_floor
+                )
+            },
+        );
+        section(
+            &mut out,
+            &self.periods,
+            format!(
+                "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",
+                self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
+            ),
+            |p| {
+                format!(
+                    "{:<8}{:<32}{:>10.3}{:>14}\n",
+                    p.backend,
+                    p.label,
+                    p.seconds,
+                    p.ratio_to_analytic
+                        .map(|r| format!("{r:.2}"))
+                        .unwrap_or_default()
+                )
+            },
+        );
+        section(
+            &mut out,
+            &self.networks,
+            format!(
+                "\nnetwork and input Jacobian over a batch\n{:<40}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
+                "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
+            ),
+            |n| {
+                format!(
+                    "{:<40}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
+                    n.network,
+                    n.backend,
+                    n.kernel,
+                    n.contacts,
+                    n.ms,
+                    n.contacts_per_s,
+                    n.gflop_per_s
+                )
+            },
+        );
         out
     }
 }

@@ -1,5 +1,6 @@
 //! Memory-traffic floors: the bytes a Jacobi PCG iteration (wgsl/pcg.wgsl
-//! `next` and `update`; the fused loops of src/cpu/pcg.rs) and each other
+//! `next` and `update`; the fused loops of src/cpu/pcg.rs), a multigrid
+//! one (src/cpu/multigrid.rs) and each other
 //! stage of a step must move between memory and the processor if every
 //! array they touch crosses once, and the copy bandwidth that moves them.
 
@@ -10,6 +11,7 @@ use serde::Serialize;
 
 use wgcloth::error::Result;
 use wgcloth::gpu::GpuContext;
+use wgcloth::multigrid::{COARSE_SWEEPS, Level, STENCIL};
 use wgcloth::stage::Stage;
 
 /// How a backend stores the solver's data, in bytes.
@@ -72,15 +74,51 @@ pub const CPU: Layout = Layout {
 };
 
 impl Layout {
-    /// Bytes one iteration must move for `vertices` and `springs`. Per
-    /// vertex: A's diagonal block, the flag, the adjacency offset and the
-    /// vector entries (neighbours' come from cache). Per spring: its
-    /// off-diagonal block once and its two adjacency entries (spring and
-    /// neighbour index, u32 each) at each end.
+    /// Bytes one Jacobi iteration must move for `vertices` and `springs`:
+    /// A once ([`Self::matrix_bytes`]) and the vector entries (neighbours'
+    /// come from cache).
     pub fn iteration_bytes(&self, vertices: u64, springs: u64) -> u64 {
-        let per_vertex = self.diag_block + self.flag + 4 + self.vectors_per_iteration * self.vector;
-        let per_spring = self.off_block + 2 * 8;
-        vertices * per_vertex + springs * per_spring
+        self.matrix_bytes(vertices, springs) + vertices * self.vectors_per_iteration * self.vector
+    }
+
+    /// Bytes of A: per vertex its diagonal block, pinned flag and adjacency
+    /// offset; per spring its off-diagonal block and its two adjacency
+    /// entries (spring and neighbour index, u32 each) at each end.
+    fn matrix_bytes(&self, vertices: u64, springs: u64) -> u64 {
+        vertices * (self.diag_block + self.flag + 4) + springs * (self.off_block + 2 * 8)
+    }
+
+    /// Bytes one multigrid-preconditioned iteration must move: the CG part
+    /// of [`Self::iteration_bytes`] (without P⁻¹ and z, which the V-cycle
+    /// reads and writes), then the V(1,1)-cycle of src/cpu/multigrid.rs
+    /// with every array crossing once per pass that reads it. At each level
+    /// but the coarsest the operator (A, or the coarse stencils) crosses
+    /// twice, once for the residual after pre-smoothing and once for the
+    /// post-smoothing sweep, and the smoother blocks twice; the pre,
+    /// residual, restriction, guess and post passes move ten vectors per
+    /// node and two per coarse node; the cloth adds rᵀz. The coarsest level
+    /// runs its sweeps over its stencils. A V-cycle cannot fuse below two
+    /// operator passes per level: each sweep needs its neighbours' result
+    /// of the one before.
+    pub fn multigrid_iteration_bytes(&self, levels: &[Level], springs: u64) -> u64 {
+        let v = self.vector;
+        let vertices = levels[0].nodes() as u64;
+        let cg = self.iteration_bytes(vertices, springs) - 2 * vertices * v;
+        let operator = |l: usize| match l {
+            0 => self.matrix_bytes(vertices, springs),
+            _ => levels[l].nodes() as u64 * STENCIL as u64 * self.off_block,
+        };
+        let last = levels.len() - 1;
+        let cycle: u64 = (0..last)
+            .map(|l| {
+                let (n, coarse) = (levels[l].nodes() as u64, levels[l + 1].nodes() as u64);
+                2 * operator(l) + n * (2 * self.diag_block + 10 * v) + coarse * 2 * v
+            })
+            .sum();
+        let coarsest =
+            levels[last].nodes() as u64 * (self.diag_block + 2 * v) * COARSE_SWEEPS as u64
+                + COARSE_SWEEPS as u64 * operator(last);
+        cg + cycle + coarsest + 2 * vertices * v
     }
 
     /// Bytes `stage` must move once per step over `e`, every array it
