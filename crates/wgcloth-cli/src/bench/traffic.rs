@@ -88,22 +88,21 @@ impl Layout {
         vertices * (self.diag_block + self.flag + 4) + springs * (self.off_block + 2 * 8)
     }
 
-    /// Bytes one multigrid-preconditioned iteration must move: the CG part
-    /// of [`Self::iteration_bytes`] (without P⁻¹ and z, which the V-cycle
-    /// reads and writes), then the V(1,1)-cycle of src/cpu/multigrid.rs
-    /// with every array crossing once per pass that reads it. At each level
-    /// but the coarsest the operator (A, or the coarse stencils) crosses
-    /// twice, once for the residual after pre-smoothing and once for the
-    /// post-smoothing sweep, and the smoother blocks twice; the pre,
-    /// residual, restriction, guess and post passes move ten vectors per
-    /// node and two per coarse node; the cloth adds rᵀz. The coarsest level
+    /// Bytes one multigrid-preconditioned iteration must move: Jacobi's
+    /// [`Self::iteration_bytes`] (the cycle's rᵀz pass, r and z read, moves
+    /// what Jacobi's P⁻¹ read and z write do), then the V(1,1)-cycle of
+    /// src/cpu/multigrid.rs with every array crossing once per pass that
+    /// reads it. At each level but the coarsest the operator (A, or the
+    /// coarse stencils) crosses twice, once for the residual after
+    /// pre-smoothing and once for the post-smoothing sweep, and the
+    /// smoother blocks twice; the pre, residual, restriction, guess and post
+    /// passes move ten vectors per node and two per coarse node. The coarsest level
     /// runs its sweeps over its stencils. A V-cycle cannot fuse below two
     /// operator passes per level: each sweep needs its neighbours' result
     /// of the one before.
     pub fn multigrid_iteration_bytes(&self, levels: &[Level], springs: u64) -> u64 {
         let v = self.vector;
         let vertices = levels[0].nodes() as u64;
-        let cg = self.iteration_bytes(vertices, springs) - 2 * vertices * v;
         let operator = |l: usize| match l {
             0 => self.matrix_bytes(vertices, springs),
             _ => levels[l].nodes() as u64 * STENCIL as u64 * self.off_block,
@@ -118,7 +117,7 @@ impl Layout {
         let coarsest =
             levels[last].nodes() as u64 * (self.diag_block + 2 * v) * COARSE_SWEEPS as u64
                 + COARSE_SWEEPS as u64 * operator(last);
-        cg + cycle + coarsest + 2 * vertices * v
+        self.iteration_bytes(vertices, springs) + cycle + coarsest
     }
 
     /// Bytes `stage` must move once per step over `e`, every array it
