@@ -40,6 +40,39 @@ pub fn inside_triangle(bary: Vec3) -> bool {
     bary.min_element() >= 0.0 && bary.max_element() <= 1.0
 }
 
+/// The point of triangle (a, b, c) nearest to `p`, by the Voronoi region
+/// `p` lies in (Ericson, Real-Time Collision Detection, 5.1.5). Mirrored by
+/// `closest_on_triangle` in wgsl/common.wgsl.
+pub fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (ab, ac) = (b - a, c - a);
+    let (d1, d2) = (ab.dot(p - a), ac.dot(p - a));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let (d3, d4) = (ab.dot(p - b), ac.dot(p - b));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let (d5, d6) = (ab.dot(p - c), ac.dot(p - c));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let inv = 1.0 / (va + vb + vc);
+    a + ab * (vb * inv) + ac * (vc * inv)
+}
+
 /// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations:
 /// returns the eigenvalues and the matrix whose columns are the eigenvectors.
 /// Jacobi is branch-light and fixed-cost, which is why the GPU twin uses it too.

@@ -306,7 +306,7 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
 }
 
 #[test]
-fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
+fn vertices_deep_inside_are_measured_and_pushed_out_as_on_the_cpu() {
     let Some((ctx, kernels)) = gpu() else { return };
     let scene = sphere(16, ModelKind::Friction);
     let mut cpu = cpu_after(&scene, IN_CONTACT);
@@ -330,9 +330,16 @@ fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
     gpu.step();
     let stats = cpu.step();
     let deepest = f32::from_bits(gpu.read_state().unwrap().max_penetration_bits);
+    let x = gpu.read_positions().unwrap();
+    let body = scene.rigid.as_ref().unwrap();
+    let (left_gpu, left_cpu) = (
+        common::deepest_inside(body, cpu.state.time, &x),
+        common::deepest_inside(body, cpu.state.time, &cpu.state.x),
+    );
     eprintln!(
-        "deepest: GPU {deepest:.5} m, CPU {:.5} m",
-        stats.max_penetration
+        "deepest after the solve: GPU {deepest:.5} m, CPU {:.5} m; after the push-out {left_gpu:.1e} and {left_cpu:.1e} m; positions {:.1e} m apart",
+        stats.max_penetration,
+        max_dev(&x, &cpu.state.x)
     );
     // Springs pull them partly out within the step; still beyond the band.
     let band = scene.config.contact.max_depth;
@@ -341,6 +348,8 @@ fn penetration_measure_matches_the_cpu_for_vertices_deep_inside() {
         "the test must put vertices deeper than the contact band"
     );
     assert!((deepest - stats.max_penetration).abs() < 1e-4);
+    assert!(left_gpu < 1e-5 && left_cpu < 1e-5, "a vertex stayed inside");
+    assert!(max_dev(&x, &cpu.state.x) < 1e-4);
 }
 
 #[test]
@@ -649,4 +658,29 @@ fn state_bytes_count_the_per_vertex_vectors_and_grow_with_the_cloth() {
     };
     let growth = bytes(64) / bytes(32);
     assert!((3.0..=4.5).contains(&growth), "64² / 32²: {growth}");
+}
+
+#[test]
+fn a_sphere_crossing_at_10_m_per_s_leaves_no_vertex_inside_on_the_gpu() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let (c, steps) = common::crossing_config(10.0, 16);
+    let scene = Scene::new(&c).unwrap();
+    let body = scene.rigid.clone().unwrap();
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let mut cpu = CpuSim::new(scene);
+    for k in 1..=steps {
+        gpu.step();
+        cpu.step();
+        let x = gpu.read_positions().unwrap();
+        let inside = common::deepest_inside(&body, cpu.state.time, &x);
+        assert!(inside < 1e-5, "step {k}: a vertex ends {inside} m inside");
+        let dev = max_dev(&x, &cpu.state.x);
+        assert!(dev < 1e-3, "step {k}: GPU and CPU {dev} m apart");
+    }
+    let deepest = f32::from_bits(gpu.read_state().unwrap().max_penetration_bits);
+    eprintln!("{steps} steps: deepest after the solve {deepest:.4} m");
+    assert!(
+        deepest > c.contact.max_depth,
+        "the sphere must reach past the band"
+    );
 }

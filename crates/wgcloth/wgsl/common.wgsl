@@ -207,6 +207,42 @@ fn point_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, n: vec
     return vec4<f32>(d, u, v, w);
 }
 
+// The point of triangle (a, b, c) nearest to p, by the Voronoi region p
+// lies in (mirrors math::closest_on_triangle; Ericson 5.1.5).
+fn closest_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
+    let ab = b - a;
+    let ac = c - a;
+    let d1 = dot(ab, p - a);
+    let d2 = dot(ac, p - a);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let d3 = dot(ab, p - b);
+    let d4 = dot(ac, p - b);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let d5 = dot(ab, p - c);
+    let d6 = dot(ac, p - c);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let inv = 1.0 / (va + vb + vc);
+    return a + ab * (vb * inv) + ac * (vc * inv);
+}
+
 fn found(hit: vec4<f32>) -> bool {
     return hit.y <= 1.0;
 }

@@ -1,10 +1,12 @@
 // Stage "measure": how deep the cloth got inside the rigid body after the
-// step (a ray-parity inside test, then the distance to the nearest face
-// plane containing the projection; no depth limit), folded into the run's
-// maximum, and the step's contact count into the total.
+// solve (a ray-parity inside test, then the distance to the nearest point
+// of the surface; no depth limit), folded into the run's maximum, the
+// push-out of every vertex found inside, and the step's contact count
+// folded into the total.
 // CPU twin: src/cpu/measure.rs.
 
-@group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read_write> x: array<vec4<f32>>;
+@group(1) @binding(6) var<storage, read_write> v: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read> frame: RigidFrame;
@@ -45,31 +47,36 @@ fn inside(p: vec3<f32>) -> bool {
     return crossings % 2u == 1u;
 }
 
-fn depth_inside(p: vec3<f32>) -> f32 {
+// Where body-space point p (inside) leaves the body: the nearest point of
+// its surface, of equally near ones the lower triangle's (cpu::measure::way_out).
+struct WayOut {
+    depth: f32,
+    surface: vec3<f32>,
+    triangle: u32,
+}
+
+fn way_out(p: vec3<f32>) -> WayOut {
     let root = bvh_nodes[0];
-    let reach = length(root.hi - root.lo);
-    var depth = 3.4e38;
-    var walk = box_walk(p, reach);
+    var best = WayOut(3.4e38, p, NO_TRIANGLE);
+    var walk = box_walk(p, length(root.hi - root.lo));
     for (var leaf = next_leaf(&walk); leaf != NO_TRIANGLE; leaf = next_leaf(&walk)) {
         let node = bvh_nodes[leaf];
         for (var k = node.first; k < node.first + node.count; k++) {
             let t = bvh_primitive(k);
-            let hit = point_triangle(p, corner(t, 0u), corner(t, 1u), corner(t, 2u), body_face_normals[t].xyz, 0.0, reach);
-            if found(hit) {
-                depth = min(depth, -hit.x);
+            let q = closest_on_triangle(p, corner(t, 0u), corner(t, 1u), corner(t, 2u));
+            let d2 = dot(q - p, q - p);
+            if d2 < best.depth || (d2 == best.depth && t < best.triangle) {
+                best = WayOut(d2, q, t);
             }
         }
     }
-    if depth < 3.4e38 {
-        return depth;
-    }
-    // A concave corner no face projection covers: the nearest vertex bounds it.
-    for (var k = 0u; k < params.n_rigid_vertices; k++) {
-        depth = min(depth, length(body_vertices[k].xyz - p));
-    }
-    return depth;
+    best.depth = sqrt(best.depth);
+    return best;
 }
 
+// The push-out (cpu::measure::push_out): a free vertex the step left inside
+// moves to the nearest surface point and loses the velocity with which it
+// moves into the body relative to the surface.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -84,5 +91,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if !box_near(root.lo, root.hi, p, 0.0) || !inside(p) {
         return;
     }
-    atomicMax(&state.max_penetration_bits, bitcast<u32>(depth_inside(p)));
+    let out = way_out(p);
+    atomicMax(&state.max_penetration_bits, bitcast<u32>(out.depth));
+    if is_pinned(i) || out.triangle == NO_TRIANGLE {
+        return;
+    }
+    let n = rotate(frame.rotation, body_face_normals[out.triangle].xyz);
+    x[i] = vec4<f32>(rotate(frame.rotation, out.surface) + frame.translation, 1.0);
+    let vi = v[i].xyz;
+    v[i] = vec4<f32>(vi + max(dot(frame.velocity, n) - dot(vi, n), 0.0) * n, 0.0);
 }

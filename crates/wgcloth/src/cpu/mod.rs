@@ -36,7 +36,8 @@ pub struct StepStats {
     pub pcg: PcgOutcome,
     /// Contacts found and responded to (both directions).
     pub contacts: usize,
-    /// Deepest cloth vertex inside the rigid surface after the step, m.
+    /// Deepest cloth vertex inside the rigid surface after the solve, m,
+    /// before the push-out moved it back onto the surface.
     pub max_penetration: f32,
     /// Seconds spent in each of [`Stage::ALL`].
     pub stage_seconds: [f64; Stage::ALL.len()],
@@ -245,7 +246,8 @@ impl CpuSim {
             Stage::Integrate => integrate::integrate(cloth, h, x, v),
             Stage::Measure => {
                 if let Some(body) = body {
-                    stats.max_penetration = measure::max_penetration(body, &self.frame, x);
+                    stats.max_penetration =
+                        measure::push_out(body, &self.frame, &cloth.pinned, x, v);
                 }
             }
         }

@@ -65,7 +65,7 @@ pub enum Entry {
     MgUp,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
-    /// Penetration depth and the contact total (`measure::main`).
+    /// Penetration depth, the push-out and the contact total (`measure::main`).
     Measure,
     /// Sizes a network batch's indirect dispatches (`batch::plan`).
     BatchPlan,

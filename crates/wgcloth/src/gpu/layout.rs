@@ -129,8 +129,8 @@ pub struct StepState {
     pub contacts_total: u32,
     /// Contacts the last step found (stage "collide" counts them).
     pub contacts_last: u32,
-    /// The deepest the cloth has been inside the body, in m, as the bit
-    /// pattern of a non-negative `f32` (so the kernels can take an atomic max).
+    /// The deepest the cloth has been inside the body after a solve (before
+    /// the push-out moved it onto the surface), in m, as the bit pattern of a non-negative `f32` (so the kernels can take an atomic max).
     pub max_penetration_bits: u32,
     /// PCG iterations of the last step.
     pub last_iterations: u32,

@@ -72,3 +72,26 @@ pub fn sphere(grid: u32, model: wgcloth::config::ModelKind) -> wgcloth::Scene {
     c.cloth.grid = [grid, grid];
     wgcloth::Scene::new(&c).unwrap()
 }
+
+/// The thesis scene with the sphere crossing the cloth's plane at `speed`
+/// m/s instead of its sinusoid, from 0.35 m behind the cloth to 0.75 m in
+/// front of it, and the steps that takes.
+pub fn crossing_config(speed: f32, grid: u32) -> (wgcloth::Config, u64) {
+    use wgcloth::config::MotionKind;
+    let mut c = wgcloth::Config::default();
+    c.cloth.grid = [grid, grid];
+    c.rigid.position = [0.0, -0.15, -0.35];
+    c.rigid.motion.kind = MotionKind::Linear;
+    c.rigid.motion.velocity = [0.0, 0.0, speed];
+    let steps = (1.1 / speed / c.solver.dt).ceil() as u64;
+    (c, steps)
+}
+
+/// How deep the deepest of `x` is inside `body` placed at time `t`, m.
+pub fn deepest_inside(body: &wgcloth::scene::RigidBody, t: f64, x: &[Vec3]) -> f32 {
+    let mut frame = wgcloth::cpu::rigid::RigidFrame::default();
+    wgcloth::cpu::rigid::transform(body, t as f32, &mut frame);
+    x.iter()
+        .map(|&p| wgcloth::cpu::measure::penetration_depth(body, &frame, p))
+        .fold(0.0, f32::max)
+}

@@ -1,5 +1,6 @@
 //! Stage "measure" (wgsl/measure.wgsl; CPU twin cpu/measure.rs): the
-//! deepest any cloth vertex is inside the body, folded into the run's.
+//! deepest any cloth vertex is inside the body, folded into the run's, and
+//! the push-out of every vertex inside onto the surface.
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
@@ -14,6 +15,7 @@ impl Measure {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Measure {
         let buffers = [
             ("x", &b.x),
+            ("v", &b.v),
             ("topology", &b.topology),
             ("body_vertices", &b.body_vertices),
             ("body_face_normals", &b.body_face_normals),
