@@ -123,10 +123,9 @@ fn step64(c: &mut Criterion) {
             } else if let Some((ctx, kernels)) = &gpu {
                 let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene)
                     .expect("fits the adapter");
-                let time = start.time as f32;
                 group.bench_function(v.label(), |b| {
                     b.iter(|| {
-                        sim.upload_state(&start.x, &start.v, time);
+                        sim.upload_state(&start.x, &start.v, start.step as u32);
                         sim.step();
                         ctx.finish().expect("device healthy");
                     })

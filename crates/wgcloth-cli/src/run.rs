@@ -546,8 +546,6 @@ fn run_gpu(
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut cut) = (0u64, 0u64, 0u64);
-    // The GPU clock (an f32 sum) at the start of the next step read.
-    let mut start_time = 0.0f32;
     let mut since = Instant::now();
     while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
         let mut finished = Vec::new();
@@ -590,7 +588,7 @@ fn run_gpu(
                 // name what failed in its own system.
                 while flight.next(ctx, &sim, true)?.is_some() {}
                 let (x0, v0) = flight.start_of(&sim, &f)?;
-                sim.upload_state(&x0, &v0, start_time);
+                sim.upload_state(&x0, &v0, f.step as u32);
                 sim.set_cg_budget(f.budget);
                 sim.step();
                 ctx.finish()?;
@@ -615,7 +613,6 @@ fn run_gpu(
                 });
                 break;
             }
-            start_time = state.time;
             if let Some(c) = checkpoint.as_deref_mut() {
                 c.reached = f.step + 1;
             }

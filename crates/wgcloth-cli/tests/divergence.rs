@@ -150,7 +150,7 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     let Some(ctx) = gpu() else { return };
     let kernels = std::sync::Arc::new(Kernels::new(&ctx.device).expect("kernels"));
     let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
-    sim.upload_state(&x0, &v0, scene.config.solver.dt);
+    sim.upload_state(&x0, &v0, 1);
     sim.step();
     ctx.finish().expect("device healthy");
     let state = sim.read_state().expect("state");
@@ -176,7 +176,7 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     sim.upload_state(
         &x0,
         &cpu.state.v.iter().map(|_| Vec3::ZERO).collect::<Vec<_>>(),
-        0.0,
+        0,
     );
     ctx.finish().expect("device healthy");
     assert_eq!(sim.read_state().unwrap().health, 0);

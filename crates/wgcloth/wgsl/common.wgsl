@@ -27,7 +27,7 @@ struct Params {
 // Time and run statistics, on the GPU so a step needs no host writes.
 // Mirrors `gpu::layout::StepState`.
 struct StepState {
-    time: f32,
+    clock: u32,
     steps: u32,
     cg_iterations_total: u32,
     cg_breakdowns: u32,

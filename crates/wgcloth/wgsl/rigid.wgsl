@@ -12,7 +12,8 @@ const TAU: f32 = 6.283185307179586;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let t = state.time + params.dt;
+    // The end of the step, from the step count: an f32 sum of h drifts.
+    let t = f32(state.clock + 1u) * params.dt;
     var offset = vec3<f32>(0.0);
     var velocity = vec3<f32>(0.0);
     if params.motion_kind == MOTION_LINEAR {
@@ -20,7 +21,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         velocity = params.motion_vector;
     } else if params.motion_kind == MOTION_SINUSOID {
         let w = TAU / params.motion_period;
-        let phase = w * t + params.motion_phase;
+        // Whole periods out first, as scene::rigid::angle.
+        let phase = TAU * fract(t / params.motion_period) + params.motion_phase;
         offset = params.motion_vector * params.motion_amplitude * sin(phase);
         velocity = params.motion_vector * params.motion_amplitude * w * cos(phase);
     }

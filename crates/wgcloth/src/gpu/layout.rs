@@ -115,8 +115,10 @@ pub struct Params {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct StepState {
-    /// Simulated time in s.
-    pub time: f32,
+    /// Steps of h since t = 0 on the body's clock: the simulated time is
+    /// clock × h, formed as `f32(clock) * h` where a kernel needs it (one
+    /// rounding, so no drift; an `f32` sum of h was 0.66 s off by step 100k).
+    pub clock: u32,
     /// Steps taken.
     pub steps: u32,
     /// PCG iterations summed over every step.

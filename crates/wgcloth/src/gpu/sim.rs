@@ -308,14 +308,15 @@ impl GpuSim {
         }
     }
 
-    /// Replaces the cloth state (e.g. with a CPU state, to compare a stage).
-    pub fn upload_state(&self, x: &[Vec3], v: &[Vec3], time: f32) {
+    /// Replaces the cloth state (e.g. with a CPU state, to compare a stage)
+    /// and sets the clock to `step` steps of h.
+    pub fn upload_state(&self, x: &[Vec3], v: &[Vec3], step: u32) {
         self.queue
             .write_buffer(&self.buffers.x, 0, bytemuck::cast_slice(&vec4s(x, 1.0)));
         self.queue
             .write_buffer(&self.buffers.v, 0, bytemuck::cast_slice(&vec4s(v, 0.0)));
         self.queue
-            .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&time));
+            .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&step));
         // A new state starts healthy.
         let health = std::mem::offset_of!(StepState, health) as u64;
         self.queue

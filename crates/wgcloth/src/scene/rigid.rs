@@ -30,6 +30,15 @@ pub enum Motion {
     },
 }
 
+/// 2π t / period + phase with the whole periods taken out first: at t =
+/// 1000 s the angle would otherwise be thousands of radians, where an f32
+/// carries little of it and WGSL does not promise `sin`'s accuracy (it
+/// does on [−π, π]). Mirrored in wgsl/rigid.wgsl.
+fn angle(t: f32, period: f32, phase: f32) -> f32 {
+    let cycles = t / period;
+    std::f32::consts::TAU * (cycles - cycles.floor()) + phase
+}
+
 impl Motion {
     /// The body origin's offset from [`RigidBody::position`] at time `t` (s),
     /// m.
@@ -42,7 +51,7 @@ impl Motion {
                 amplitude,
                 period,
                 phase,
-            } => axis * amplitude * (std::f32::consts::TAU * t / period + phase).sin(),
+            } => axis * amplitude * angle(t, period, phase).sin(),
         }
     }
 
@@ -59,7 +68,7 @@ impl Motion {
                 phase,
             } => {
                 let w = std::f32::consts::TAU / period;
-                axis * amplitude * w * (w * t + phase).cos()
+                axis * amplitude * w * angle(t, period, phase).cos()
             }
         }
     }
