@@ -711,3 +711,50 @@ fn the_body_is_placed_from_the_step_count_as_on_the_cpu_far_into_a_run() {
         );
     }
 }
+
+#[test]
+fn a_coarse_cloth_keeps_every_face_vertex_contact_and_repeats_bit_for_bit() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    for model in [ModelKind::Friction, ModelKind::FrictionNet] {
+        // 0.2 m cells against a sphere of 642 vertices: many rigid vertices
+        // fall on one cloth triangle at once.
+        let scene = sphere(6, model);
+        let steps = 100;
+        let run = |count: bool| {
+            let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+            let mut most = 0;
+            for _ in 0..steps {
+                gpu.step();
+                if count {
+                    let (_, face_vertex) = gpu.read_contacts().unwrap();
+                    let mut per_triangle = vec![0; scene.cloth.triangles.len()];
+                    for (c, _) in face_vertex.iter().filter(|(c, _)| c.valid != 0) {
+                        per_triangle[c.triangle as usize] += 1;
+                    }
+                    most = most.max(per_triangle.into_iter().max().unwrap_or(0));
+                }
+            }
+            (gpu.read_positions().unwrap(), most)
+        };
+        let ((first, most), (second, _)) = (run(true), run(false));
+        let cpu = cpu_after(&scene, steps);
+        let dev = max_dev(&first, &cpu.state.x);
+        eprintln!(
+            "{model:?}: at most {most} face–vertex contacts on one triangle; GPU–CPU {dev:.2e} m"
+        );
+        assert!(
+            most > 8,
+            "the scene must put more than 8 contacts on a triangle"
+        );
+        let bits = |x: &[Vec3]| {
+            x.iter()
+                .flat_map(|p| p.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert!(
+            bits(&first) == bits(&second),
+            "{model:?}: two runs of the same scene differ"
+        );
+        assert!(dev < 1e-3, "{model:?}: GPU and CPU drifted {dev} m apart");
+    }
+}

@@ -11,8 +11,8 @@
 // then one per rigid vertex (face–vertex).
 @group(1) @binding(3) var<storage, read> contacts: array<Contact>;
 @group(1) @binding(4) var<storage, read> responses: array<Response>;
-// Per cloth triangle its face–vertex contact count, then
-// MAX_TRIANGLE_CONTACTS slots per triangle.
+// Per cloth triangle the head of its face–vertex contact list, then per
+// rigid vertex the next entry (wgsl/collide.wgsl).
 @group(1) @binding(5) var<storage, read> triangle_contacts: array<u32>;
 // A: its diagonal blocks (one per vertex), then one block per spring.
 @group(1) @binding(6) var<storage, read_write> matrix: array<Sym3>;
@@ -22,20 +22,21 @@ fn stiffness_scale() -> f32 {
     return params.dt * params.dt + params.dt * params.damping_stiffness;
 }
 
-// The face–vertex contacts on triangle t, in rigid-vertex order so the
-// sums do not depend on the order the detection appended them.
-fn sorted_triangle_contacts(t: u32, out: ptr<function, array<u32, MAX_TRIANGLE_CONTACTS>>) -> u32 {
-    let count = min(triangle_contacts[t], MAX_TRIANGLE_CONTACTS);
-    for (var j = 0u; j < count; j++) {
-        var k = triangle_contacts[params.n_triangles + t * MAX_TRIANGLE_CONTACTS + j];
-        var m = j;
-        while m > 0u && (*out)[m - 1u] > k {
-            (*out)[m] = (*out)[m - 1u];
-            m--;
+// The face–vertex contact on triangle t with the lowest rigid vertex above
+// `after`, as an entry (rigid vertex + 1; 0: none; start with 0). Taking a
+// list in rigid-vertex order keeps the sums independent of the order the
+// detection's threads linked it in; lists are short, and a list never
+// holds more than the body's vertices (the bound only guards the walk).
+fn next_triangle_contact(t: u32, after: u32) -> u32 {
+    var best = 0u;
+    var e = triangle_contacts[t];
+    for (var hops = 0u; e != 0u && hops < params.n_rigid_vertices; hops++) {
+        if e > after && (best == 0u || e < best) {
+            best = e;
         }
-        (*out)[m] = k;
+        e = triangle_contacts[params.n_triangles + e - 1u];
     }
-    return count;
+    return best;
 }
 
 // Σ β_k v_k (a vertex–face contact has β = (1, 0, 0)).
@@ -75,11 +76,9 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
         let t = vertex_triangle(q) / 3u;
         let corner = vertex_triangle(q) % 3u;
-        var list: array<u32, MAX_TRIANGLE_CONTACTS>;
-        let count = sorted_triangle_contacts(t, &list);
-        for (var j = 0u; j < count; j++) {
-            let c = contacts[params.n_vertices + list[j]];
-            let r = responses[params.n_vertices + list[j]];
+        for (var e = next_triangle_contact(t, 0u); e != 0u; e = next_triangle_contact(t, e)) {
+            let c = contacts[params.n_vertices + e - 1u];
+            let r = responses[params.n_vertices + e - 1u];
             let beta = c.beta[corner];
             diag = sym_add(diag, sym_scale(contact_block(r, c.normal), beta * beta));
             rhs += beta * h * (r.force - sym_mul(r.damping, cloth_velocity(c)));
@@ -106,12 +105,10 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
         if t == NO_TRIANGLE {
             continue;
         }
-        var list: array<u32, MAX_TRIANGLE_CONTACTS>;
-        let count = sorted_triangle_contacts(t, &list);
-        for (var j = 0u; j < count; j++) {
-            let c = contacts[params.n_vertices + list[j]];
+        for (var e = next_triangle_contact(t, 0u); e != 0u; e = next_triangle_contact(t, e)) {
+            let c = contacts[params.n_vertices + e - 1u];
             let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
-            off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + list[j]], c.normal), weight));
+            off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + e - 1u], c.normal), weight));
         }
     }
     matrix[params.n_vertices + s] = off;

@@ -7,7 +7,7 @@
 //     cloth grid: tiles of TILE×TILE cells and super-tiles of TILE×TILE
 //     tiles, refitted every step by `tiles` and `supertiles` (two
 //     dispatches whatever the size, where a BVH refit needs one per level).
-//     Each contact is also appended to its cloth triangle's list, which the
+//     Each contact is also linked into its cloth triangle's list, which the
 //     assembly gathers from.
 
 @group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
@@ -19,6 +19,9 @@
 // The tiles' bounds, then the super-tiles'.
 @group(1) @binding(6) var<storage, read_write> bounds: array<Bounds>;
 @group(1) @binding(7) var<storage, read_write> contacts: array<Contact>;
+// Per cloth triangle the head of its face–vertex contact list, then per
+// rigid vertex the next entry of the list it is in (entries: rigid vertex
+// + 1; 0 ends a list).
 @group(1) @binding(8) var<storage, read_write> triangle_contacts: array<atomic<u32>>;
 @group(1) @binding(9) var<storage, read_write> state: StepState;
 
@@ -171,10 +174,10 @@ fn face_vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     if best_t != NO_TRIANGLE {
         let verts = vec3<u32>(cloth_index(3u * best_t), cloth_index(3u * best_t + 1u), cloth_index(3u * best_t + 2u));
         c = Contact(best_n, best.x - params.thickness, -best.yzw, best.x, frame.velocity, 1u, verts, best_t);
-        let slot = atomicAdd(&triangle_contacts[best_t], 1u);
-        if slot < MAX_TRIANGLE_CONTACTS {
-            atomicStore(&triangle_contacts[params.n_triangles + best_t * MAX_TRIANGLE_CONTACTS + slot], k);
-        }
+        // Linked in at the head of the triangle's list (entries are k + 1;
+        // 0 ends a list): one node per rigid vertex, so nothing can overflow.
+        let next = atomicExchange(&triangle_contacts[best_t], k + 1u);
+        atomicStore(&triangle_contacts[params.n_triangles + k], next);
         atomicAdd(&state.contacts_last, 1u);
     }
     contacts[params.n_vertices + k] = c;

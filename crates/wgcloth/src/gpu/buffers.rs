@@ -8,7 +8,7 @@ use wgpu::util::DeviceExt;
 
 use crate::config::{ModelKind, Preconditioner};
 use crate::error::{Error, Result};
-use crate::gpu::constants::{MAX_TRIANGLE_CONTACTS, TILE, WORKGROUP, model, motion};
+use crate::gpu::constants::{TILE, WORKGROUP, model, motion};
 use crate::gpu::layout::{
     BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, SpringTerm,
     StepState, Sym3,
@@ -46,7 +46,8 @@ pub(crate) struct Buffers {
     /// (one per rigid vertex).
     pub(crate) contacts: wgpu::Buffer,
     pub(crate) responses: wgpu::Buffer,
-    /// Per cloth triangle its face–vertex contact count, then the lists.
+    /// Per cloth triangle the head of its face–vertex contact list, then
+    /// per rigid vertex the next entry of its list (wgsl/collide.wgsl).
     pub(crate) triangle_contacts: wgpu::Buffer,
     /// A's diagonal blocks, then its off-diagonal ones.
     pub(crate) matrix: wgpu::Buffer,
@@ -273,7 +274,7 @@ impl Sizes {
             spring_terms: size(s, size_of::<SpringTerm>()),
             contacts: size(slots, size_of::<Contact>()),
             responses: size(slots, size_of::<Response>()),
-            triangle_contacts: size(t * (1 + MAX_TRIANGLE_CONTACTS as u64), 4),
+            triangle_contacts: size(t + p.n_rigid_vertices as u64, 4),
             matrix: size(n + s, size_of::<Sym3>()),
             partials: size(5 * groups(n as u32) as u64, 4),
             operators: size(operators, size_of::<Sym3>()),

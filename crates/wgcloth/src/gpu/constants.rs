@@ -7,8 +7,6 @@ use crate::multigrid;
 
 /// Invocations per workgroup of the per-element kernels.
 pub const WORKGROUP: u32 = 256;
-/// Face–vertex contacts one cloth triangle holds.
-pub const MAX_TRIANGLE_CONTACTS: u32 = 8;
 /// "No triangle here" in a triangle index.
 pub const NO_TRIANGLE: u32 = u32::MAX;
 /// Cloth grid cells per tile edge, and tiles per super-tile edge (the
@@ -51,10 +49,9 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 20] = [
+pub const SHARED: [(&str, u32); 19] = [
     ("WORKGROUP", WORKGROUP),
     ("BATCH_GROUP", BATCH_GROUP),
-    ("MAX_TRIANGLE_CONTACTS", MAX_TRIANGLE_CONTACTS),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),
     ("MLP_MAX_WIDTH", MLP_MAX_WIDTH),

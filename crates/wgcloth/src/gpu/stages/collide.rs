@@ -40,8 +40,8 @@ impl Collide {
         }
     }
 
-    /// Before the pass: face–vertex contacts append to their triangle's
-    /// list, so the per-triangle counts start at zero.
+    /// Before the pass: face–vertex contacts link into their triangle's
+    /// list, so every list starts empty (a zero head).
     pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
         let counts = 4 * p.n_triangles as u64;
         encoder.clear_buffer(&self.triangle_contacts, 0, Some(counts));
