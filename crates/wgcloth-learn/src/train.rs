@@ -86,20 +86,34 @@ fn candle(e: candle_core::Error) -> Error {
 
 struct Net {
     layers: Vec<Linear>,
-    /// The contact-frame network's symmetry (`ContactFrame`): scaled
-    /// inputs at −slide are x ⊙ flip + shift, and the output is
-    /// (y(x) + sign ⊙ y(x̄)) / 2, even in the slide for g_n, odd for g_t.
-    mirror: Option<[Tensor; 3]>,
+    /// The contact-frame network's structure (`ContactFrame`).
+    frame: Option<FrameRows>,
+}
+
+/// How the contact-frame network's rows are formed from the scaled input
+/// x at +slide: x ⊙ flip + shift is the row at −slide and x ⊙ still +
+/// rest the row at slide 0; the output is g_n from the row at 0 and
+/// g_t = (y_t(s) − y_t(−s)) / 2, the pick masks selecting each column.
+struct FrameRows {
+    flip: Tensor,
+    shift: Tensor,
+    still: Tensor,
+    rest: Tensor,
+    normal: Tensor,
+    friction: Tensor,
 }
 
 impl Net {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
         let y = self.layers(x)?;
-        let Some([flip, shift, sign]) = &self.mirror else {
+        let Some(f) = &self.frame else {
             return Ok(y);
         };
-        let mirrored = self.layers(&x.broadcast_mul(flip)?.broadcast_add(shift)?)?;
-        (y + mirrored.broadcast_mul(sign)?)? * 0.5
+        let mirrored = self.layers(&x.broadcast_mul(&f.flip)?.broadcast_add(&f.shift)?)?;
+        let at_rest = self.layers(&x.broadcast_mul(&f.still)?.broadcast_add(&f.rest)?)?;
+        at_rest
+            .broadcast_mul(&f.normal)?
+            .broadcast_add(&(y - mirrored)?.broadcast_mul(&f.friction)?)
     }
 
     fn layers(&self, x: &Tensor) -> candle_core::Result<Tensor> {
@@ -306,22 +320,26 @@ pub fn train(
     let mut sizes = vec![width];
     sizes.extend(&opts.hidden);
     sizes.push(outputs);
-    let mirror = (kind == NetKind::FrictionContact)
+    let frame = (kind == NetKind::FrictionContact)
         .then(|| {
-            let mut flip = [1.0f32; 7];
-            let mut shift = [0.0f32; 7];
-            // slide is scaled over [−max, max]: −s is 1 − u.
+            // slide is scaled over [−max, max]: −s is 1 − u, and 0 is ½.
+            let (mut flip, mut shift) = ([1.0f32; 7], [0.0f32; 7]);
             (flip[2], shift[2]) = (-1.0, 1.0);
-            Ok::<_, candle_core::Error>([
-                Tensor::new(&flip, &dev)?,
-                Tensor::new(&shift, &dev)?,
-                Tensor::new(&[1.0f32, -1.0], &dev)?,
-            ])
+            let (mut still, mut rest) = ([1.0f32; 7], [0.0f32; 7]);
+            (still[2], rest[2]) = (0.0, 0.5);
+            Ok::<_, candle_core::Error>(FrameRows {
+                flip: Tensor::new(&flip, &dev)?,
+                shift: Tensor::new(&shift, &dev)?,
+                still: Tensor::new(&still, &dev)?,
+                rest: Tensor::new(&rest, &dev)?,
+                normal: Tensor::new(&[1.0f32, 0.0], &dev)?,
+                friction: Tensor::new(&[0.0f32, 0.5], &dev)?,
+            })
         })
         .transpose()
         .map_err(candle)?;
     let net = Net {
-        mirror,
+        frame,
         layers: sizes
             .windows(2)
             .enumerate()

@@ -111,8 +111,10 @@ fn contact_frame_network_jacobians_match_finite_differences() {
 }
 
 /// What the contact frame guarantees for any weights: the force turns with
-/// the contact (g(Rc, Rv) = R g(c, v)), friction vanishes as the sliding
-/// stops, and the Jacobians stay finite there and approach their limit.
+/// the contact (g(Rc, Rv) = R g(c, v)), it lies in the friction cone (no
+/// pulling, friction at most μ times the normal force), its normal part
+/// does not depend on the sliding, friction vanishes as the sliding stops,
+/// and the Jacobians stay finite there and approach their limit.
 #[test]
 fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
     let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
@@ -128,6 +130,16 @@ fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
             r * a.force,
             b.force
         );
+        let n = -c.normalize();
+        let (f_n, f_t) = (a.force.dot(n), a.force.reject_from(n).length());
+        assert!(
+            f_n >= 0.0 && f_t <= K.mu * f_n * (1.0 + 1e-5),
+            "normal {f_n}, friction {f_t}, μ {}",
+            K.mu
+        );
+        let faster = g(c, v + 0.7 * v.reject_from(n));
+        assert!((faster.force.dot(n) - f_n).abs() <= 1e-5 * f_n.max(1e-3));
+
         let rotated = Mat3::from_quat(r);
         assert_close(
             rotated * a.d_v * rotated.transpose(),

@@ -293,14 +293,16 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     if params.model == MODEL_FRICTION_CONTACT_NET {
-        let entry = atomicAdd(&net_batch[0], 2u);
-        atomicStore(&net_batch[1u + entry], s);
-        atomicStore(&net_batch[1u + entry + 1u], s);
+        // Rows at +slide, −slide and slide 0 (ContactFrame::inputs).
+        let entry = atomicAdd(&net_batch[0], CONTACT_FRAME_ROWS);
         let f = contact_frame(k.normal * k.depth, relative_velocity(k));
-        let row = array<f32, 7>(f.depth, f.approach, f.slide, params.kn, params.kd, params.kt, params.mu);
-        for (var i = 0u; i < 7u; i++) {
-            net_inputs[entry * 7u + i] = row[i];
-            net_inputs[entry * 7u + 7u + i] = select(row[i], -row[i], i == 2u);
+        let slides = array<f32, CONTACT_FRAME_ROWS>(f.slide, -f.slide, 0.0);
+        for (var r = 0u; r < CONTACT_FRAME_ROWS; r++) {
+            atomicStore(&net_batch[1u + entry + r], s);
+            let row = array<f32, 7>(f.depth, f.approach, slides[r], params.kn, params.kd, params.kt, params.mu);
+            for (var i = 0u; i < 7u; i++) {
+                net_inputs[(entry + r) * 7u + i] = row[i];
+            }
         }
         return;
     }
@@ -337,7 +339,8 @@ fn output_pair(entry: u32, row: u32) -> vec2<f32> {
 }
 
 // g and its Jacobians from the contact-frame network's entries `entry`
-// (+slide) and `entry + 1` (−slide): mirrors ContactFrame::force.
+// (+slide), `entry + 1` (−slide) and `entry + 2` (slide 0): mirrors
+// ContactFrame::force.
 fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
     let f = contact_frame(c, v);
     if f.depth == 0.0 {
@@ -345,16 +348,28 @@ fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
     }
     let y0 = output_pair(entry, 0u);
     let y1 = output_pair(entry + 1u, 0u);
-    // Even part for g_n, odd for g_t; the mirror's slide derivative flips.
-    let g_n = 0.5 * (y0.x + y1.x);
-    let g_t = 0.5 * (y0.y - y1.y);
-    var d_gn: vec3<f32>;
+    // g_n at slide 0, the odd part for g_t; the mirror's slide derivative flips.
+    var g_n = output_pair(entry + 2u, 0u).x;
+    var g_t = 0.5 * (y0.y - y1.y);
+    var d_gn = vec3<f32>(output_pair(entry + 2u, 1u).x, output_pair(entry + 2u, 2u).x, 0.0);
     var d_gt: vec3<f32>;
     for (var t = 0u; t < 3u; t++) {
         let a = output_pair(entry, 1u + t);
         let b = select(1.0, -1.0, t == 2u) * output_pair(entry + 1u, 1u + t);
-        d_gn[t] = 0.5 * (a.x + b.x);
         d_gt[t] = 0.5 * (a.y - b.y);
+    }
+    // Inside the friction cone (cpu::contact::coulomb): g_n ≥ 0, |g_t| ≤ μ g_n.
+    if g_n <= 0.0 {
+        g_n = 0.0;
+        g_t = 0.0;
+        d_gn = vec3<f32>(0.0);
+        d_gt = vec3<f32>(0.0);
+    }
+    let cap = params.mu * g_n;
+    if abs(g_t) > cap {
+        let side = sign(g_t);
+        g_t = side * cap;
+        d_gt = side * params.mu * d_gn;
     }
     let p = IDENTITY - outer(f.c_hat, f.c_hat);
     let n = -f.c_hat;
@@ -402,8 +417,8 @@ fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacob
 @compute @workgroup_size(WORKGROUP)
 fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     let entry = id.x;
-    // A contact-frame contact's second entry is read with its first.
-    let second = params.model == MODEL_FRICTION_CONTACT_NET && entry % 2u == 1u;
+    // A contact-frame contact's later entries are read with its first.
+    let second = params.model == MODEL_FRICTION_CONTACT_NET && entry % CONTACT_FRAME_ROWS != 0u;
     if entry >= atomicLoad(&net_batch[0]) || second {
         return;
     }

@@ -242,11 +242,14 @@ const SLIDE_AT_REST: f32 = 1e-6;
 /// n = −ĉ and t̂ = ṫ/|ṫ|, where g_n and g_t depend only on the depth
 /// r = |c|, the approach speed a = v_rel·ĉ (ḋ), the slide speed s = |ṫ|
 /// and the coefficients; the network learns these two scalars, and the
-/// directions are exact. Its output y is made even in s for g_n and odd
-/// for g_t,
-///   g_n = (y_n(s) + y_n(−s)) / 2,   g_t = (y_t(s) − y_t(−s)) / 2,
-/// so friction vanishes with ṫ as it must and g_t / s stays finite: the
-/// Jacobian's (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest.
+/// directions are exact. Its output y is taken at slide 0 for g_n and made
+/// odd in s for g_t,
+///   g_n = y_n(0),   g_t = (y_t(s) − y_t(−s)) / 2,
+/// so the normal force does not depend on the slide (eq. 8; the network's
+/// own slide dependence turned, through the Coulomb bound, into a friction
+/// that grew with speed and braked a sliding patch), friction vanishes
+/// with ṫ as it must, and g_t / s stays finite: the Jacobian's
+/// (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactFrame {
     c_hat: Vec3,
@@ -284,12 +287,15 @@ impl ContactFrame {
         })
     }
 
-    /// The network's two input rows, at +slide and at −slide.
-    pub fn inputs(&self, k: &Coefficients) -> [f32; 14] {
+    /// The network's three input rows: at +slide, at −slide and at 0.
+    pub fn inputs(&self, k: &Coefficients) -> [f32; 21] {
         let (r, a, s) = (self.depth, self.approach, self.slide);
-        [
-            r, a, s, k.kn, k.kd, k.kt, k.mu, r, a, -s, k.kn, k.kd, k.kt, k.mu,
-        ]
+        let row = |s: f32| [r, a, s, k.kn, k.kd, k.kt, k.mu];
+        let mut rows = [0.0; 21];
+        for (out, s) in rows.chunks_exact_mut(7).zip([s, -s, 0.0]) {
+            out.copy_from_slice(&row(s));
+        }
+        rows
     }
 
     /// (g_n, g_t) of a force g: what the network learns.
@@ -298,15 +304,18 @@ impl ContactFrame {
     }
 
     /// g and its Jacobians from the network's outputs y and Jacobians j
-    /// (row-major [2 outputs × (depth, approach, slide)]) at the two rows.
-    pub fn force(&self, y: [&[f32]; 2], j: [&[f32]; 2]) -> ForceJacobian {
+    /// (row-major [2 outputs × (depth, approach, slide)]) at the three rows,
+    /// held to eq. 8's "no pulling" and to Coulomb's law with coefficient
+    /// `mu` ([`coulomb`]).
+    pub fn force(&self, y: [&[f32]; 3], j: [&[f32]; 3], mu: f32) -> ForceJacobian {
         let (y0, y1, j0, j1) = (y[0], y[1], j[0], j[1]);
-        // Even part for g_n, odd part for g_t; the mirror row's slide is −s,
-        // so its slide derivatives enter with the other sign.
-        let g_n = 0.5 * (y0[0] + y1[0]);
+        // g_n at slide 0; the odd part for g_t (the mirror row's slide is
+        // −s, so its slide derivatives enter with the other sign).
+        let g_n = y[2][0];
         let g_t = 0.5 * (y0[1] - y1[1]);
-        let d_gn = 0.5 * Vec3::new(j0[0] + j1[0], j0[1] + j1[1], j0[2] - j1[2]);
+        let d_gn = Vec3::new(j[2][0], j[2][1], 0.0);
         let d_gt = 0.5 * Vec3::new(j0[3] - j1[3], j0[4] - j1[4], j0[5] + j1[5]);
+        let ((g_n, d_gn), (g_t, d_gt)) = coulomb((g_n, d_gn), (g_t, d_gt), mu);
         let (c_hat, t_hat, r, a) = (self.c_hat, self.t_hat, self.depth, self.approach);
         let p = Mat3::IDENTITY - outer(c_hat, c_hat);
         // Gradients of a function of (r, a, s): ∂r/∂c = ĉ; ∂a/∂c = ṫ/r,
@@ -331,13 +340,40 @@ impl ContactFrame {
     }
 }
 
+/// The contact-frame network's (g_n, g_t), each with its gradient in
+/// (depth, approach, slide), put inside the friction cone: g_n ≥ 0 (eq. 8
+/// never pulls) and |g_t| ≤ μ g_n (eq. 9's Coulomb bound), with the clamped
+/// value's own gradient. The network's outputs are free scalars whose
+/// small absolute errors at resting contact (millinewtons against a domain
+/// of tens of newtons) held a patch on an incline well above the friction
+/// angle; inside the cone the network decides, at its edge Coulomb does.
+/// Mirrored by `contact_net_force` in wgsl/contact.wgsl.
+pub fn coulomb(normal: (f32, Vec3), tangent: (f32, Vec3), mu: f32) -> ((f32, Vec3), (f32, Vec3)) {
+    if normal.0 <= 0.0 {
+        return ((0.0, Vec3::ZERO), (0.0, Vec3::ZERO));
+    }
+    let cap = mu * normal.0;
+    let tangent = if tangent.0 > cap {
+        (cap, mu * normal.1)
+    } else if tangent.0 < -cap {
+        (-cap, -mu * normal.1)
+    } else {
+        tangent
+    };
+    (normal, tangent)
+}
+
 /// g and its Jacobians from a contact-frame friction network.
 pub fn friction_contact_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
     let Some(frame) = ContactFrame::new(c, v) else {
         return ForceJacobian::ZERO;
     };
     let (y, j) = net.forward_jacobian(&frame.inputs(k), NetKind::FrictionContact.wrt());
-    frame.force([&y[..2], &y[2..]], [&j[..6], &j[6..]])
+    frame.force(
+        [&y[..2], &y[2..4], &y[4..]],
+        [&j[..6], &j[6..12], &j[12..]],
+        k.mu,
+    )
 }
 
 impl Model {
@@ -419,8 +455,12 @@ impl Model {
                             .collect();
                         let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
                         each_framed(&frames, |f, i| {
-                            let (y, j) = (&y[4 * i..], &j[12 * i..]);
-                            f.force([&y[..2], &y[2..4]], [&j[..6], &j[6..12]])
+                            let (y, j) = (&y[6 * i..], &j[18 * i..]);
+                            f.force(
+                                [&y[..2], &y[2..4], &y[4..6]],
+                                [&j[..6], &j[6..12], &j[12..18]],
+                                coefficients.mu,
+                            )
                         })
                     }
                     _ => {

@@ -17,6 +17,9 @@ pub const MLP_MAX_WIDTH: u32 = 256;
 /// The most layers the `per_contact` network kernel holds.
 pub const MLP_MAX_LAYERS: u32 = 16;
 
+/// Network rows per contact of the contact-frame network
+/// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
+pub const CONTACT_FRAME_ROWS: u32 = 3;
 /// Invocations per workgroup of the network batch's kernels (`batch::plan`,
 /// `mlp::per_contact`).
 pub const BATCH_GROUP: u32 = 64;
@@ -49,8 +52,9 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 19] = [
+pub const SHARED: [(&str, u32); 20] = [
     ("WORKGROUP", WORKGROUP),
+    ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("BATCH_GROUP", BATCH_GROUP),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),

@@ -116,10 +116,12 @@ impl NetKind {
     }
 
     /// Network evaluations per contact: the contact-frame network runs at
-    /// +slide and −slide, the symmetry that makes its friction odd in ṫ.
+    /// +slide and −slide, the symmetry that makes its friction odd in ṫ,
+    /// and at slide 0 for the normal force, which eq. 8 makes independent
+    /// of the slide.
     pub fn evaluations(self) -> usize {
         match self {
-            NetKind::FrictionContact => 2,
+            NetKind::FrictionContact => crate::gpu::constants::CONTACT_FRAME_ROWS as usize,
             _ => 1,
         }
     }
