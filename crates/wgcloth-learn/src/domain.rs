@@ -112,7 +112,7 @@ pub fn random_coefficients(rng: &mut Rng) -> Coefficients {
 }
 
 /// The rows a network of `kind` evaluates for one uniform sample: the
-/// sample's inputs, or for the contact-frame network its two rows.
+/// sample's inputs, or for the contact-frame network its rows.
 pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
     let (x, _) = uniform_sample(kind, rng);
     if kind != NetKind::FrictionContact {
@@ -127,7 +127,7 @@ pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
     };
     // c = 0 has no frame; any depth-zero row stands in for it.
     ContactFrame::new(c, v).map_or_else(
-        || [&[0.0; 3], &x[6..]].concat().repeat(2),
+        || [&[0.0; 3], &x[6..]].concat().repeat(kind.evaluations()),
         |f| f.inputs(&k).to_vec(),
     )
 }

@@ -399,3 +399,31 @@ fn a_warm_start_begins_where_the_given_weights_left_off() {
             .contains("--init")
     );
 }
+
+/// The shipped networks' accuracy on fixed uniform samples of their
+/// declared domains, against the figures in crates/wgcloth/weights/README.md
+/// with a margin: a change to how a network is evaluated, or a retrained
+/// file, may not quietly make it worse.
+#[test]
+fn the_shipped_networks_keep_their_accuracy() {
+    use wgcloth::nn::weights::{FRICTION_SMALL, FRICTION_THESIS, NAIVE};
+    // (network, most standardised MSE, most median Jacobian error).
+    for (shipped, mse, jacobian) in [
+        (FRICTION_SMALL, 1e-4, 0.08),
+        (FRICTION_THESIS, 1.5e-3, 0.15),
+        (NAIVE, 1e-7, 1e-3),
+    ] {
+        let file = shipped.read().unwrap();
+        let e = evaluate(&file, None, 20_000, 11);
+        eprintln!(
+            "{}: standardised MSE {:.3e}, median Jacobian error {:.3e}",
+            shipped.path, e.uniform_mse, e.jacobian_median_relative_error
+        );
+        assert!(e.uniform_mse <= mse, "{}: {e:?}", shipped.path);
+        assert!(
+            e.jacobian_median_relative_error <= jacobian,
+            "{}: {e:?}",
+            shipped.path
+        );
+    }
+}

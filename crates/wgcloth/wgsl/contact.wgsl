@@ -16,7 +16,7 @@
 // The batch: its size, then each entry's contact slot; the network inputs
 // [entry × width] and outputs [entry × R × net_outputs]: row 0 the output,
 // row 1 + t its derivative along input wrt_start + t. The contact-frame
-// network has two entries per contact, at +slide and −slide.
+// network has CONTACT_FRAME_ROWS entries per contact: at +slide, −slide, 0.
 @group(1) @binding(6) var<storage, read_write> net_batch: array<atomic<u32>>;
 @group(1) @binding(7) var<storage, read_write> net_inputs: array<f32>;
 @group(1) @binding(8) var<storage, read> net_outputs: array<f32>;
