@@ -21,6 +21,10 @@ const STEPS: usize = 200;
 /// z, its vertices just inside the contact band; every contact and solver
 /// setting is the default (μ = 0.5).
 fn patch_on_incline(tilt: f32, model: ModelKind) -> Scene {
+    Scene::new(&patch_config(tilt, model)).unwrap()
+}
+
+fn patch_config(tilt: f32, model: ModelKind) -> Config {
     let mut c = Config {
         scene: SceneKind::Sphere,
         model,
@@ -48,54 +52,50 @@ fn patch_on_incline(tilt: f32, model: ModelKind) -> Scene {
         (Quat::from_rotation_z(tilt) * Vec3::new(0.0, c.contact.thickness - 1e-4, 0.0)).to_array();
     (cl.grid, cl.size, cl.mass, cl.pins) = ([6, 6], [0.2, 0.2], 0.036, Pins::None);
     cl.damping_mass = 0.0; // no air drag: only Coulomb's law acts along the slope
-    Scene::new(&c).unwrap()
+    c
 }
 
 fn mean(v: &[Vec3]) -> Vec3 {
     v.iter().copied().sum::<Vec3>() / v.len() as f32
 }
 
-/// The patch's mean position and velocity after STEPS / 2 and STEPS steps.
-type Halves = [(Vec3, Vec3); 2];
+/// The patch's mean position and velocity after each step.
+type Trace = Vec<(Vec3, Vec3)>;
 
-fn on_cpu(scene: &Scene) -> Halves {
+fn on_cpu(scene: &Scene) -> Trace {
     let mut sim = CpuSim::new(scene.clone());
-    [0, 1].map(|_| {
-        for _ in 0..STEPS / 2 {
+    (0..STEPS)
+        .map(|_| {
             sim.step();
-        }
-        (mean(&sim.state.x), mean(&sim.state.v))
-    })
+            (mean(&sim.state.x), mean(&sim.state.v))
+        })
+        .collect()
 }
 
-fn on_gpu(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, scene: &Scene) -> Halves {
+fn on_gpu(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, scene: &Scene) -> Trace {
     let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene).unwrap();
-    [0, 1].map(|_| {
-        for _ in 0..STEPS / 2 {
+    (0..STEPS)
+        .map(|_| {
             sim.step();
-        }
-        (
-            mean(&sim.read_positions().unwrap()),
-            mean(&sim.read_velocities().unwrap()),
-        )
-    })
+            (
+                mean(&sim.read_positions().unwrap()),
+                mean(&sim.read_velocities().unwrap()),
+            )
+        })
+        .collect()
 }
 
-/// Each model on the CPU, then (where there is an adapter) on the GPU.
-fn each_run(tilt: f32, check: impl Fn(&str, ModelKind, Halves)) {
+/// Each model's scene on the CPU, then (where there is an adapter) on the GPU.
+fn each_run(scene: impl Fn(ModelKind) -> Scene, check: impl Fn(&str, ModelKind, Trace)) {
     for model in MODELS {
-        check("CPU", model, on_cpu(&patch_on_incline(tilt, model)));
+        check("CPU", model, on_cpu(&scene(model)));
     }
     let Some(ctx) = common::gpu_context() else {
         return;
     };
     let kernels = Kernels::new(&ctx.device).expect("kernels build");
     for model in MODELS {
-        check(
-            "GPU",
-            model,
-            on_gpu(&ctx, &kernels, &patch_on_incline(tilt, model)),
-        );
+        check("GPU", model, on_gpu(&ctx, &kernels, &scene(model)));
     }
 }
 
@@ -103,18 +103,21 @@ fn each_run(tilt: f32, check: impl Fn(&str, ModelKind, Halves)) {
 fn friction_holds_the_patch_below_the_friction_angle() {
     let tilt = 0.8 * 0.5f32.atan();
     let normal = Quat::from_rotation_z(tilt) * Vec3::Y;
-    each_run(tilt, |path, model, [(x1, _), (x2, _)]| {
-        let moved = x2 - x1;
-        let drift = (moved - moved.dot(normal) * normal).length();
-        eprintln!(
-            "{path} {model:?}: drift over the second second at {:.1}°: {drift:.2e} m",
-            tilt.to_degrees()
-        );
-        assert!(
-            drift < 3e-3,
-            "{path} {model:?}: the patch slid {drift} m in 1 s below the friction angle"
-        );
-    });
+    each_run(
+        |m| patch_on_incline(tilt, m),
+        |path, model, trace| {
+            let moved = trace[STEPS - 1].0 - trace[STEPS / 2 - 1].0;
+            let drift = (moved - moved.dot(normal) * normal).length();
+            eprintln!(
+                "{path} {model:?}: drift over the second second at {:.1}°: {drift:.2e} m",
+                tilt.to_degrees()
+            );
+            assert!(
+                drift < 3e-3,
+                "{path} {model:?}: the patch slid {drift} m in 1 s below the friction angle"
+            );
+        },
+    );
 }
 
 #[test]
@@ -123,18 +126,56 @@ fn friction_lets_the_patch_slide_at_coulombs_acceleration_above_the_friction_ang
     let tilt = 1.3 * mu.atan();
     let downhill = -(Quat::from_rotation_z(tilt) * Vec3::X);
     let expected = G * (tilt.sin() - mu * tilt.cos());
-    each_run(tilt, |path, model, [(_, v1), (_, v2)]| {
-        let seconds = (STEPS / 2) as f32 * Config::default().solver.dt;
-        let measured = (v2 - v1).dot(downhill) / seconds;
+    each_run(
+        |m| patch_on_incline(tilt, m),
+        |path, model, trace| {
+            let seconds = (STEPS / 2) as f32 * Config::default().solver.dt;
+            let measured = (trace[STEPS - 1].1 - trace[STEPS / 2 - 1].1).dot(downhill) / seconds;
+            eprintln!(
+                "{path} {model:?}: acceleration at {:.1}°: {measured:.4} m/s², Coulomb {expected:.4}",
+                tilt.to_degrees()
+            );
+            // The lagged friction linearisation over-brakes by about h·a/|v|
+            // (2–3 % here); the issue asked for 20 %.
+            assert!(
+                (measured - expected).abs() < 0.05 * expected,
+                "{path} {model:?}: {measured} m/s² vs {expected}"
+            );
+        },
+    );
+}
+
+#[test]
+fn a_moving_plane_drags_the_patch_at_coulombs_acceleration_until_it_sticks() {
+    let (mu, speed) = (0.5f32, 3.0f32);
+    let dt = Config::default().solver.dt;
+    let scene = |model| {
+        let mut c = patch_config(0.0, model);
+        c.rigid.motion.kind = MotionKind::Linear;
+        c.rigid.motion.velocity = [speed, 0.0, 0.0];
+        Scene::new(&c).unwrap()
+    };
+    each_run(scene, |path, model, trace| {
+        let v: Vec<f32> = trace.iter().map(|(_, v)| v.x).collect();
+        // Slip: from 20 % to 80 % of the plane's speed, friction is μ m g.
+        let at = |f: f32| v.iter().position(|&u| u >= f * speed);
+        let (Some(a), Some(b)) = (at(0.2), at(0.8)) else {
+            panic!("{path} {model:?}: the patch never reached the plane's speed: {v:?}");
+        };
+        let measured = (v[b] - v[a]) / ((b - a) as f32 * dt);
+        let last = v[STEPS - 1];
         eprintln!(
-            "{path} {model:?}: acceleration at {:.1}°: {measured:.4} m/s², Coulomb {expected:.4}",
-            tilt.to_degrees()
+            "{path} {model:?}: slip acceleration {measured:.3} m/s² (μ g {:.3}), final speed {last:.4} m/s",
+            mu * G
         );
-        // The lagged friction linearisation over-brakes by about h·a/|v|
-        // (2–3 % here); the issue asked for 20 %.
         assert!(
-            (measured - expected).abs() < 0.05 * expected,
-            "{path} {model:?}: {measured} m/s² vs {expected}"
+            (measured - mu * G).abs() < 0.2 * mu * G,
+            "{path} {model:?}: dragged at {measured} m/s², Coulomb {}",
+            mu * G
+        );
+        assert!(
+            (last - speed).abs() < 0.01 * speed,
+            "{path} {model:?}: the patch ends at {last} m/s on a plane at {speed}"
         );
     });
 }

@@ -75,8 +75,8 @@ fn way_out(p: vec3<f32>) -> WayOut {
 }
 
 // The push-out (cpu::measure::push_out): a free vertex the step left inside
-// moves to the nearest surface point and loses the velocity with which it
-// moves into the body relative to the surface.
+// moves to the nearest surface point and ε beyond it along the normal, and
+// loses the velocity with which it moves into the body relative to it.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -97,7 +97,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let n = rotate(frame.rotation, body_face_normals[out.triangle].xyz);
-    x[i] = vec4<f32>(rotate(frame.rotation, out.surface) + frame.translation, 1.0);
+    x[i] = vec4<f32>(rotate(frame.rotation, out.surface) + frame.translation + params.thickness * n, 1.0);
     let vi = v[i].xyz;
     v[i] = vec4<f32>(vi + max(dot(frame.velocity, n) - dot(vi, n), 0.0) * n, 0.0);
 }

@@ -85,7 +85,11 @@ pub fn penetration_depth(body: &RigidBody, frame: &RigidFrame, x: Vec3) -> f32 {
 }
 
 /// The push-out: every free cloth vertex the step left inside the body
-/// moves out to the nearest point of the surface ([`way_out`]), and loses the velocity
+/// moves out to the nearest point of the surface ([`way_out`]) and on
+/// along that triangle's normal by the contact thickness ε, where the
+/// contact force starts (onto the surface itself it would start the next
+/// step with the full penalty ε k_n, and a line drawn from it would sit
+/// in the body), and loses the velocity
 /// with which it moves into the body relative to the surface (an inelastic
 /// impact). Contacts only see points within `max_depth` of a face, so this
 /// is what keeps a vertex from staying inside, or a fast body from
@@ -93,6 +97,7 @@ pub fn penetration_depth(body: &RigidBody, frame: &RigidFrame, x: Vec3) -> f32 {
 pub fn push_out(
     body: &RigidBody,
     frame: &RigidFrame,
+    thickness: f32,
     pinned: &[bool],
     x: &mut [Vec3],
     v: &mut [Vec3],
@@ -107,7 +112,7 @@ pub fn push_out(
             };
             if !pinned {
                 let n = frame.rotation * out.normal;
-                *xi = frame.rotation * out.surface + frame.translation;
+                *xi = frame.rotation * out.surface + frame.translation + thickness * n;
                 *vi += (frame.velocity.dot(n) - vi.dot(n)).max(0.0) * n;
             }
             out.depth

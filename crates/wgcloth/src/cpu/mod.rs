@@ -246,8 +246,14 @@ impl CpuSim {
             Stage::Integrate => integrate::integrate(cloth, h, x, v),
             Stage::Measure => {
                 if let Some(body) = body {
-                    stats.max_penetration =
-                        measure::push_out(body, &self.frame, &cloth.pinned, x, v);
+                    stats.max_penetration = measure::push_out(
+                        body,
+                        &self.frame,
+                        self.tolerances.thickness,
+                        &cloth.pinned,
+                        x,
+                        v,
+                    );
                 }
             }
         }
