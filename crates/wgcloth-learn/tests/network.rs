@@ -427,3 +427,54 @@ fn the_shipped_networks_keep_their_accuracy() {
         );
     }
 }
+
+/// friction-net against the analytic model it learned, on the thesis
+/// scene over one sphere period, measured against the scene's own
+/// sensitivity: the analytic run against itself with every vertex nudged
+/// 1e-7 m at the start (as `wgcloth validate` does). Contact makes the
+/// scene chaotic, so the nudged run alone drifts centimetres apart.
+#[test]
+fn friction_net_follows_the_analytic_model_within_a_few_times_the_scenes_sensitivity() {
+    use wgcloth::config::ModelKind;
+    use wgcloth::cpu::CpuSim;
+    use wgcloth::{Config, Scene};
+    let sim = |model| {
+        let mut c = Config {
+            model,
+            ..Default::default()
+        };
+        c.cloth.grid = [32, 32];
+        CpuSim::new(Scene::new(&c).unwrap())
+    };
+    let (mut analytic, mut net, mut nudged) = (
+        sim(ModelKind::Friction),
+        sim(ModelKind::FrictionNet),
+        sim(ModelKind::Friction),
+    );
+    for (i, x) in nudged.state.x.iter_mut().enumerate() {
+        let phase = i as f32 * 2.399_963;
+        *x += 1e-7 * Vec3::new(phase.cos(), phase.sin(), (0.5 * phase).cos()).normalize();
+    }
+    let apart = |p: &[Vec3], q: &[Vec3]| {
+        p.iter()
+            .zip(q)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0f32, f32::max)
+    };
+    let (mut model_error, mut sensitivity) = (0.0f32, 0.0f32);
+    for _ in 0..200 {
+        analytic.step();
+        net.step();
+        nudged.step();
+        model_error = model_error.max(apart(&net.state.x, &analytic.state.x));
+        sensitivity = sensitivity.max(apart(&nudged.state.x, &analytic.state.x));
+    }
+    eprintln!(
+        "over one period: friction-net {model_error:.3e} m from the analytic run, the nudged analytic run {sensitivity:.3e} m ({:.2}×)",
+        model_error / sensitivity
+    );
+    assert!(
+        model_error <= 3.0 * sensitivity,
+        "friction-net strays {model_error} m, the scene's sensitivity is {sensitivity} m"
+    );
+}
