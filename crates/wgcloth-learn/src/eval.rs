@@ -66,11 +66,7 @@ fn predict(net: &Network, data: &Dataset) -> Vec<(Vec3, Mat3)> {
             let (y, j) = net
                 .mlp
                 .forward_jacobian(&frame.inputs(&coefficients(x)), net.kind.wrt());
-            let fj = frame.force(
-                [&y[..2], &y[2..4], &y[4..]],
-                [&j[..6], &j[6..12], &j[12..]],
-                x[9],
-            );
+            let fj = frame.force(&y, &j, x[9]);
             (fj.force, fj.d_c)
         })
         .collect()
