@@ -1,8 +1,8 @@
 //! Stage "measure": how deep the cloth got inside the rigid body after the
-//! step (a ray-parity inside test, then the distance to the nearest point
-//! of the surface; no depth limit), the run's deepest,
-//! and the push-out that moves every vertex found inside back onto the
-//! surface. CPU twin of wgsl/measure.wgsl.
+//! solve (a ray-parity inside test, then the distance to the nearest point
+//! of the surface; no depth limit), the run's deepest, and the push-out
+//! that moves every vertex found inside back out of the body. CPU twin of
+//! wgsl/measure.wgsl.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -84,16 +84,15 @@ pub fn penetration_depth(body: &RigidBody, frame: &RigidFrame, x: Vec3) -> f32 {
     way_out(body, frame.to_body(x)).map_or(0.0, |w| w.depth)
 }
 
-/// The push-out: every free cloth vertex the step left inside the body
-/// moves out to the nearest point of the surface ([`way_out`]) and on
-/// along that triangle's normal by the contact thickness ε, where the
-/// contact force starts (onto the surface itself it would start the next
-/// step with the full penalty ε k_n, and a line drawn from it would sit
-/// in the body), and loses the velocity
-/// with which it moves into the body relative to the surface (an inelastic
-/// impact). Contacts only see points within `max_depth` of a face, so this
-/// is what keeps a vertex from staying inside, or a fast body from
-/// tunnelling. Returns how deep the deepest vertex was before it moved, m.
+/// The push-out: every free cloth vertex the solve left inside the body
+/// moves to the nearest point of the surface ([`way_out`]) and on along
+/// that triangle's normal by the contact thickness ε, where the contact
+/// force starts (on the surface itself it would start the next step with
+/// the full penalty ε k_n), and loses the velocity with which it moves
+/// into the body relative to the surface (an inelastic impact). Contacts
+/// only see points within `max_depth` of a face, so this is what keeps a
+/// vertex from staying inside, or a fast body from tunnelling. Returns how
+/// deep the deepest vertex (pinned ones too) was before it moved, m.
 pub fn push_out(
     body: &RigidBody,
     frame: &RigidFrame,
