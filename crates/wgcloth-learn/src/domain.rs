@@ -112,10 +112,10 @@ pub fn random_coefficients(rng: &mut Rng) -> Coefficients {
 }
 
 /// The rows a network of `kind` evaluates for one uniform sample: the
-/// sample's inputs, or for the contact-frame network its rows.
+/// sample's inputs, or for a friction network its contact frame's rows.
 pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
     let (x, _) = uniform_sample(kind, rng);
-    if kind != NetKind::FrictionContact {
+    if kind == NetKind::Naive {
         return x;
     }
     let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
@@ -127,8 +127,12 @@ pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
     };
     // c = 0 has no frame; any depth-zero row stands in for it.
     ContactFrame::new(c, v).map_or_else(
-        || [&[0.0; 3], &x[6..]].concat().repeat(kind.evaluations()),
-        |f| f.inputs(&k).to_vec(),
+        || {
+            let width = kind.inputs().len();
+            let zeros = vec![0.0; width - 4];
+            [&zeros[..], &x[6..]].concat().repeat(kind.evaluations())
+        },
+        |f| f.inputs(kind, &k),
     )
 }
 

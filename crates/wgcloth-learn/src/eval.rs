@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::dataset::Dataset;
 use crate::domain::{Rng, uniform_sample};
-use wgcloth::cpu::contact::{Coefficients, ContactFrame, friction};
+use wgcloth::cpu::contact::{Coefficients, friction, friction_net};
 use wgcloth::nn::weights::{NetKind, Network, WeightsFile};
 
 #[derive(Clone, Debug)]
@@ -45,28 +45,21 @@ fn matrix(j: &[f32]) -> Mat3 {
 /// The network's output for each sample of `data` in the data's frame,
 /// with its Jacobian along c (friction) or p (naive).
 fn predict(net: &Network, data: &Dataset) -> Vec<(Vec3, Mat3)> {
-    let along = match net.kind {
-        NetKind::Naive => 4..7,
-        _ => 0..3,
-    };
-    if net.kind != NetKind::FrictionContact {
-        let (y, j) = net.mlp.forward_jacobian_parallel(&data.inputs, along);
+    if net.kind == NetKind::Naive {
+        let (y, j) = net
+            .mlp
+            .forward_jacobian_parallel(&data.inputs, net.kind.wrt());
         return (0..data.len())
             .map(|i| (Vec3::from_slice(&y[3 * i..]), matrix(&j[9 * i..])))
             .collect();
     }
+    // Friction networks as the simulation runs them: in the contact frame.
     (0..data.len())
         .into_par_iter()
         .map(|i| {
             let x = data.input(i);
             let (c, v) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]));
-            let Some(frame) = ContactFrame::new(c, v) else {
-                return (Vec3::ZERO, Mat3::ZERO);
-            };
-            let (y, j) = net
-                .mlp
-                .forward_jacobian(&frame.inputs(&coefficients(x)), net.kind.wrt());
-            let fj = frame.force(&y, &j, x[9]);
+            let fj = friction_net(&net.mlp, net.kind, c, v, &coefficients(x));
             (fj.force, fj.d_c)
         })
         .collect()

@@ -184,7 +184,7 @@ fn rows_for(kind: NetKind, data: &Dataset) -> (Vec<f32>, Vec<f32>) {
         if let Some(frame) =
             ContactFrame::new(Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]))
         {
-            inputs.extend(&frame.inputs(&k)[..7]);
+            inputs.extend(&frame.inputs(kind, &k)[..7]);
             targets.extend(frame.targets(Vec3::from_array(*g)));
         }
     }

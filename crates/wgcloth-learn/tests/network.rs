@@ -8,7 +8,7 @@ use std::path::Path;
 
 use common::{Rng, assert_close};
 use glam::{Mat3, Quat, Vec3};
-use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_contact_net, friction_net};
+use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_net};
 use wgcloth::nn::weights::{NetKind, WeightsFile};
 use wgcloth::nn::{Layer, Mlp};
 use wgcloth_learn::dataset::{Dataset, generate};
@@ -82,16 +82,48 @@ fn assert_jacobians_match_differences(
     }
 }
 
+/// The world-frame network read in the contact frame: its Jacobians are
+/// those of the frame's scalars, so they match finite differences along
+/// the frame's directions (depth along ĉ; approach along ĉ and slide along
+/// t̂ in v). Turning the contact turns a world-frame network's inputs and,
+/// as it is not equivariant, changes its output a little: that part, the
+/// network's error, is left out of the stiffness by design.
 #[test]
-fn network_force_jacobians_match_finite_differences() {
+fn network_force_jacobians_match_finite_differences_along_the_contact_frame() {
     // c spans 0.1, v 4, the coefficients up to 1000.
     let ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
     let net = scaled_random_net(&[10, 24, 24, 3], &ranges, 8);
+    let g = |c, v| friction_net(&net, NetKind::Friction, c, v, &K);
     let mut rng = Rng(4);
-    for _ in 0..20 {
+    let mut checked = 0;
+    for _ in 0..40 {
         let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
-        assert_jacobians_match_differences(|c, v| friction_net(&net, c, v, &K), c, v);
+        let fj = g(c, v);
+        if fj.force == Vec3::ZERO {
+            continue; // outside the cone's pushing side: nothing to differentiate
+        }
+        checked += 1;
+        let c_hat = c.normalize();
+        let t_hat = v.reject_from(c_hat).normalize();
+        for (got, dc, dv, h, what) in [
+            (fj.d_c * c_hat, c_hat, Vec3::ZERO, 1e-4, "depth"),
+            (fj.d_v * c_hat, Vec3::ZERO, c_hat, 1e-3, "approach"),
+            (fj.d_v * t_hat, Vec3::ZERO, t_hat, 1e-3, "slide"),
+        ] {
+            let f = |s: f32| g(c + s * h * dc, v + s * h * dv).force;
+            let (f0, fp, fm) = (f(0.0), f(1.0), f(-1.0));
+            let best = [(fp - fm) / (2.0 * h), (fp - f0) / h, (f0 - fm) / h]
+                .iter()
+                .map(|d| (*d - got).length())
+                .fold(f32::INFINITY, f32::min);
+            assert!(
+                best <= 1e-2 * got.length().max(0.1),
+                "along {what} at c {c}, v {v}: {got} vs {:?}",
+                (fp - fm) / (2.0 * h)
+            );
+        }
     }
+    assert!(checked >= 10, "only {checked} of 40 contacts pushed");
 }
 
 /// The contact-frame network's input ranges: depth, approach, slide, the
@@ -106,58 +138,96 @@ fn contact_frame_network_jacobians_match_finite_differences() {
     let mut rng = Rng(5);
     for _ in 0..40 {
         let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
-        assert_jacobians_match_differences(|c, v| friction_contact_net(&net, c, v, &K), c, v);
+        let g = |c, v| friction_net(&net, NetKind::FrictionContact, c, v, &K);
+        assert_jacobians_match_differences(g, c, v);
     }
 }
 
-/// What the contact frame guarantees for any weights: the force turns with
-/// the contact (g(Rc, Rv) = R g(c, v)), it lies in the friction cone (no
-/// pulling, friction at most μ times the normal force), its normal part
-/// does not depend on the sliding, friction vanishes as the sliding stops,
-/// and the Jacobians stay finite there and approach their limit.
+/// What the contact frame guarantees for any weights, for both friction
+/// networks: the force lies in the friction cone (no pulling, friction at
+/// most μ times the normal force), friction vanishes as the sliding stops, and the Jacobians stay
+/// finite there. The contact-frame network's Jacobians also approach their
+/// limit, its normal force does not depend on the sliding, and its force
+/// turns with the contact (g(Rc, Rv) = R g(c, v)); the world-frame
+/// network's cannot, as it sees the world's axes.
 #[test]
-fn contact_frame_network_is_equivariant_and_frictionless_at_rest() {
-    let net = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
-    let g = |c: Vec3, v: Vec3| friction_contact_net(&net, c, v, &K);
-    let mut rng = Rng(6);
-    for _ in 0..20 {
-        let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
-        let r = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
-        let (a, b) = (g(c, v), g(r * c, r * v));
-        assert!(
-            (r * a.force - b.force).length() <= 1e-4 * a.force.length().max(1e-3),
-            "{} vs {}",
-            r * a.force,
-            b.force
-        );
-        let n = -c.normalize();
-        let (f_n, f_t) = (a.force.dot(n), a.force.reject_from(n).length());
-        assert!(
-            f_n >= 0.0 && f_t <= K.mu * f_n * (1.0 + 1e-5),
-            "normal {f_n}, friction {f_t}, μ {}",
-            K.mu
-        );
-        let faster = g(c, v + 0.7 * v.reject_from(n));
-        assert!((faster.force.dot(n) - f_n).abs() <= 1e-5 * f_n.max(1e-3));
+fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
+    let world_ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
+    // The contact-frame network's g_n (whose sign does not turn with the
+    // contact) made to vary enough to change sign over the samples.
+    let mut contact = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
+    let last = contact.layers.last_mut().unwrap();
+    last.weight[..last.inputs]
+        .iter_mut()
+        .for_each(|w| *w *= 20.0);
+    let networks = [
+        (NetKind::FrictionContact, contact),
+        (
+            NetKind::Friction,
+            scaled_random_net(&[10, 24, 24, 3], &world_ranges, 11),
+        ),
+    ];
+    for (kind, net) in &networks {
+        let g = |c: Vec3, v: Vec3| friction_net(net, *kind, c, v, &K);
+        let mut rng = Rng(6);
+        let mut pushing = 0;
+        for _ in 0..40 {
+            let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
+            let a = g(c, v);
+            if *kind == NetKind::FrictionContact {
+                let r = Quat::from_axis_angle(rng.vec3(-1.0, 1.0).normalize(), rng.range(0.0, 6.0));
+                let b = g(r * c, r * v);
+                assert!(
+                    (r * a.force - b.force).length() <= 1e-4 * a.force.length().max(1e-3),
+                    "{} vs {}",
+                    r * a.force,
+                    b.force
+                );
+                let rotated = Mat3::from_quat(r);
+                assert_close(
+                    rotated * a.d_v * rotated.transpose(),
+                    b.d_v,
+                    1e-3,
+                    1e-3,
+                    "rotated ∂g/∂v",
+                );
+            }
+            let n = -c.normalize();
+            let (f_n, f_t) = (a.force.dot(n), a.force.reject_from(n).length());
+            assert!(
+                f_n >= 0.0 && f_t <= K.mu * f_n * (1.0 + 1e-5),
+                "{kind:?}: normal {f_n}, friction {f_t}, μ {}",
+                K.mu
+            );
+            pushing += usize::from(f_n > 0.0);
+            if *kind == NetKind::FrictionContact {
+                // g_n is taken at slide 0 (the world-frame network's is
+                // the even part in the slide).
+                let faster = g(c, v + 0.7 * v.reject_from(n));
+                assert!((faster.force.dot(n) - f_n).abs() <= 1e-5 * f_n.max(1e-3));
+            }
 
-        let rotated = Mat3::from_quat(r);
-        assert_close(
-            rotated * a.d_v * rotated.transpose(),
-            b.d_v,
-            1e-3,
-            1e-3,
-            "rotated ∂g/∂v",
+            // v along c: no sliding, no friction, finite Jacobians; and
+            // sliding at 1 µm/s is within rounding of it.
+            let n = c.normalize();
+            let rest = g(c, 0.3 * n);
+            assert!(rest.force.cross(n).length() <= 1e-6 * rest.force.length().max(1.0));
+            assert!(rest.d_c.is_finite() && rest.d_v.is_finite());
+            let creeping = g(c, 0.3 * n + 2e-6 * n.any_orthonormal_vector());
+            assert!(creeping.force.cross(n).length() <= 1e-3 * rest.force.length().max(1.0));
+            // The world-frame network's tangential stiffness differs with
+            // the direction of sliding; at rest it takes the mean.
+            if *kind == NetKind::FrictionContact {
+                assert_close(creeping.d_v, rest.d_v, 1e-2, 1e-2, "∂g/∂v as sliding stops");
+            }
+        }
+        // Random weights push at some contacts and not at others; both
+        // must have been seen for the cone's checks to mean something.
+        eprintln!("{kind:?}: {pushing} of 40 push");
+        assert!(
+            (5..=35).contains(&pushing),
+            "{kind:?}: {pushing} of 40 push"
         );
-
-        // v along c: no sliding, no friction, finite Jacobians; and sliding
-        // at 1 µm/s is within rounding of it.
-        let n = c.normalize();
-        let rest = g(c, 0.3 * n);
-        assert!(rest.force.cross(n).length() <= 1e-6 * rest.force.length().max(1.0));
-        assert!(rest.d_c.is_finite() && rest.d_v.is_finite());
-        let creeping = g(c, 0.3 * n + 2e-6 * n.any_orthonormal_vector());
-        assert!(creeping.force.cross(n).length() <= 1e-3 * rest.force.length().max(1.0));
-        assert_close(creeping.d_v, rest.d_v, 1e-2, 1e-2, "∂g/∂v as sliding stops");
     }
 }
 
@@ -410,7 +480,7 @@ fn the_shipped_networks_keep_their_accuracy() {
     // (network, most standardised MSE, most median Jacobian error).
     for (shipped, mse, jacobian) in [
         (FRICTION_SMALL, 1e-4, 0.08),
-        (FRICTION_THESIS, 1.5e-3, 0.15),
+        (FRICTION_THESIS, 1e-3, 0.1),
         (NAIVE, 1e-7, 1e-3),
     ] {
         let file = shipped.read().unwrap();

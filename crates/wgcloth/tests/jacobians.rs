@@ -6,11 +6,12 @@ use common::{Rng, assert_close, fd_jacobian};
 use glam::{Mat3, Quat, Vec3};
 use wgcloth::cpu::collide::{self, Contact, Geometry, Tolerances};
 use wgcloth::cpu::contact::{
-    Coefficients, ForceJacobian, Model, friction, local_frame, naive, naive_net,
+    Coefficients, ContactFrame, ForceJacobian, Model, friction, local_frame, naive, naive_net,
 };
 use wgcloth::cpu::rigid::{RigidFrame, transform};
 use wgcloth::cpu::springs::spring;
 use wgcloth::math::outer;
+use wgcloth::nn::weights::NetKind;
 use wgcloth::nn::{Layer, Mlp};
 use wgcloth::scene::{Cloth, Motion, RigidBody, TriMesh};
 
@@ -118,6 +119,38 @@ fn friction_jacobians_match_finite_differences_in_every_regime() {
         let fj = friction(c, v, &k);
         assert_eq!(fj.force, Vec3::ZERO);
         check_model(|c, v| friction(c, v, &k), c, v, "friction separated");
+    }
+}
+
+/// A friction network is read in the contact frame (`ContactFrame`): a
+/// world-frame network that computed eqs. 8–9 exactly would give eqs. 8–9,
+/// force and Jacobians, in stick and in slip.
+#[test]
+fn a_world_frame_network_read_in_the_contact_frame_keeps_the_exact_law() {
+    let k = coefficients();
+    let mut rng = Rng(9);
+    for _ in 0..30 {
+        let depth = -rng.range(0.01, 0.05);
+        let (n, t, c) = frame(&mut rng, depth);
+        for v in [-0.05 * n + 0.01 * t, -0.05 * n + 1.0 * t, 0.1 * n + 0.3 * t] {
+            let frame = ContactFrame::new(c, v).expect("in contact");
+            let rows = frame.inputs(NetKind::Friction, &k);
+            let (mut y, mut j) = (Vec::new(), Vec::new());
+            for x in rows.chunks_exact(10) {
+                let exact = friction(Vec3::from_slice(x), Vec3::from_slice(&x[3..]), &k);
+                y.extend(exact.force.to_array());
+                // Row-major [3 outputs × (c, v)].
+                for o in 0..3 {
+                    j.extend((0..3).map(|t| exact.d_c.col(t)[o]));
+                    j.extend((0..3).map(|t| exact.d_v.col(t)[o]));
+                }
+            }
+            let got = frame.network_force(NetKind::Friction, &y, &j, k.mu);
+            let want = friction(c, v, &k);
+            assert!((got.force - want.force).length() <= 1e-4 * want.force.length());
+            assert_close(got.d_c, want.d_c, 1e-2, 1e-3, "∂g/∂c read in the frame");
+            assert_close(got.d_v, want.d_v, 1e-2, 1e-3, "∂g/∂v read in the frame");
+        }
     }
 }
 

@@ -15,8 +15,8 @@
 @group(1) @binding(5) var<storage, read> rigid: array<vec4<f32>>;
 // The batch: its size, then each entry's contact slot; the network inputs
 // [entry × width] and outputs [entry × R × net_outputs]: row 0 the output,
-// row 1 + t its derivative along input wrt_start + t. The contact-frame
-// network has CONTACT_FRAME_ROWS entries per contact: at +slide, −slide, 0.
+// row 1 + t its derivative along input wrt_start + t. A friction network
+// has frame_rows() entries per contact: at +slide, −slide (and 0).
 @group(1) @binding(6) var<storage, read_write> net_batch: array<atomic<u32>>;
 @group(1) @binding(7) var<storage, read_write> net_inputs: array<f32>;
 @group(1) @binding(8) var<storage, read> net_outputs: array<f32>;
@@ -292,16 +292,28 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if k.valid == 0u {
         return;
     }
-    if params.model == MODEL_FRICTION_CONTACT_NET {
-        // Rows at +slide, −slide and slide 0 (ContactFrame::inputs).
-        let entry = atomicAdd(&net_batch[0], CONTACT_FRAME_ROWS);
+    if framed() {
+        // Rows at +slide, −slide and (contact-frame network) slide 0
+        // (ContactFrame::inputs).
+        let entry = atomicAdd(&net_batch[0], frame_rows());
         let f = contact_frame(k.normal * k.depth, relative_velocity(k));
         let slides = array<f32, CONTACT_FRAME_ROWS>(f.slide, -f.slide, 0.0);
-        for (var r = 0u; r < CONTACT_FRAME_ROWS; r++) {
+        let c = f.depth * f.c_hat;
+        for (var r = 0u; r < frame_rows(); r++) {
             atomicStore(&net_batch[1u + entry + r], s);
-            let row = array<f32, 7>(f.depth, f.approach, slides[r], params.kn, params.kd, params.kt, params.mu);
-            for (var i = 0u; i < 7u; i++) {
-                net_inputs[(entry + r) * 7u + i] = row[i];
+            let base = (entry + r) * params.net_width;
+            if params.model == MODEL_FRICTION_CONTACT_NET {
+                let row = array<f32, 7>(f.depth, f.approach, slides[r], params.kn, params.kd, params.kt, params.mu);
+                for (var i = 0u; i < 7u; i++) {
+                    net_inputs[base + i] = row[i];
+                }
+            } else {
+                let v = f.approach * f.c_hat + slides[r] * f.t_hat;
+                let row = array<f32, 10>(c.x, c.y, c.z, v.x, v.y, v.z,
+                                         params.kn, params.kd, params.kt, params.mu);
+                for (var i = 0u; i < 10u; i++) {
+                    net_inputs[base + i] = row[i];
+                }
             }
         }
         return;
@@ -309,21 +321,22 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let entry = atomicAdd(&net_batch[0], 1u);
     atomicStore(&net_batch[1u + entry], s);
     let base = entry * params.net_width;
-    if params.model == MODEL_FRICTION_NET {
-        let c = k.normal * k.depth;
-        let v_rel = relative_velocity(k);
-        let row = array<f32, 10>(c.x, c.y, c.z, v_rel.x, v_rel.y, v_rel.z,
-                                 params.kn, params.kd, params.kt, params.mu);
-        for (var i = 0u; i < 10u; i++) {
-            net_inputs[base + i] = row[i];
-        }
-    } else {
-        let f = local_frame(s, k);
-        let row = array<f32, 7>(f.b.x, f.c.x, f.c.y, 0.0, f.p.x, f.p.y, f.p.z);
-        for (var i = 0u; i < 7u; i++) {
-            net_inputs[base + i] = row[i];
-        }
+    let f = local_frame(s, k);
+    let row = array<f32, 7>(f.b.x, f.c.x, f.c.y, 0.0, f.p.x, f.p.y, f.p.z);
+    for (var i = 0u; i < 7u; i++) {
+        net_inputs[base + i] = row[i];
     }
+}
+
+// Whether the model's network is a friction network, evaluated in the
+// contact frame at `frame_rows()` rows a contact.
+fn framed() -> bool {
+    return params.model == MODEL_FRICTION_CONTACT_NET || params.model == MODEL_FRICTION_NET;
+}
+
+// NetKind::evaluations of a friction network.
+fn frame_rows() -> u32 {
+    return select(WORLD_FRAME_ROWS, CONTACT_FRAME_ROWS, params.model == MODEL_FRICTION_CONTACT_NET);
 }
 
 // Row `row` of a batch entry's outputs (three of them).
@@ -338,25 +351,66 @@ fn output_pair(entry: u32, row: u32) -> vec2<f32> {
     return vec2<f32>(net_outputs[o], net_outputs[o + 1u]);
 }
 
-// g and its Jacobians from the contact-frame network's entries `entry`
-// (+slide), `entry + 1` (−slide) and `entry + 2` (slide 0): mirrors
-// ContactFrame::force.
+// A friction network's row in the contact frame: (g_n, g_t) and their
+// derivatives along (depth, approach, slide).
+struct FrameRow {
+    y: vec2<f32>,
+    d: array<vec2<f32>, 3>,
+}
+
+// Batch entry `entry` read in frame f (ContactFrame::network_force): the
+// contact-frame network's outputs as they are; the world-frame network's g
+// along n and t̂, its Jacobian along ĉ (depth and approach) and t̂ (slide),
+// at rest the slide's along the tangent plane's mean
+// (ContactFrame::read_world_rows).
+fn frame_row(entry: u32, f: ContactFrame) -> FrameRow {
+    var row: FrameRow;
+    if params.model == MODEL_FRICTION_CONTACT_NET {
+        row.y = output_pair(entry, 0u);
+        for (var t = 0u; t < 3u; t++) {
+            row.d[t] = output_pair(entry, 1u + t);
+        }
+        return row;
+    }
+    let g = output_row(entry, 0u);
+    let j_c = output_jacobian(entry, 1u);
+    let j_v = output_jacobian(entry, 4u);
+    row.y = vec2<f32>(-dot(f.c_hat, g), dot(f.t_hat, g));
+    let along = array<vec3<f32>, 3>(j_c * f.c_hat, j_v * f.c_hat, j_v * f.t_hat);
+    for (var t = 0u; t < 3u; t++) {
+        row.d[t] = vec2<f32>(-dot(f.c_hat, along[t]), dot(f.t_hat, along[t]));
+    }
+    if f.slide <= SLIDE_AT_REST {
+        row.d[2].y = 0.5 * (j_v[0].x + j_v[1].y + j_v[2].z - dot(f.c_hat, j_v * f.c_hat));
+    }
+    return row;
+}
+
+// g and its Jacobians from a friction network's entries `entry` (+slide),
+// `entry + 1` (−slide) and, for the contact-frame network, `entry + 2`
+// (slide 0): mirrors ContactFrame::force.
 fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
     let f = contact_frame(c, v);
     if f.depth == 0.0 {
         return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
     }
-    let y0 = output_pair(entry, 0u);
-    let y1 = output_pair(entry + 1u, 0u);
-    // g_n at slide 0, the odd part for g_t; the mirror's slide derivative flips.
-    var g_n = output_pair(entry + 2u, 0u).x;
-    var g_t = 0.5 * (y0.y - y1.y);
-    var d_gn = vec3<f32>(output_pair(entry + 2u, 1u).x, output_pair(entry + 2u, 2u).x, 0.0);
+    let plus = frame_row(entry, f);
+    let minus = frame_row(entry + 1u, f);
+    // The odd part for g_t; the mirror's slide derivative flips. g_n at
+    // slide 0 where there is a third row, else the even part.
+    var g_t = 0.5 * (plus.y.y - minus.y.y);
     var d_gt: vec3<f32>;
+    var g_n = 0.5 * (plus.y.x + minus.y.x);
+    var d_gn: vec3<f32>;
     for (var t = 0u; t < 3u; t++) {
-        let a = output_pair(entry, 1u + t);
-        let b = select(1.0, -1.0, t == 2u) * output_pair(entry + 1u, 1u + t);
-        d_gt[t] = 0.5 * (a.y - b.y);
+        let b = select(1.0, -1.0, t == 2u) * minus.d[t];
+        d_gt[t] = 0.5 * (plus.d[t].y - b.y);
+        d_gn[t] = 0.5 * (plus.d[t].x + b.x);
+    }
+    if frame_rows() == CONTACT_FRAME_ROWS {
+        let still = frame_row(entry + 2u, f);
+        g_n = still.y.x;
+        d_gn = vec3<f32>(still.d[0].x, still.d[1].x, 0.0);
     }
     // Inside the friction cone (cpu::contact::coulomb): g_n ≥ 0, |g_t| ≤ μ g_n.
     if g_n <= 0.0 {
@@ -397,14 +451,10 @@ fn output_jacobian(entry: u32, first: u32) -> mat3x3<f32> {
 // The network's force and Jacobians for batch entry `entry` (mirrors
 // cpu::contact::friction_net and naive_net, scaled to force units).
 fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacobian {
-    if params.model == MODEL_FRICTION_CONTACT_NET {
+    if framed() {
         return contact_net_force(entry, k.normal * k.depth, v_rel);
     }
     let g = output_row(entry, 0u);
-    if params.model == MODEL_FRICTION_NET {
-        let sc = params.force_scale;
-        return ForceJacobian(sc * g, sc * output_jacobian(entry, 1u), sc * output_jacobian(entry, 4u));
-    }
     let f = local_frame(s, k);
     if !f.valid {
         return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
@@ -418,7 +468,7 @@ fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacob
 fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     let entry = id.x;
     // A contact-frame contact's later entries are read with its first.
-    let second = params.model == MODEL_FRICTION_CONTACT_NET && entry % CONTACT_FRAME_ROWS != 0u;
+    let second = framed() && entry % frame_rows() != 0u;
     if entry >= atomicLoad(&net_batch[0]) || second {
         return;
     }

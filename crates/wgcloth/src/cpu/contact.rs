@@ -133,8 +133,8 @@ pub enum Model {
         /// k_n, k_d, k_t, μ.
         coefficients: Coefficients,
     },
-    /// g from the network (thesis 2.7), in the world frame or in the
-    /// contact's (`ContactFrame`); ∂g/∂c and ∂g/∂v_rel from its input
+    /// g from the network (thesis 2.7), read in the contact's frame
+    /// ([`ContactFrame`]) whichever frame it was trained in; ∂g/∂c and ∂g/∂v_rel from its input
     /// Jacobian, by reverse mode through the layers.
     FrictionNet {
         /// The friction network; its kind picks world or contact frame.
@@ -212,44 +212,29 @@ fn naive_net_output(frame: &LocalFrame, f: &[f32], j: &[f32]) -> ForceJacobian {
     }
 }
 
-/// g and its Jacobians from a friction network with inputs
-/// (c, v_rel, k_n, k_d, k_t, μ) in the world frame.
-pub fn friction_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
-    let (g, j) = net.forward_jacobian(&friction_net_inputs(c, v, k), NetKind::Friction.wrt());
-    friction_net_output(&g, &j)
-}
-
-fn friction_net_inputs(c: Vec3, v: Vec3, k: &Coefficients) -> [f32; 10] {
-    [c.x, c.y, c.z, v.x, v.y, v.z, k.kn, k.kd, k.kt, k.mu]
-}
-
-fn friction_net_output(g: &[f32], j: &[f32]) -> ForceJacobian {
-    // j is row-major [3 outputs × 6 tangents]: columns 0–2 are ∂/∂c, 3–5 ∂/∂v.
-    let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
-    ForceJacobian {
-        force: Vec3::new(g[0], g[1], g[2]),
-        d_c: Mat3::from_cols(column(0), column(1), column(2)),
-        d_v: Mat3::from_cols(column(3), column(4), column(5)),
-    }
-}
-
 /// Below this slide speed (m/s) ṫ has no direction: friction is taken as
 /// zero and g_t / s as its limit ∂g_t/∂s.
 const SLIDE_AT_REST: f32 = 1e-6;
 
-/// A contact in its own frame, for the contact-frame friction network
-/// (`NetKind::FrictionContact`). Eqs. 8–9 give g = g_n n + g_t t̂ with
-/// n = −ĉ and t̂ = ṫ/|ṫ|, where g_n and g_t depend only on the depth
-/// r = |c|, the approach speed a = v_rel·ĉ (ḋ), the slide speed s = |ṫ|
-/// and the coefficients; the network learns these two scalars, and the
-/// directions are exact. Its output y is taken at slide 0 for g_n and made
-/// odd in s for g_t,
-///   g_n = y_n(0),   g_t = (y_t(s) − y_t(−s)) / 2,
-/// so the normal force does not depend on the slide (eq. 8; the network's
-/// own slide dependence turned, through the Coulomb bound, into a friction
-/// that grew with speed and braked a sliding patch), friction vanishes
-/// with ṫ as it must, and g_t / s stays finite: the Jacobian's
-/// (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest.
+/// A contact in its own frame, where both friction networks are evaluated.
+/// Eqs. 8–9 give g = g_n n + g_t t̂ with n = −ĉ and t̂ = ṫ/|ṫ|, where g_n
+/// and g_t depend only on the depth r = |c|, the approach speed
+/// a = v_rel·ĉ (ḋ), the slide speed s = |ṫ| and the coefficients. The
+/// contact-frame network learns these two scalars, and the directions are
+/// exact. The world-frame network (thesis 2.7) is evaluated at the same
+/// contact turned to the frame's directions and its g read along n and t̂:
+/// the thesis used its g as it came, which holds no cone, has friction
+/// where nothing slides, and fails Coulomb's law (issue 21). Either way the
+/// output y is made odd in s for g_t,
+///   g_t = (y_t(s) − y_t(−s)) / 2,
+/// so friction vanishes with ṫ as it must and g_t / s stays finite: the
+/// Jacobian's (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest. g_n is
+/// the contact-frame network's y_n(0), so it does not depend on the slide
+/// (eq. 8; that network's own slide dependence turned, through the
+/// Coulomb bound, into a friction that grew with speed and braked a
+/// sliding patch), and the world-frame network's even part
+/// (y_n(s) + y_n(−s)) / 2: it saw few samples at zero slide (a uniform ball
+/// of v_rel has slide density ∝ s) and its y_n(0) errs 2× more.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactFrame {
     c_hat: Vec3,
@@ -287,15 +272,73 @@ impl ContactFrame {
         })
     }
 
-    /// The network's three input rows: at +slide, at −slide and at 0.
-    pub fn inputs(&self, k: &Coefficients) -> [f32; 21] {
-        let (r, a, s) = (self.depth, self.approach, self.slide);
-        let row = |s: f32| [r, a, s, k.kn, k.kd, k.kt, k.mu];
-        let mut rows = [0.0; 21];
-        for (out, s) in rows.chunks_exact_mut(7).zip([s, -s, 0.0]) {
-            out.copy_from_slice(&row(s));
+    /// The slides of the rows a friction network of `kind` is evaluated at.
+    fn slides(&self, kind: NetKind) -> impl Iterator<Item = f32> {
+        [self.slide, -self.slide, 0.0]
+            .into_iter()
+            .take(kind.evaluations())
+    }
+
+    /// A friction network's input rows, at +slide, at −slide and (the
+    /// contact-frame network) at 0: (depth, approach, slide, k_n, k_d, k_t,
+    /// μ) for the contact-frame network; for the world-frame one (c, v_rel,
+    /// k_n, k_d, k_t, μ) with c = depth ĉ and v_rel = approach ĉ + slide t̂,
+    /// the same contact turned to the frame's directions.
+    pub fn inputs(&self, kind: NetKind, k: &Coefficients) -> Vec<f32> {
+        let (r, a, coefficients) = (self.depth, self.approach, [k.kn, k.kd, k.kt, k.mu]);
+        let c = r * self.c_hat;
+        self.slides(kind)
+            .flat_map(|s| match kind {
+                NetKind::FrictionContact => [&[r, a, s][..], &coefficients].concat(),
+                _ => {
+                    let v = a * self.c_hat + s * self.t_hat;
+                    [&c.to_array()[..], &v.to_array(), &coefficients].concat()
+                }
+            })
+            .collect()
+    }
+
+    /// A friction network's outputs y and input Jacobians j at the rows of
+    /// [`inputs`](ContactFrame::inputs), read in this frame (as the
+    /// contact-frame network's: (g_n, g_t) a row, and row-major [2 × (depth,
+    /// approach, slide)]) and held to the friction cone.
+    pub fn network_force(&self, kind: NetKind, y: &[f32], j: &[f32], mu: f32) -> ForceJacobian {
+        match kind {
+            NetKind::FrictionContact => self.force(y, j, Some((y[4], &j[12..15])), mu),
+            _ => {
+                let (y, j) = self.read_world_rows(y, j);
+                self.force(&y, &j, None, mu)
+            }
         }
-        rows
+    }
+
+    /// The world-frame network's g (3 a row) and ∂g/∂(c, v_rel) (row-major
+    /// [3 × 6] a row) in the frame: g_n = −ĉ·g and g_t = t̂·g, with the
+    /// derivatives along the frame's directions, ∂/∂depth = J_c ĉ,
+    /// ∂/∂approach = J_v ĉ and ∂/∂slide = J_v t̂. At rest t̂ is undefined;
+    /// ∂g_t/∂slide, the tangential stiffness that holds a resting contact,
+    /// is then the mean over the tangent plane, (tr J_v − ĉ·J_v ĉ) / 2.
+    fn read_world_rows(&self, g: &[f32], j: &[f32]) -> ([f32; 4], [f32; 12]) {
+        let (c_hat, t_hat) = (self.c_hat, self.t_hat);
+        let (mut y, mut frame_j) = ([0.0; 4], [0.0; 12]);
+        for row in 0..2 {
+            let (g, j) = (Vec3::from_slice(&g[3 * row..]), &j[18 * row..]);
+            let column = |t: usize| Vec3::new(j[t], j[6 + t], j[12 + t]);
+            let j_c = Mat3::from_cols(column(0), column(1), column(2));
+            let j_v = Mat3::from_cols(column(3), column(4), column(5));
+            let along = [j_c * c_hat, j_v * c_hat, j_v * t_hat];
+            y[2 * row..2 * row + 2].copy_from_slice(&[-c_hat.dot(g), t_hat.dot(g)]);
+            let out = &mut frame_j[6 * row..6 * row + 6];
+            for (d, a) in along.iter().enumerate() {
+                out[d] = -c_hat.dot(*a);
+                out[3 + d] = t_hat.dot(*a);
+            }
+            if t_hat == Vec3::ZERO {
+                out[5] =
+                    0.5 * (j_v.x_axis.x + j_v.y_axis.y + j_v.z_axis.z - c_hat.dot(j_v * c_hat));
+            }
+        }
+        (y, frame_j)
     }
 
     /// (g_n, g_t) of a force g: what the network learns.
@@ -303,20 +346,26 @@ impl ContactFrame {
         [-g.dot(self.c_hat), g.dot(self.t_hat)]
     }
 
-    /// g and its Jacobians from the network's outputs y (2 a row) and
-    /// Jacobians j (row-major [2 outputs × (depth, approach, slide)] a row)
-    /// at the three rows of [`inputs`](ContactFrame::inputs), held to eq.
-    /// 8's "no pulling" and to Coulomb's law with coefficient `mu`
-    /// ([`coulomb`]).
-    pub fn force(&self, y: &[f32], j: &[f32], mu: f32) -> ForceJacobian {
-        let (y0, y1, y2) = (&y[..2], &y[2..4], &y[4..6]);
-        let (j0, j1, j2) = (&j[..6], &j[6..12], &j[12..18]);
-        // g_n at slide 0; the odd part for g_t (the mirror row's slide is
-        // −s, so its slide derivatives enter with the other sign).
-        let g_n = y2[0];
+    /// g and its Jacobians from the frame's (g_n, g_t) y and their
+    /// derivatives j (row-major [2 × (depth, approach, slide)]) at +slide
+    /// and −slide, and g_n with its (depth, approach) derivatives at slide 0
+    /// where there is such a row; held to eq. 8's "no pulling" and to
+    /// Coulomb's law with coefficient `mu` ([`coulomb`]).
+    fn force(&self, y: &[f32], j: &[f32], still: Option<(f32, &[f32])>, mu: f32) -> ForceJacobian {
+        let (y0, y1) = (&y[..2], &y[2..4]);
+        let (j0, j1) = (&j[..6], &j[6..12]);
+        // The odd part for g_t (the mirror row's slide is −s, so its slide
+        // derivatives enter with the other sign); g_n at slide 0 where
+        // there is a third row, else the even part.
         let g_t = 0.5 * (y0[1] - y1[1]);
-        let d_gn = Vec3::new(j2[0], j2[1], 0.0);
         let d_gt = 0.5 * Vec3::new(j0[3] - j1[3], j0[4] - j1[4], j0[5] + j1[5]);
+        let (g_n, d_gn) = match still {
+            Some((g_n, d)) => (g_n, Vec3::new(d[0], d[1], 0.0)),
+            None => (
+                0.5 * (y0[0] + y1[0]),
+                0.5 * Vec3::new(j0[0] + j1[0], j0[1] + j1[1], j0[2] - j1[2]),
+            ),
+        };
         let ((g_n, d_gn), (g_t, d_gt)) = coulomb((g_n, d_gn), (g_t, d_gt), mu);
         let (c_hat, t_hat, r, a) = (self.c_hat, self.t_hat, self.depth, self.approach);
         let p = Mat3::IDENTITY - outer(c_hat, c_hat);
@@ -366,13 +415,14 @@ pub fn coulomb(normal: (f32, Vec3), tangent: (f32, Vec3), mu: f32) -> ((f32, Vec
     (normal, tangent)
 }
 
-/// g and its Jacobians from a contact-frame friction network.
-pub fn friction_contact_net(net: &Mlp, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
+/// g and its Jacobians from a friction network of `kind` (world or
+/// contact frame), evaluated in the contact's frame ([`ContactFrame`]).
+pub fn friction_net(net: &Mlp, kind: NetKind, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
     let Some(frame) = ContactFrame::new(c, v) else {
         return ForceJacobian::ZERO;
     };
-    let (y, j) = net.forward_jacobian(&frame.inputs(k), NetKind::FrictionContact.wrt());
-    frame.force(&y, &j, k.mu)
+    let (y, j) = net.forward_jacobian(&frame.inputs(kind, k), kind.wrt());
+    frame.network_force(kind, &y, &j, k.mu)
 }
 
 impl Model {
@@ -441,33 +491,27 @@ impl Model {
                 scale,
                 coefficients,
             } => {
-                let forces = match net.kind {
-                    NetKind::FrictionContact => {
-                        let frames: Vec<Option<ContactFrame>> = contacts
-                            .iter()
-                            .map(|(c, v)| ContactFrame::new(*c, *v))
-                            .collect();
-                        let inputs: Vec<f32> = frames
-                            .iter()
-                            .flatten()
-                            .flat_map(|f| f.inputs(coefficients))
-                            .collect();
-                        let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
-                        each_framed(&frames, |f, i| {
-                            f.force(&y[6 * i..], &j[18 * i..], coefficients.mu)
-                        })
-                    }
-                    _ => {
-                        let inputs: Vec<f32> = contacts
-                            .iter()
-                            .flat_map(|(c, v)| friction_net_inputs(*c, *v, coefficients))
-                            .collect();
-                        let (g, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
-                        (0..contacts.len())
-                            .map(|i| friction_net_output(&g[3 * i..], &j[18 * i..]))
-                            .collect()
-                    }
-                };
+                let frames: Vec<Option<ContactFrame>> = contacts
+                    .iter()
+                    .map(|(c, v)| ContactFrame::new(*c, *v))
+                    .collect();
+                let inputs: Vec<f32> = frames
+                    .iter()
+                    .flatten()
+                    .flat_map(|f| f.inputs(net.kind, coefficients))
+                    .collect();
+                let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
+                // Per contact: `evaluations` rows of outputs and of Jacobians.
+                let rows = net.kind.evaluations() * net.mlp.outputs();
+                let jacobians = rows * net.kind.wrt().len();
+                let forces = each_framed(&frames, |f, i| {
+                    f.network_force(
+                        net.kind,
+                        &y[rows * i..],
+                        &j[jacobians * i..],
+                        coefficients.mu,
+                    )
+                });
                 forces.into_iter().map(|f| f.scaled(*scale)).collect()
             }
             Model::NaiveNet { net, stiffness } => {

@@ -20,6 +20,9 @@ pub const MLP_MAX_LAYERS: u32 = 16;
 /// Network rows per contact of the contact-frame network
 /// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
 pub const CONTACT_FRAME_ROWS: u32 = 3;
+/// Network rows per contact of the world-frame friction network
+/// (`NetKind::Friction`), read in the contact frame: at +slide and −slide.
+pub const WORLD_FRAME_ROWS: u32 = 2;
 /// Invocations per workgroup of the network batch's kernels (`batch::plan`,
 /// `mlp::per_contact`).
 pub const BATCH_GROUP: u32 = 64;
@@ -52,9 +55,10 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 20] = [
+pub const SHARED: [(&str, u32); 21] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
+    ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
     ("BATCH_GROUP", BATCH_GROUP),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),

@@ -63,7 +63,7 @@ pub const FRICTION_INPUTS: [&str; 10] =
 pub const FRICTION_OUTPUTS: [&str; 3] = ["gx", "gy", "gz"];
 /// The friction network in the contact frame: depth |c|, approach speed
 /// v_rel·ĉ, signed sliding speed ±|ṫ|, coefficients; outputs g along n and
-/// along ṫ/|ṫ| (see `cpu::contact::friction_contact_net`).
+/// along ṫ/|ṫ| (see `cpu::contact::ContactFrame`).
 pub const FRICTION_CONTACT_INPUTS: [&str; 7] =
     ["depth", "approach", "slide", "kn", "kd", "kt", "mu"];
 /// The contact-frame network's outputs: g along n and along ṫ/|ṫ|.
@@ -115,14 +115,17 @@ impl NetKind {
         }
     }
 
-    /// Network evaluations per contact: the contact-frame network runs at
-    /// +slide and −slide, the symmetry that makes its friction odd in ṫ,
-    /// and at slide 0 for the normal force, which eq. 8 makes independent
-    /// of the slide.
+    /// Network evaluations per contact: a friction network (either frame)
+    /// runs at +slide and −slide, the symmetry that makes its friction odd
+    /// in ṫ; the contact-frame network also at slide 0 for the normal
+    /// force, which eq. 8 makes independent of the slide
+    /// (`cpu::contact::ContactFrame`).
     pub fn evaluations(self) -> usize {
+        use crate::gpu::constants::{CONTACT_FRAME_ROWS, WORLD_FRAME_ROWS};
         match self {
-            NetKind::FrictionContact => crate::gpu::constants::CONTACT_FRAME_ROWS as usize,
-            _ => 1,
+            NetKind::Naive => 1,
+            NetKind::Friction => WORLD_FRAME_ROWS as usize,
+            NetKind::FrictionContact => CONTACT_FRAME_ROWS as usize,
         }
     }
 
