@@ -15,7 +15,7 @@
 // rigid vertex the next entry (wgsl/collide.wgsl).
 @group(1) @binding(5) var<storage, read> triangle_contacts: array<u32>;
 // A: its diagonal blocks (one per vertex), then one block per spring.
-@group(1) @binding(6) var<storage, read_write> matrix: array<Sym3>;
+@group(1) @binding(6) var<storage, read_write> matrix: array<PackedSym3>;
 @group(1) @binding(7) var<storage, read_write> b: array<vec4<f32>>;
 
 fn stiffness_scale() -> f32 {
@@ -57,10 +57,10 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     var f = m * params.gravity;
     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
         let s = adjacent_spring(k);
-        k_sum = sym_add(k_sum, spring_terms[s].block);
+        k_sum = sym_add(k_sum, sym_unpack(spring_terms[s].block));
         // spring_terms[s].force acts on the spring's first vertex.
         let sign = select(-1.0, 1.0, spring_ends(s).x == i);
-        f += sign * spring_terms[s].force.xyz;
+        f += sign * spring_force(spring_terms[s]);
     }
     var diag = sym_add(sym_diagonal((1.0 + h * params.damping_mass) * m), sym_scale(k_sum, stiffness_scale()));
     var rhs = m * v[i].xyz + h * f;
@@ -71,7 +71,7 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     if c.valid != 0u {
         let r = responses[i];
         diag = sym_add(diag, contact_block(r, c.normal));
-        rhs += h * (r.force - sym_mul(r.damping, v[i].xyz));
+        rhs += h * (r.force - sym_mul(sym_unpack(r.damping), v[i].xyz));
     }
     for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
         let t = vertex_triangle(q) / 3u;
@@ -81,10 +81,10 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
             let r = responses[params.n_vertices + e - 1u];
             let beta = c.beta[corner];
             diag = sym_add(diag, sym_scale(contact_block(r, c.normal), beta * beta));
-            rhs += beta * h * (r.force - sym_mul(r.damping, cloth_velocity(c)));
+            rhs += beta * h * (r.force - sym_mul(sym_unpack(r.damping), cloth_velocity(c)));
         }
     }
-    matrix[i] = diag;
+    matrix[i] = sym_pack(diag);
     b[i] = vec4<f32>(rhs, 0.0);
 }
 
@@ -94,7 +94,7 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
     if s >= params.n_springs {
         return;
     }
-    var off = sym_scale(spring_terms[s].block, -stiffness_scale());
+    var off = sym_scale(sym_unpack(spring_terms[s].block), -stiffness_scale());
     // No branch on params.has_rigid: without a body every slot stays
     // invalid and every triangle count zero, and lavapipe recompiles a
     // kernel with a uniform-only branch at each dispatch.
@@ -111,5 +111,5 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
             off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + e - 1u], c.normal), weight));
         }
     }
-    matrix[params.n_vertices + s] = off;
+    matrix[params.n_vertices + s] = sym_pack(off);
 }

@@ -43,12 +43,28 @@ struct StepState {
     pad: u32,
 }
 
-// A symmetric 3×3 block: a = (xx, yy, zz, xy), b = (xz, yz, 0, 0).
-// Every block of the system matrix is symmetric, so 8 floats instead of 9
-// padded to 12 keep the SpMV's memory traffic down.
+// A symmetric 3×3 block as the kernels compute with it: a = (xx, yy, zz,
+// xy), b = (xz, yz, 0, 0).
 struct Sym3 {
     a: vec4<f32>,
     b: vec4<f32>,
+}
+
+// A symmetric 3×3 block as buffers hold it: (xx, yy), (zz, xy), (xz, yz).
+// Every block of the system matrix is symmetric, so 6 floats (24 bytes)
+// instead of 9 keep the SpMV's and the V-cycle's memory traffic down.
+struct PackedSym3 {
+    xx_yy: vec2<f32>,
+    zz_xy: vec2<f32>,
+    xz_yz: vec2<f32>,
+}
+
+fn sym_pack(m: Sym3) -> PackedSym3 {
+    return PackedSym3(m.a.xy, m.a.zw, m.b.xy);
+}
+
+fn sym_unpack(m: PackedSym3) -> Sym3 {
+    return Sym3(vec4<f32>(m.xx_yy, m.zz_xy), vec4<f32>(m.xz_yz, 0.0, 0.0));
 }
 
 fn sym_zero() -> Sym3 {
@@ -119,8 +135,14 @@ struct Contact {
 
 // A spring's force on its first vertex and its stiffness block.
 struct SpringTerm {
-    force: vec4<f32>,
-    block: Sym3,
+    block: PackedSym3,
+    force_xy: vec2<f32>,
+    force_z: f32,
+    pad: f32,
+}
+
+fn spring_force(t: SpringTerm) -> vec3<f32> {
+    return vec3<f32>(t.force_xy, t.force_z);
 }
 
 // What a contact adds to the system (mirrors `cpu::contact::Response`):
@@ -128,14 +150,15 @@ struct SpringTerm {
 struct Response {
     force: vec3<f32>,
     normal_stiffness: f32,
-    damping: Sym3,
+    damping: PackedSym3,
+    pad: vec2<f32>,
 }
 
 
 // −(h D_c + h² K_c): the contact's block of A before the β weights.
 fn contact_block(r: Response, n: vec3<f32>) -> Sym3 {
     let h = params.dt;
-    return sym_scale(sym_add(sym_scale(r.damping, h), sym_scale(sym_outer(n), h * h * r.normal_stiffness)), -1.0);
+    return sym_scale(sym_add(sym_scale(sym_unpack(r.damping), h), sym_scale(sym_outer(n), h * h * r.normal_stiffness)), -1.0);
 }
 
 // The rigid body at the end of the step (written by stage "rigid").

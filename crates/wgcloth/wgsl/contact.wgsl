@@ -163,7 +163,7 @@ fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>) -> Response {
             damping -= deficit * outer(t_hat, t_hat);
         }
     }
-    return Response(fj.force, normal_stiffness, project_nsd(damping));
+    return Response(fj.force, normal_stiffness, sym_pack(project_nsd(damping)), vec2<f32>(0.0));
 }
 
 fn relative_velocity(c: Contact) -> vec3<f32> {

@@ -31,9 +31,9 @@ struct Hop {
 
 @group(1) @binding(0) var<storage, read> hop: Hop;
 // A of the cloth: its diagonal blocks (one per vertex), then one per spring.
-@group(1) @binding(1) var<storage, read> matrix: array<Sym3>;
+@group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
 // Every level's smoother blocks and every coarse level's stencils.
-@group(1) @binding(2) var<storage, read_write> operators: array<Sym3>;
+@group(1) @binding(2) var<storage, read_write> operators: array<PackedSym3>;
 // Every coarse level's right-hand side and correction.
 @group(1) @binding(3) var<storage, read_write> vectors: array<vec4<f32>>;
 // The PCG residual, level 0's right-hand side.
@@ -158,7 +158,7 @@ fn interpolate(j: u32) -> vec3<f32> {
 // The fine level's guess at node j: its pre-smoothing ω D⁻¹ r, plus the
 // interpolated coarse correction on the way up.
 fn guess(j: u32, up: bool) -> vec3<f32> {
-    var e = sym_mul(operators[hop.fine.smoothers_at + j], fine_rhs(j));
+    var e = sym_mul(sym_unpack(operators[hop.fine.smoothers_at + j]), fine_rhs(j));
     if up {
         e += interpolate(j);
     }
@@ -169,9 +169,9 @@ fn guess(j: u32, up: bool) -> vec3<f32> {
 fn row_guess(i: u32, up: bool) -> vec3<f32> {
     let g = hop.fine;
     if g.level == 0u {
-        var acc = sym_mul(matrix[i], guess(i, up));
+        var acc = sym_mul(sym_unpack(matrix[i]), guess(i, up));
         for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-            acc += sym_mul(matrix[params.n_vertices + adjacent_spring(k)], guess(adjacent_vertex(k), up));
+            acc += sym_mul(sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]), guess(adjacent_vertex(k), up));
         }
         return acc;
     }
@@ -181,7 +181,7 @@ fn row_guess(i: u32, up: bool) -> vec3<f32> {
         for (var dx = -2; dx <= 2; dx++) {
             let j = neighbour(g, c, dx, dy);
             if j >= 0 {
-                let block = operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)];
+                let block = sym_unpack(operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]);
                 acc += sym_mul(block, guess(u32(j), up));
             }
         }
@@ -241,9 +241,9 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             if g.level == 0u {
-                add_entry(cc, wi, i, matrix[i]);
+                add_entry(cc, wi, i, sym_unpack(matrix[i]));
                 for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-                    add_entry(cc, wi, adjacent_vertex(k), matrix[params.n_vertices + adjacent_spring(k)]);
+                    add_entry(cc, wi, adjacent_vertex(k), sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]));
                 }
             } else {
                 let c = vec2<u32>(x, y);
@@ -251,7 +251,7 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
                     for (var dx = -2; dx <= 2; dx++) {
                         let j = neighbour(g, c, dx, dy);
                         if j >= 0 {
-                            add_entry(cc, wi, u32(j), operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]);
+                            add_entry(cc, wi, u32(j), sym_unpack(operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]));
                         }
                     }
                 }
@@ -259,7 +259,7 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     for (var k = 0u; k < STENCIL; k++) {
-        operators[hop.coarse.stencil_at + I * STENCIL + k] = acc[k];
+        operators[hop.coarse.stencil_at + I * STENCIL + k] = sym_pack(acc[k]);
     }
     let centre = inverse(acc[stencil_slot(0, 0)]);
     var spread = 0.0;
@@ -268,21 +268,21 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
             spread += scaled_norm(centre, acc[k]);
         }
     }
-    operators[hop.coarse.smoothers_at + I] = smoother(centre, spread);
+    operators[hop.coarse.smoothers_at + I] = sym_pack(smoother(centre, spread));
     if g.level == 0u {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
             for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
                 let i = y * g.nx + x;
                 var m = sym_zero();
                 if !is_pinned(i) {
-                    let d = inverse(matrix[i]);
+                    let d = inverse(sym_unpack(matrix[i]));
                     var spread = 0.0;
                     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-                        spread += scaled_norm(d, matrix[params.n_vertices + adjacent_spring(k)]);
+                        spread += scaled_norm(d, sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]));
                     }
                     m = smoother(d, spread);
                 }
-                operators[g.smoothers_at + i] = m;
+                operators[g.smoothers_at + i] = sym_pack(m);
             }
         }
     }
@@ -323,7 +323,7 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
     let mine = lid < nodes(g);
     var e = vec3<f32>(0.0);
     if mine {
-        e = sym_mul(operators[g.smoothers_at + lid], vectors[g.rhs_at + lid].xyz);
+        e = sym_mul(sym_unpack(operators[g.smoothers_at + lid]), vectors[g.rhs_at + lid].xyz);
         sweep[lid] = vec4<f32>(e, 0.0);
     }
     workgroupBarrier();
@@ -335,12 +335,12 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
                 for (var dx = -2; dx <= 2; dx++) {
                     let j = neighbour(g, c, dx, dy);
                     if j >= 0 {
-                        let block = operators[g.stencil_at + lid * STENCIL + stencil_slot(dx, dy)];
+                        let block = sym_unpack(operators[g.stencil_at + lid * STENCIL + stencil_slot(dx, dy)]);
                         row += sym_mul(block, sweep[j].xyz);
                     }
                 }
             }
-            e += sym_mul(operators[g.smoothers_at + lid], vectors[g.rhs_at + lid].xyz - row);
+            e += sym_mul(sym_unpack(operators[g.smoothers_at + lid]), vectors[g.rhs_at + lid].xyz - row);
         }
         workgroupBarrier();
         if mine {
@@ -364,7 +364,7 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_in
     var rz = 0.0;
     if i < nodes(g) {
         let ri = fine_rhs(i);
-        let zi = guess(i, true) + sym_mul(operators[g.smoothers_at + i], ri - row_guess(i, true));
+        let zi = guess(i, true) + sym_mul(sym_unpack(operators[g.smoothers_at + i]), ri - row_guess(i, true));
         if g.level == 0u {
             zq[i] = vec4<f32>(zi, 0.0);
             rz = dot(ri, zi);

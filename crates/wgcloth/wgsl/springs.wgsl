@@ -16,15 +16,14 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let dx = x[ij.y].xyz - x[ij.x].xyz;
     let l = length(dx);
     if l <= 1.17549435e-38 {
-        spring_terms[s] = SpringTerm(vec4<f32>(0.0), sym_zero());
+        spring_terms[s] = SpringTerm(sym_pack(sym_zero()), vec2<f32>(0.0), 0.0, 0.0);
         return;
     }
     let d = dx / l;
     let rest = rest_lengths[s];
     let ratio = rest / l;
     let e = params.stiffness;
-    spring_terms[s] = SpringTerm(
-        vec4<f32>(e * (l - rest) * d, 0.0),
-        sym_add(sym_scale(sym_outer(d), e * ratio), sym_diagonal(e * max(1.0 - ratio, 0.0))),
-    );
+    let force = e * (l - rest) * d;
+    let block = sym_add(sym_scale(sym_outer(d), e * ratio), sym_diagonal(e * max(1.0 - ratio, 0.0)));
+    spring_terms[s] = SpringTerm(sym_pack(block), force.xy, force.z, 0.0);
 }

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use wgcloth::error::Result;
-use wgcloth::gpu::GpuContext;
+use wgcloth::gpu::{GpuContext, layout};
 use wgcloth::multigrid::{COARSE_SWEEPS, Level, STENCIL};
 use wgcloth::stage::Stage;
 
@@ -44,18 +44,19 @@ pub struct Extent {
     pub contacts: f64,
 }
 
-/// wgsl/pcg.wgsl: `vec4<f32>` vectors, `Sym3` blocks (8 floats), u32 flags.
+/// wgsl/pcg.wgsl: `vec4<f32>` vectors, packed `Sym3` blocks (6 floats), u32
+/// flags; the blocks, slots and spring terms as `gpu::layout` holds them.
 /// Per vertex `next` reads z and p and writes p' and q; `update` reads and
 /// writes x and r, reads p, q and P⁻¹ and writes z: 12 vectors.
 pub const GPU: Layout = Layout {
     vector: 16,
-    diag_block: 32,
-    off_block: 32,
+    diag_block: size_of::<layout::Sym3>() as u64,
+    off_block: size_of::<layout::Sym3>() as u64,
     flag: 4,
     vectors_per_iteration: 12,
-    contact: 64,
-    response: 48,
-    spring_term: 48,
+    contact: size_of::<layout::Contact>() as u64,
+    response: size_of::<layout::Response>() as u64,
+    spring_term: size_of::<layout::SpringTerm>() as u64,
 };
 
 /// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags. Per vertex

@@ -149,28 +149,25 @@ pub struct StepState {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct SpringTerm {
-    /// The spring's force on its first vertex in N (w = 0); the second
-    /// gets the opposite.
-    pub force: [f32; 4],
     /// Its stiffness block K_s = ∂f_i/∂x_j (wgsl/springs.wgsl).
     pub block: Sym3,
+    /// The spring's force on its first vertex in N; the second gets the
+    /// opposite.
+    pub force: [f32; 3],
+    /// Padding to the WGSL size.
+    pub pad: f32,
 }
 
-/// Symmetric 3×3 block: (xx, yy, zz, xy), (xz, yz, 0, 0).
+/// A symmetric 3×3 block as buffers hold it (mirrors `PackedSym3` in
+/// wgsl/common.wgsl): xx, yy, zz, xy, xz, yz.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct Sym3 {
-    /// (xx, yy, zz, xy).
-    pub a: [f32; 4],
-    /// (xz, yz, 0, 0).
-    pub b: [f32; 4],
-}
+pub struct Sym3(pub [f32; 6]);
 
 impl Sym3 {
     /// The full symmetric matrix.
     pub fn to_mat3(self) -> glam::Mat3 {
-        let [xx, yy, zz, xy] = self.a;
-        let [xz, yz, _, _] = self.b;
+        let [xx, yy, zz, xy, xz, yz] = self.0;
         glam::Mat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz])
     }
 }
@@ -214,6 +211,8 @@ pub struct Response {
     pub normal_stiffness: f32,
     /// The contact damping block D_c.
     pub damping: Sym3,
+    /// Padding to the WGSL size.
+    pub pad: [f32; 2],
 }
 
 /// Mirrors `RigidFrame` in wgsl/common.wgsl.
@@ -403,18 +402,37 @@ pub fn topology(scene: &Scene) -> (Vec<u32>, Sections) {
 mod tests {
     use super::*;
 
+    /// The size naga gives the WGSL struct `name` in `stage`'s source.
+    fn wgsl_size(stage: &str, name: &str) -> usize {
+        use wgpu::naga;
+        let source = crate::gpu::shaders::source(stage, 8);
+        let module = naga::front::wgsl::parse_str(&source).expect("the stage parses");
+        let (_, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no struct {name} in {stage}"));
+        ty.inner.size(module.to_ctx()) as usize
+    }
+
     #[test]
     fn sizes_match_the_wgsl_layout() {
-        assert_eq!(size_of::<Params>(), 224);
-        assert_eq!(size_of::<SpringTerm>(), 48);
-        assert_eq!(size_of::<StepState>(), 48);
-        assert_eq!(size_of::<Sym3>(), 32);
-        assert_eq!(size_of::<Contact>(), 64);
-        assert_eq!(size_of::<Response>(), 48);
-        assert_eq!(size_of::<Scalars>(), 32 + 12 * MAX_LEVELS as usize);
-        assert_eq!(size_of::<Hop>(), 64);
-        assert_eq!(size_of::<RigidFrame>(), 48);
-        assert_eq!(size_of::<BvhNode>(), 32);
+        for (stage, name, size) in [
+            ("springs", "Params", size_of::<Params>()),
+            ("springs", "SpringTerm", size_of::<SpringTerm>()),
+            ("springs", "StepState", size_of::<StepState>()),
+            ("springs", "PackedSym3", size_of::<Sym3>()),
+            ("springs", "Contact", size_of::<Contact>()),
+            ("springs", "Response", size_of::<Response>()),
+            ("pcg", "Scalars", size_of::<Scalars>()),
+            ("multigrid", "Hop", size_of::<Hop>()),
+            ("springs", "RigidFrame", size_of::<RigidFrame>()),
+            ("springs", "BvhNode", size_of::<BvhNode>()),
+        ] {
+            assert_eq!(wgsl_size(stage, name), size, "{name}");
+        }
+        // The packed blocks are 6 floats, without padding.
+        assert_eq!(size_of::<Sym3>(), 24);
         assert_eq!(std::mem::offset_of!(Params, gravity), 64);
         assert_eq!(std::mem::offset_of!(Params, rigid_position), 112);
         assert_eq!(std::mem::offset_of!(Params, rigid_rotation), 128);

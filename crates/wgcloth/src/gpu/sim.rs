@@ -392,7 +392,7 @@ impl GpuSim {
         Ok(terms
             .iter()
             .take(self.params.n_springs as usize)
-            .map(|t| (Vec3::from_slice(&t.force[..3]), t.block))
+            .map(|t| (Vec3::from_array(t.force), t.block))
             .unzip())
     }
 
