@@ -199,14 +199,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
                 .filter(|t| t.backend == *backend && t.grid == grid)
                 .map(|t| t.stage)
                 .collect();
-            for stage in [
-                "rigid",
-                "collide",
-                "springs",
-                "assemble",
-                "integrate",
-                "measure",
-            ] {
+            for stage in ["rigid", "collide", "assemble", "integrate", "measure"] {
                 assert!(of.contains(&stage), "{backend} {grid}²: {of:?}");
             }
             assert!(!of.contains(&"pcg"), "{of:?}");
@@ -225,7 +218,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             .expect("the friction-net row");
         assert_eq!(t.measured_ms, row.report.stage_ms[t.stage], "{t:?}");
         // The stages that sweep the cloth move at least one vector per vertex.
-        if ["collide", "springs", "assemble", "integrate", "measure"].contains(&t.stage) {
+        if ["collide", "assemble", "integrate", "measure"].contains(&t.stage) {
             assert!(t.bytes >= 12 * row.particles as u64, "{t:?}");
         }
         assert!(t.bytes > 0 && t.floor_ms > 0.0, "{t:?}");

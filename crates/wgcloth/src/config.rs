@@ -613,11 +613,11 @@ fn rotation(field: &str, r: &Rotation) -> Result<()> {
     finite(&format!("{field}.degrees"), &[r.degrees])
 }
 
-#[cfg(test)]
+// The tests read TOML, which the library parses only with its `toml` feature.
+#[cfg(all(test, feature = "toml"))]
 mod tests {
     use super::*;
 
-    #[cfg(feature = "toml")]
     #[test]
     fn defaults_are_valid_and_round_trip_through_toml() {
         let c = Config::default();
@@ -626,7 +626,6 @@ mod tests {
         assert_eq!(Config::from_toml(&text, Path::new("x.toml")).unwrap(), c);
     }
 
-    #[cfg(feature = "toml")]
     #[test]
     fn partial_toml_keeps_defaults() {
         let c = Config::from_toml("[cloth]\nmass = 0.5\n", Path::new("x.toml")).unwrap();
@@ -634,7 +633,6 @@ mod tests {
         assert_eq!(c.cloth.grid, ClothConfig::default().grid);
     }
 
-    #[cfg(feature = "toml")]
     #[test]
     fn errors_name_the_field() {
         let e = Config::from_toml("[cloth]\nmas = 0.5\n", Path::new("x.toml")).unwrap_err();

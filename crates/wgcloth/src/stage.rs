@@ -11,9 +11,8 @@ pub enum Stage {
     Collide,
     /// The contact model's forces and Jacobians (eqs. 6, 8, 9, or a network).
     Contact,
-    /// Spring forces and stiffness blocks (eqs. 4–5).
-    Springs,
-    /// The backward Euler system A v' = b.
+    /// The spring forces and stiffness blocks (eqs. 4–5) and the backward
+    /// Euler system A v' = b.
     Assemble,
     /// Preconditioned CG (multigrid or Jacobi).
     Pcg,
@@ -25,11 +24,10 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the order a step runs them.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 7] = [
         Stage::Rigid,
         Stage::Collide,
         Stage::Contact,
-        Stage::Springs,
         Stage::Assemble,
         Stage::Pcg,
         Stage::Integrate,
@@ -42,7 +40,6 @@ impl Stage {
             Stage::Rigid => "rigid",
             Stage::Collide => "collide",
             Stage::Contact => "contact",
-            Stage::Springs => "springs",
             Stage::Assemble => "assemble",
             Stage::Pcg => "pcg",
             Stage::Integrate => "integrate",

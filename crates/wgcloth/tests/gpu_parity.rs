@@ -8,7 +8,7 @@ use std::sync::Arc;
 use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
-use wgcloth::cpu::{CpuSim, springs};
+use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::{Config, Scene};
 
@@ -63,8 +63,9 @@ fn cpu_after(scene: &Scene, steps: usize) -> CpuSim {
     cpu
 }
 
+/// Stage "assemble", springs included: the system from the same state.
 #[test]
-fn springs_and_assembly_match_the_cpu_on_the_same_state() {
+fn assembly_matches_the_cpu_on_the_same_state() {
     let Some((ctx, kernels)) = gpu() else { return };
     let scene = hang(12);
     let mut cpu = cpu_after(&scene, 7);
@@ -72,22 +73,6 @@ fn springs_and_assembly_match_the_cpu_on_the_same_state() {
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
     gpu.step();
     cpu.step();
-
-    let (gf, gk) = gpu.read_springs().unwrap();
-    let mut cf = vec![Vec3::ZERO; scene.cloth.springs.len()];
-    let mut ck = vec![Mat3::ZERO; scene.cloth.springs.len()];
-    // The CPU's state before its step: recompute from the uploaded one.
-    let before = cpu_after(&scene, 7);
-    springs::evaluate(&scene.cloth, &before.state.x, &mut cf, &mut ck);
-    let gk: Vec<Mat3> = gk.iter().map(|m| m.to_mat3()).collect();
-    assert!(
-        max_dev(&gf, &cf) <= 1e-4 * max_norm(&cf),
-        "spring forces {} vs {}",
-        max_dev(&gf, &cf),
-        max_norm(&cf)
-    );
-    let (dev, norm) = mat_dev(&gk, &ck);
-    assert!(dev <= 1e-5 * norm, "spring blocks {dev} vs {norm}");
 
     let (gd, go, gb) = gpu.read_system().unwrap();
     let (a, b) = cpu.system();
@@ -367,7 +352,7 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
     ctx.queue.submit([encoder.finish()]);
     ctx.finish().unwrap();
-    // 11 outside the solve; PCG's init, init_scalars, spmv, conclude and
+    // 10 outside the solve; PCG's init, init_scalars, spmv, conclude and
     // finish; per iteration `next` (but the first) and `advance`; the
     // multigrid setup (one per coarse level L) and a V-cycle (2 L + 1) at
     // the start and in every iteration.
@@ -377,7 +362,7 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     );
     let cycle = 2 * coarse + 1;
     let pcg = 5 + (iters - 1) + iters * (1 + cycle) + coarse + cycle;
-    assert_eq!(dispatches, 50 * (11 + pcg), "dispatches per step");
+    assert_eq!(dispatches, 50 * (10 + pcg), "dispatches per step");
     assert_eq!(
         embedded.read_positions().unwrap(),
         separate.read_positions().unwrap()

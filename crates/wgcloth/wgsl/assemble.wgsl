@@ -1,12 +1,12 @@
 // Stage "assemble": the linearised backward Euler system (thesis eqs. 1–3
-// with the velocity Jacobian D), gathered per vertex and per spring:
+// with the velocity Jacobian D), gathered per vertex and per spring, each
+// spring's force and block computed here (wgsl/springs.wgsl, eqs. 4–5):
 //   A_ii = (1 + hα) m I + (h² + hβ) Σ K_s + Σ β_k² C,   C = −(h D_c + h² K_c)
 //   A_ij = −(h² + hβ) K_s + Σ β_k β_l C                 (per spring)
 //   b_i  = m v_i + h (m g + Σ ±f_s) + Σ β_k h (f − D_c (v_rel − u))
 // CPU twin: src/cpu/assemble.rs (which scatters the contacts instead).
 
 @group(1) @binding(1) var<storage, read> v: array<vec4<f32>>;
-@group(1) @binding(2) var<storage, read> spring_terms: array<SpringTerm>;
 // Contact slots and their responses: one per cloth vertex (vertex–face),
 // then one per rigid vertex (face–vertex).
 @group(1) @binding(3) var<storage, read> contacts: array<Contact>;
@@ -57,10 +57,11 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     var f = m * params.gravity;
     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
         let s = adjacent_spring(k);
-        k_sum = sym_add(k_sum, sym_unpack(spring_terms[s].block));
-        // spring_terms[s].force acts on the spring's first vertex.
+        let term = spring_term(s);
+        k_sum = sym_add(k_sum, term.block);
+        // The term's force acts on the spring's first vertex.
         let sign = select(-1.0, 1.0, spring_ends(s).x == i);
-        f += sign * spring_force(spring_terms[s]);
+        f += sign * term.force;
     }
     var diag = sym_add(sym_diagonal((1.0 + h * params.damping_mass) * m), sym_scale(k_sum, stiffness_scale()));
     var rhs = m * v[i].xyz + h * f;
@@ -94,7 +95,7 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
     if s >= params.n_springs {
         return;
     }
-    var off = sym_scale(sym_unpack(spring_terms[s].block), -stiffness_scale());
+    var off = sym_scale(spring_term(s).block, -stiffness_scale());
     // No branch on params.has_rigid: without a body every slot stays
     // invalid and every triangle count zero, and lavapipe recompiles a
     // kernel with a uniform-only branch at each dispatch.

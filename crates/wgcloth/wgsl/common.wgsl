@@ -133,18 +133,6 @@ struct Contact {
     triangle: u32,
 }
 
-// A spring's force on its first vertex and its stiffness block.
-struct SpringTerm {
-    block: PackedSym3,
-    force_xy: vec2<f32>,
-    force_z: f32,
-    pad: f32,
-}
-
-fn spring_force(t: SpringTerm) -> vec3<f32> {
-    return vec3<f32>(t.force_xy, t.force_z);
-}
-
 // What a contact adds to the system (mirrors `cpu::contact::Response`):
 // force on the penetrating point, K_c = normal_stiffness n nᵀ, and D_c.
 struct Response {

@@ -2,7 +2,8 @@
 // no stage needs more than WebGPU's 8 storage buffers. Sections (their
 // starts in `params`, laid out by gpu::layout::Sections):
 //   cloth triangles (3 per triangle; first, so the buffer is the index
-//   buffer an app draws with), springs (2 each), adjacency (offsets per
+//   buffer an app draws with), springs (2 vertices and the rest length's
+//   bits each), adjacency (offsets per
 //   vertex, then (spring, other vertex) pairs), pinned flags, vertex
 //   triangles (offsets, then 3 t + corner), spring triangles ((triangle,
 //   edge) × 2 per spring), body triangles, the body BVH's primitive order.
@@ -14,8 +15,12 @@ fn cloth_index(k: u32) -> u32 {
 }
 
 fn spring_ends(s: u32) -> vec2<u32> {
-    let at = params.springs_at + 2u * s;
+    let at = params.springs_at + 3u * s;
     return vec2<u32>(topology[at], topology[at + 1u]);
+}
+
+fn rest_length(s: u32) -> f32 {
+    return bitcast<f32>(topology[params.springs_at + 3u * s + 2u]);
 }
 
 // Vertex i's springs are adjacency entries adjacency_begin(i) .. adjacency_begin(i + 1).

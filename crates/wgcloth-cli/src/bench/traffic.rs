@@ -56,7 +56,8 @@ pub const GPU: Layout = Layout {
     vectors_per_iteration: 12,
     contact: size_of::<layout::Contact>() as u64,
     response: size_of::<layout::Response>() as u64,
-    spring_term: size_of::<layout::SpringTerm>() as u64,
+    // Each spring's force and block is computed where it is gathered.
+    spring_term: 0,
 };
 
 /// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags. Per vertex
@@ -130,11 +131,11 @@ impl Layout {
     ///   face–vertex slot written per body vertex;
     /// - contact: each contact's slot read, its response written, the
     ///   velocities of its three vertices read;
-    /// - springs: the positions read; per spring its ends and rest length
-    ///   read, its force and block written;
-    /// - assemble: per vertex v read, b and A's diagonal block written, its
-    ///   adjacency offset read; per spring its force and block and two
-    ///   adjacency entries read, its off-diagonal block written;
+    /// - assemble: the positions and v read, b and A's diagonal block
+    ///   written, each adjacency offset read; per spring its ends and rest
+    ///   length and two adjacency entries read, its off-diagonal block
+    ///   written, and where a layout stores spring terms (the CPU's) each
+    ///   written once and read twice;
     /// - integrate: x and v read, x written, the pinned flag read;
     /// - measure: the positions read.
     pub fn stage_bytes(&self, stage: Stage, e: &Extent) -> Option<u64> {
@@ -144,9 +145,9 @@ impl Layout {
             Stage::Rigid => 4 * m * v,
             Stage::Collide => n * (v + self.contact) + t * 12 + m * (2 * v + self.contact),
             Stage::Contact => (e.contacts * (self.contact + self.response + 3 * v) as f64) as u64,
-            Stage::Springs => n * v + s * (12 + self.spring_term),
             Stage::Assemble => {
-                n * (2 * v + self.diag_block + 4) + s * (self.spring_term + 16 + self.off_block)
+                n * (3 * v + self.diag_block + 4)
+                    + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
             Stage::Pcg => return None,
             Stage::Integrate => n * (3 * v + self.flag),

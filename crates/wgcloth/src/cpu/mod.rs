@@ -203,10 +203,8 @@ impl CpuSim {
                     &mut self.responses,
                 );
             }
-            Stage::Springs => {
-                springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks)
-            }
             Stage::Assemble => {
+                springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks);
                 assemble::springs_and_inertia(
                     cloth,
                     &self.params,

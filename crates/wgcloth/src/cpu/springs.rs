@@ -1,6 +1,7 @@
-//! Stage "springs": force and stiffness block of every spring (thesis 2.2,
-//! eqs. 4–5). Mirrors wgsl/springs.wgsl: one output per spring, which the
-//! assembly gathers per vertex.
+//! The springs of stage "assemble": force and stiffness block of every
+//! spring (thesis 2.2, eqs. 4–5). Mirrors wgsl/springs.wgsl; the CPU keeps
+//! one term per spring for the assembly to gather, where the GPU computes
+//! each where it is gathered.
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;

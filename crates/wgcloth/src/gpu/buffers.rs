@@ -10,8 +10,7 @@ use crate::config::{ModelKind, Preconditioner};
 use crate::error::{Error, Result};
 use crate::gpu::constants::{TILE, WORKGROUP, model, motion};
 use crate::gpu::layout::{
-    BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, SpringTerm,
-    StepState, Sym3,
+    BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, StepState, Sym3,
 };
 use crate::multigrid::{self, STENCIL};
 use crate::nn::weights::NetKind;
@@ -40,8 +39,6 @@ pub(crate) struct Buffers {
     pub(crate) rest: wgpu::Buffer,
     pub(crate) topology: wgpu::Buffer,
     pub(crate) sections: Sections,
-    pub(crate) rest_lengths: wgpu::Buffer,
-    pub(crate) spring_terms: wgpu::Buffer,
     /// Vertex–face slots (one per cloth vertex), then face–vertex ones
     /// (one per rigid vertex).
     pub(crate) contacts: wgpu::Buffer,
@@ -223,8 +220,6 @@ pub(crate) struct Sizes {
     /// twice this for z and q together, `zq`).
     pub(crate) per_vertex: u64,
     pub(crate) topology: u64,
-    pub(crate) rest_lengths: u64,
-    pub(crate) spring_terms: u64,
     pub(crate) contacts: u64,
     pub(crate) responses: u64,
     pub(crate) triangle_contacts: u64,
@@ -270,8 +265,6 @@ impl Sizes {
         Sizes {
             per_vertex: size(n, 16),
             topology: size(topology_words as u64, 4),
-            rest_lengths: size(s, 4),
-            spring_terms: size(s, size_of::<SpringTerm>()),
             contacts: size(slots, size_of::<Contact>()),
             responses: size(slots, size_of::<Response>()),
             triangle_contacts: size(t + p.n_rigid_vertices as u64, 4),
@@ -289,13 +282,11 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn all(&self) -> [(&'static str, u64); 18] {
+    pub(crate) fn all(&self) -> [(&'static str, u64); 16] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
             ("topology", self.topology),
-            ("rest lengths", self.rest_lengths),
-            ("spring terms", self.spring_terms),
             ("contacts", self.contacts),
             ("responses", self.responses),
             ("triangle contact lists", self.triangle_contacts),
@@ -398,8 +389,6 @@ impl Buffers {
                 wgpu::BufferUsages::INDEX,
             ),
             sections,
-            rest_lengths: storage("rest lengths", bytemuck::cast_slice(&cloth.rest_lengths)),
-            spring_terms: zeroed("spring terms", sizes.spring_terms),
             contacts: zeroed("contacts", sizes.contacts),
             responses: zeroed("responses", sizes.responses),
             triangle_contacts: zeroed("triangle contacts", sizes.triangle_contacts),

@@ -32,8 +32,6 @@ pub enum Entry {
     ContactGather,
     /// Responses from the network's outputs (`contact::respond_batch`).
     ContactRespondBatch,
-    /// Force and stiffness block of every spring (`springs::main`).
-    Springs,
     /// A's diagonal block and b, per vertex (`assemble::vertex`).
     AssembleVertex,
     /// A's off-diagonal block, per spring (`assemble::spring`).
@@ -79,7 +77,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 30] = [
+    pub const ALL: [Entry; 29] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -89,7 +87,6 @@ impl Entry {
         Entry::ContactResetBatch,
         Entry::ContactGather,
         Entry::ContactRespondBatch,
-        Entry::Springs,
         Entry::AssembleVertex,
         Entry::AssembleSpring,
         Entry::PcgInit,
@@ -124,7 +121,6 @@ impl Entry {
             Entry::ContactResetBatch => ("contact", "reset_batch"),
             Entry::ContactGather => ("contact", "gather"),
             Entry::ContactRespondBatch => ("contact", "respond_batch"),
-            Entry::Springs => ("springs", "main"),
             Entry::AssembleVertex => ("assemble", "vertex"),
             Entry::AssembleSpring => ("assemble", "spring"),
             Entry::PcgInit => ("pcg", "init"),

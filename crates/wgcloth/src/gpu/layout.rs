@@ -145,19 +145,6 @@ pub struct StepState {
     pub pad: u32,
 }
 
-/// Mirrors `SpringTerm` in wgsl/common.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct SpringTerm {
-    /// Its stiffness block K_s = ∂f_i/∂x_j (wgsl/springs.wgsl).
-    pub block: Sym3,
-    /// The spring's force on its first vertex in N; the second gets the
-    /// opposite.
-    pub force: [f32; 3],
-    /// Padding to the WGSL size.
-    pub pad: f32,
-}
-
 /// A symmetric 3×3 block as buffers hold it (mirrors `PackedSym3` in
 /// wgsl/common.wgsl): xx, yy, zz, xy, xz, yz.
 #[repr(C)]
@@ -318,7 +305,8 @@ pub struct Hop {
 /// to 256 bytes, so a section can also be bound on its own.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Sections {
-    /// Start of the springs (two vertices each), in `u32`s.
+    /// Start of the springs (two vertices and the rest length's bits each),
+    /// in `u32`s.
     pub springs: u32,
     /// Start of the adjacency: offsets per vertex, then (spring, other vertex) pairs.
     pub adjacency: u32,
@@ -380,7 +368,13 @@ pub fn topology(scene: &Scene) -> (Vec<u32>, Sections) {
         at
     };
     let sections = Sections {
-        springs: section(&mut cloth.springs.iter().flatten().copied()),
+        springs: section(
+            &mut cloth
+                .springs
+                .iter()
+                .zip(&cloth.rest_lengths)
+                .flat_map(|(&[i, j], rest)| [i, j, rest.to_bits()]),
+        ),
         adjacency: section(&mut adjacency.into_iter()),
         pinned: section(&mut cloth.pinned.iter().map(|&p| p as u32)),
         vertex_triangles: section(&mut vertex_triangles.into_iter()),
@@ -418,16 +412,15 @@ mod tests {
     #[test]
     fn sizes_match_the_wgsl_layout() {
         for (stage, name, size) in [
-            ("springs", "Params", size_of::<Params>()),
-            ("springs", "SpringTerm", size_of::<SpringTerm>()),
-            ("springs", "StepState", size_of::<StepState>()),
-            ("springs", "PackedSym3", size_of::<Sym3>()),
-            ("springs", "Contact", size_of::<Contact>()),
-            ("springs", "Response", size_of::<Response>()),
+            ("assemble", "Params", size_of::<Params>()),
+            ("assemble", "StepState", size_of::<StepState>()),
+            ("assemble", "PackedSym3", size_of::<Sym3>()),
+            ("assemble", "Contact", size_of::<Contact>()),
+            ("assemble", "Response", size_of::<Response>()),
             ("pcg", "Scalars", size_of::<Scalars>()),
             ("multigrid", "Hop", size_of::<Hop>()),
-            ("springs", "RigidFrame", size_of::<RigidFrame>()),
-            ("springs", "BvhNode", size_of::<BvhNode>()),
+            ("assemble", "RigidFrame", size_of::<RigidFrame>()),
+            ("assemble", "BvhNode", size_of::<BvhNode>()),
         ] {
             assert_eq!(wgsl_size(stage, name), size, "{name}");
         }

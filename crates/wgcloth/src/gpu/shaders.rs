@@ -10,11 +10,10 @@ use wgpu::naga;
 use crate::gpu::constants;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 12] = [
+pub const STAGES: [(&str, &str); 11] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
-    ("springs", include_str!("../../wgsl/springs.wgsl")),
     ("assemble", include_str!("../../wgsl/assemble.wgsl")),
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
     ("multigrid", include_str!("../../wgsl/multigrid.wgsl")),
@@ -31,14 +30,13 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 3] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 4] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
         &[
             "collide",
             "contact",
-            "springs",
             "assemble",
             "pcg",
             "multigrid",
@@ -50,6 +48,11 @@ pub const INCLUDES: [(&str, &str, &[&str]); 3] = [
         "bvh",
         include_str!("../../wgsl/bvh.wgsl"),
         &["collide", "measure"],
+    ),
+    (
+        "springs",
+        include_str!("../../wgsl/springs.wgsl"),
+        &["assemble"],
     ),
     (
         "partials",

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::gpu::buffers::{Buffers, Sizes, check_limits, params_for, vec4s};
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
-use crate::gpu::layout::{self, Contact, Params, Response, Sections, SpringTerm, StepState, Sym3};
+use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState, Sym3};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::stages::Stages;
 use crate::scene::Scene;
@@ -298,7 +298,6 @@ impl GpuSim {
             Stage::Rigid => s.rigid.encode(&mut pass, p),
             Stage::Collide => s.collide.encode(&mut pass, p),
             Stage::Contact => s.contact.encode(&mut pass, p, &s.params),
-            Stage::Springs => s.springs.encode(&mut pass, p),
             Stage::Assemble => s.assemble.encode(&mut pass, p),
             Stage::Pcg => s
                 .pcg
@@ -384,16 +383,6 @@ impl GpuSim {
         let mut slots = contacts.into_iter().zip(responses);
         let vertex_face = slots.by_ref().take(n).collect();
         Ok((vertex_face, slots.take(r).collect()))
-    }
-
-    /// Spring forces and blocks of the last step.
-    pub fn read_springs(&self) -> Result<(Vec<Vec3>, Vec<Sym3>)> {
-        let terms: Vec<SpringTerm> = self.read(&self.buffers.spring_terms)?;
-        Ok(terms
-            .iter()
-            .take(self.params.n_springs as usize)
-            .map(|t| (Vec3::from_array(t.force), t.block))
-            .unzip())
     }
 
     /// Milliseconds of each pass of the last recorded step, when the

@@ -1,5 +1,6 @@
-//! Stage "assemble" (wgsl/assemble.wgsl; CPU twin cpu/assemble.rs): the
-//! linearised backward Euler system (thesis eqs. 1–3), gathered per vertex
+//! Stage "assemble" (wgsl/assemble.wgsl with wgsl/springs.wgsl; CPU twins
+//! cpu/springs.rs and cpu/assemble.rs): the springs (thesis eqs. 4–5) and
+//! the linearised backward Euler system (eqs. 1–3), gathered per vertex
 //! (diagonal blocks and b) and per spring (off-diagonal blocks).
 
 use crate::gpu::buffers::Buffers;
@@ -16,8 +17,8 @@ impl Assemble {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Assemble {
         let buffers = [
             ("v", &b.v),
+            ("x", &b.x),
             ("topology", &b.topology),
-            ("spring_terms", &b.spring_terms),
             ("contacts", &b.contacts),
             ("responses", &b.responses),
             ("triangle_contacts", &b.triangle_contacts),

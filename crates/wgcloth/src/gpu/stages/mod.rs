@@ -13,7 +13,6 @@ pub mod measure;
 pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
-pub mod springs;
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::kernels::Kernels;
@@ -27,7 +26,6 @@ pub(crate) struct Stages {
     pub(crate) rigid: rigid::Rigid,
     pub(crate) collide: collide::Collide,
     pub(crate) contact: contact::Contact,
-    pub(crate) springs: springs::Springs,
     pub(crate) assemble: assemble::Assemble,
     pub(crate) pcg: pcg::Pcg,
     pub(crate) integrate: integrate::Integrate,
@@ -53,7 +51,6 @@ impl Stages {
             rigid: rigid::Rigid::new(kernels, device, b),
             collide: collide::Collide::new(kernels, device, b),
             contact: contact::Contact::new(kernels, device, b, network),
-            springs: springs::Springs::new(kernels, device, b),
             assemble: assemble::Assemble::new(kernels, device, b),
             pcg: pcg::Pcg::new(kernels, device, b, scene),
             integrate: integrate::Integrate::new(kernels, device, b),
