@@ -398,7 +398,6 @@ mod tests {
 
     /// The size naga gives the WGSL struct `name` in `stage`'s source.
     fn wgsl_size(stage: &str, name: &str) -> usize {
-        use wgpu::naga;
         let source = crate::gpu::shaders::source(stage, 8);
         let module = naga::front::wgsl::parse_str(&source).expect("the stage parses");
         let (_, ty) = module

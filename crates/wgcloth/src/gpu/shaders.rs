@@ -5,8 +5,6 @@
 
 use std::collections::BTreeMap;
 
-use wgpu::naga;
-
 use crate::gpu::constants;
 
 /// The stage files, by name.

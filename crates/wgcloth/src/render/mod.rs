@@ -537,7 +537,6 @@ pub const MAX_FRAME_SIZE: u32 = 16384;
 #[cfg(test)]
 mod tests {
     use super::SHADER;
-    use wgpu::naga;
 
     #[test]
     fn the_render_shader_validates_with_naga() {
