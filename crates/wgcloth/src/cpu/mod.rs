@@ -12,7 +12,10 @@ pub mod pcg;
 pub mod rigid;
 pub mod springs;
 
+#[cfg(not(target_arch = "wasm32"))]
 use std::time::Instant;
+#[cfg(target_arch = "wasm32")]
+use web_time::Instant;
 
 use glam::{Mat3, Vec3};
 

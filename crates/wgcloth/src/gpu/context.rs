@@ -1,10 +1,15 @@
 //! Choosing an adapter and opening a device for headless use. Embedding
 //! apps skip this and hand their own device and queue to [`super::GpuSim`].
+//! What blocks on the device (opening it, waiting, reading back) is native
+//! only: a browser resolves a future only once its event loop runs, and
+//! reads back through [`super::Readback`].
 
 use crate::error::{Error, Result};
 
+#[cfg(not(target_arch = "wasm32"))]
 use bytemuck::Pod;
 use std::sync::{Arc, Mutex};
+#[cfg(not(target_arch = "wasm32"))]
 use std::time::Duration;
 
 /// A device and queue with what the simulator needs to know of them.
@@ -27,11 +32,13 @@ pub fn describe(info: &wgpu::AdapterInfo) -> String {
 }
 
 impl GpuContext {
+    #[cfg(not(target_arch = "wasm32"))]
     /// A device on [`GpuContext::pick_adapter`]'s adapter.
     pub fn headless() -> Result<GpuContext> {
         Self::from_adapter(&Self::pick_adapter()?)
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Picks an adapter: `WGPU_BACKEND` limits the backends,
     /// `WGPU_ADAPTER_NAME` (a case-insensitive substring) picks by name,
     /// otherwise the high-performance default. Errors say which adapters
@@ -71,6 +78,7 @@ impl GpuContext {
         Ok(adapter)
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Opens a device on `adapter` with its full limits and, where present,
     /// timestamp queries.
     pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<GpuContext> {
@@ -112,6 +120,7 @@ impl GpuContext {
         })
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Waits for submitted work and reports any fault the device recorded.
     pub fn finish(&self) -> Result<()> {
         wait(&self.device)?;
@@ -144,11 +153,13 @@ pub fn one_line(error: &str) -> String {
         .join(": ")
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// The longest the host waits for submitted work: far beyond any step
 /// (a 256² step takes about a second on lavapipe), so reaching it means a
 /// hung or lost device, which then ends the run instead of hanging it.
 pub const WATCHDOG: Duration = Duration::from_secs(120);
 
+#[cfg(not(target_arch = "wasm32"))]
 /// Waits for all submitted work, at most [`WATCHDOG`].
 pub fn wait(device: &wgpu::Device) -> Result<()> {
     device
@@ -166,6 +177,7 @@ pub fn wait(device: &wgpu::Device) -> Result<()> {
         })
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// Copies `buffer` back to the host (blocks until the GPU is done), as
 /// whole elements of `T` (small buffers are padded to 64 bytes).
 pub fn read_buffer<T: Pod>(

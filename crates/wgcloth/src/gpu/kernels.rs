@@ -251,10 +251,18 @@ pub fn mlp_threads(limits: &wgpu::Limits) -> u32 {
 impl Kernels {
     /// Compiles every stage for `device`; a device that rejects a kernel
     /// gives an error saying which and why (captured with error scopes).
+    /// In a browser, await [`Kernels::create`] instead.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new(device: &wgpu::Device) -> Result<Kernels> {
+        pollster::block_on(Self::create(device))
+    }
+
+    /// [`Kernels::new`] as a future: on the web the error scope resolves
+    /// only once the event loop runs.
+    pub async fn create(device: &wgpu::Device) -> Result<Kernels> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let kernels = Self::compile(device);
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = scope.pop().await {
             return Err(Error::Gpu(format!(
                 "compiling the kernels: {}",
                 crate::gpu::context::one_line(&e.to_string())

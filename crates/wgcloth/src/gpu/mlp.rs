@@ -16,6 +16,7 @@ use wgpu::util::DeviceExt;
 
 use crate::error::{Error, Result};
 use crate::gpu::constants::{BATCH_GROUP, MLP_MAX_LAYERS, MLP_MAX_WIDTH, WORKGROUP};
+#[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::nn::Mlp;
@@ -536,10 +537,17 @@ impl NetworkBatch {
         queue.submit([encoder.finish()]);
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// The outputs, [contacts × (1 + |wrt|) × 3]: per contact the output,
     /// then its derivative along each input of `wrt`.
     pub fn read_outputs(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<f32>> {
-        read_buffer(device, queue, &self.outputs)
+        read_buffer(device, queue, self.outputs())
+    }
+
+    /// The outputs' buffer, laid out as [`NetworkBatch::read_outputs`]
+    /// returns it, for an asynchronous read ([`crate::gpu::Readback`]).
+    pub fn outputs(&self) -> &wgpu::Buffer {
+        &self.outputs
     }
 
     /// The uploaded network (its kernel, chunks and cost).

@@ -6,14 +6,16 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
+#[cfg(not(target_arch = "wasm32"))]
 use bytemuck::Pod;
 use glam::Vec3;
 
 use crate::error::{Error, Result};
 use crate::gpu::buffers::{Buffers, Sizes, check_limits, params_for, vec4s};
+#[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
-use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState, Sym3};
+use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::stages::Stages;
 use crate::scene::Scene;
@@ -45,17 +47,42 @@ pub struct GpuSim {
 impl GpuSim {
     /// Compiles the kernels for `device` and uploads `scene` onto it: the
     /// one call an app needs. It waits on the device's error scopes, which
-    /// resolve at once on native backends. Fails with an error naming the limit when the
-    /// device cannot run the scene. To run several scenes on one device,
-    /// build [`Kernels`] once and use [`GpuSim::with_kernels`].
+    /// resolve at once on native backends. Fails with an error naming the
+    /// limit when the device cannot run the scene. To run several scenes
+    /// on one device, build [`Kernels`] once and use
+    /// [`GpuSim::with_kernels`]. In a browser, where nothing may block,
+    /// await [`GpuSim::create`] instead.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> Result<GpuSim> {
-        Self::with_kernels(&Kernels::new(device)?, device, queue, scene)
+        pollster::block_on(Self::create(device, queue, scene))
     }
 
     /// Uploads `scene` onto the app's device with kernels already built for
     /// it. Fails with a clear error when the scene exceeds the device's
-    /// limits.
+    /// limits. In a browser, await [`GpuSim::create_with_kernels`].
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn with_kernels(
+        kernels: &Kernels,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+    ) -> Result<GpuSim> {
+        pollster::block_on(Self::create_with_kernels(kernels, device, queue, scene))
+    }
+
+    /// [`GpuSim::new`] as a future: on the web the device's error scopes
+    /// resolve only once the event loop runs.
+    pub async fn create(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+    ) -> Result<GpuSim> {
+        let kernels = Kernels::create(device).await?;
+        Self::create_with_kernels(&kernels, device, queue, scene).await
+    }
+
+    /// [`GpuSim::with_kernels`] as a future.
+    pub async fn create_with_kernels(
         kernels: &Kernels,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -67,15 +94,15 @@ impl GpuSim {
         check_limits(&device.limits(), &sizes, &params)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let sim = Self::create(kernels, device, queue, scene, params, (topology, sections));
-        captured(oom, "allocating the scene's buffers")?;
-        captured(scope, "creating the scene's GPU state")?;
+        let sim = Self::build(kernels, device, queue, scene, params, (topology, sections));
+        captured(oom, "allocating the scene's buffers").await?;
+        captured(scope, "creating the scene's GPU state").await?;
         sim
     }
 
     /// Builds everything once the scene is known to fit (errors the device
     /// reports come back through the caller's error scopes).
-    fn create(
+    fn build(
         kernels: &Kernels,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -330,10 +357,12 @@ impl GpuSim {
         count
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     fn read<T: Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
         read_buffer(&self.device, &self.queue, buffer)
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// A buffer of one `vec4<f32>` per vertex (positions, velocities or a
     /// copy of either), read back (blocks until the GPU is done).
     pub fn read_vec3(&self, buffer: &wgpu::Buffer) -> Result<Vec<Vec3>> {
@@ -344,32 +373,37 @@ impl GpuSim {
             .collect())
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Cloth positions, read back (blocks until the GPU is done).
     pub fn read_positions(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.x)
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Cloth velocities, read back (blocks until the GPU is done).
     pub fn read_velocities(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.v)
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// The clock and run statistics, read back (blocks until the GPU is done).
     pub fn read_state(&self) -> Result<StepState> {
         Ok(self.read::<StepState>(&self.buffers.state)?[0])
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// The assembled system of the last step: A's diagonal and per-spring
     /// blocks, and b.
-    pub fn read_system(&self) -> Result<(Vec<Sym3>, Vec<Sym3>, Vec<Vec3>)> {
+    pub fn read_system(&self) -> Result<(Vec<layout::Sym3>, Vec<layout::Sym3>, Vec<Vec3>)> {
         let b = self.read_vec3(&self.buffers.b)?;
-        let mut diagonal: Vec<Sym3> = self.read(&self.buffers.matrix)?;
+        let mut diagonal: Vec<layout::Sym3> = self.read(&self.buffers.matrix)?;
         let n = self.params.n_vertices as usize;
         let mut off = diagonal.split_off(n);
         off.truncate(self.params.n_springs as usize);
         Ok((diagonal, off, b))
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// The last step's contact slots and responses: vertex–face (one per
     /// cloth vertex), then face–vertex (one per rigid vertex); `valid`
     /// marks the slots in use.
@@ -385,6 +419,7 @@ impl GpuSim {
         Ok((vertex_face, slots.take(r).collect()))
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     /// Milliseconds of each pass of the last recorded step, when the
     /// adapter has timestamp queries.
     pub fn read_stage_ms(&self) -> Result<Option<Vec<(&'static str, f64)>>> {
@@ -397,8 +432,8 @@ impl GpuSim {
 }
 
 /// The first error `scope` captured, as one line saying what was being done.
-fn captured(scope: wgpu::ErrorScopeGuard, doing: &str) -> Result<()> {
-    match pollster::block_on(scope.pop()) {
+async fn captured(scope: wgpu::ErrorScopeGuard, doing: &str) -> Result<()> {
+    match scope.pop().await {
         None => Ok(()),
         Some(e) => Err(Error::Gpu(format!(
             "{doing}: {}",

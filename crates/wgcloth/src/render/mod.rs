@@ -11,15 +11,19 @@ use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use crate::cpu::CpuSim;
+#[cfg(not(target_arch = "wasm32"))]
 use crate::error::{Error, Result};
 use crate::gpu::GpuSim;
 use crate::gpu::buffers::vec4s;
+#[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::scene::Scene;
 
 pub use camera::Camera;
 
 const SHADER: &str = include_str!("../../wgsl/render.wgsl");
+#[cfg(not(target_arch = "wasm32"))]
+// The offscreen frames' format ([`Renderer`], native only).
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// The frame size unless asked otherwise.
@@ -443,6 +447,7 @@ impl Pipelines {
     }
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// The render pipelines with an offscreen RGBA8 (sRGB) target of one size,
 /// read back frame by frame.
 pub struct Renderer {
@@ -453,6 +458,7 @@ pub struct Renderer {
     height: u32,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl Renderer {
     /// Pipelines and a width × height target; a size the adapter cannot
     /// hold is an error naming the limit.
@@ -476,7 +482,9 @@ impl Renderer {
         })
     }
 
-    /// Draws `source` as seen by `camera` and reads the frame back.
+    /// Draws `source` as seen by `camera` and reads the frame back (native
+    /// only: it blocks; a browser draws with [`Pipelines::record`]).
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn render(
         &self,
         device: &wgpu::Device,
