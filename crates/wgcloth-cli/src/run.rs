@@ -113,6 +113,9 @@ pub struct Report {
     /// only), and per cloth vertex.
     pub gpu_state_bytes: Option<u64>,
     pub gpu_bytes_per_vertex: Option<f64>,
+    /// GPU arrays bound in parts because they pass a binding's limit, with
+    /// the bindings each takes (`GpuSim::split_arrays`).
+    pub gpu_split_arrays: Vec<(String, usize)>,
     /// The process's peak resident memory, bytes (Linux `VmHWM`; absent
     /// elsewhere): on the CPU path the simulation's memory plus the
     /// program's own.
@@ -429,6 +432,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         dispatches_per_step: None,
         gpu_state_bytes: None,
         gpu_bytes_per_vertex: None,
+        gpu_split_arrays: Vec::new(),
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration,
         finite: sim.is_finite(),
@@ -662,6 +666,11 @@ fn run_gpu(
         dispatches_per_step: Some(flight.dispatches),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
+        gpu_split_arrays: sim
+            .split_arrays()
+            .into_iter()
+            .map(|(name, parts)| (name.to_string(), parts))
+            .collect(),
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,
@@ -766,10 +775,18 @@ impl Report {
             .map(|d| format!(", {d} dispatches/step"))
             .unwrap_or_default();
         let memory = match (self.gpu_state_bytes, self.gpu_bytes_per_vertex) {
-            (Some(bytes), Some(per_vertex)) => format!(
-                "gpu memory   {:.2} MiB of state, {per_vertex:.0} bytes per vertex\n",
-                bytes as f64 / (1 << 20) as f64
-            ),
+            (Some(bytes), Some(per_vertex)) => {
+                let split: Vec<String> = self
+                    .gpu_split_arrays
+                    .iter()
+                    .map(|(name, parts)| format!(", {name} in {parts} bindings"))
+                    .collect();
+                format!(
+                    "gpu memory   {:.2} MiB of state, {per_vertex:.0} bytes per vertex{}\n",
+                    bytes as f64 / (1 << 20) as f64,
+                    split.concat()
+                )
+            }
             _ => String::new(),
         };
         let vertices = (self.grid[0] as u64 * self.grid[1] as u64) as f64;

@@ -7,10 +7,16 @@
 //! P). Each coarse operator is the Galerkin product Pᵀ A P, whose blocks are
 //! weighted sums of symmetric blocks and so symmetric themselves: the
 //! springs reach two nodes (bend springs), and so does every coarse level's
-//! 5 × 5 stencil.
+//! 5 × 5 stencil. Since A_ij = A_ji and each block is symmetric, a node
+//! stores only the upper half of its stencil ([`STORED_STENCIL`] blocks)
+//! and reads the lower half from its neighbours ([`stored_at`]): half the
+//! memory, and a coarse operator that is exactly symmetric in f32.
 
 /// Blocks in a coarse node's stencil: offsets −2..=2 along each axis.
 pub const STENCIL: u32 = 25;
+/// Blocks a coarse node stores: the centre and the offsets after it in
+/// [`stencil_slot`]'s order (dy > 0, or dy = 0 and dx > 0).
+pub const STORED_STENCIL: u32 = STENCIL / 2 + 1;
 /// Stop coarsening once a level has at most this many nodes; the coarsest
 /// is then solved by [`COARSE_SWEEPS`] Jacobi sweeps in one workgroup.
 pub const COARSEST_NODES: u32 = 16;
@@ -109,6 +115,18 @@ pub fn stencil_slot(dx: i32, dy: i32) -> usize {
     ((dy + 2) * 5 + dx + 2) as usize
 }
 
+/// Where the block of offset (dx, dy) from a node is stored: at the node
+/// itself (`false`) or at its neighbour at (dx, dy) (`true`), and the slot
+/// among that node's [`STORED_STENCIL`].
+pub fn stored_at(dx: i32, dy: i32) -> (bool, usize) {
+    let centre = STENCIL as usize / 2;
+    let slot = stencil_slot(dx, dy);
+    match slot >= centre {
+        true => (false, slot - centre),
+        false => (true, centre - slot),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,6 +142,22 @@ mod tests {
         assert!(odd.last().unwrap().nodes() <= COARSEST_NODES as usize);
         let tall = levels(2, 1 << 25);
         assert!(tall.len() <= MAX_LEVELS as usize, "{}", tall.len());
+    }
+
+    #[test]
+    fn each_offset_is_stored_once_and_its_opposite_at_the_neighbour() {
+        let mut seen = [0; STORED_STENCIL as usize];
+        for dy in -2..=2 {
+            for dx in -2..=2 {
+                let (neighbour, slot) = stored_at(dx, dy);
+                let centre = (dx, dy) == (0, 0);
+                assert_eq!(stored_at(-dx, -dy), (!neighbour && !centre, slot));
+                if !neighbour {
+                    seen[slot] += 1;
+                }
+            }
+        }
+        assert_eq!(seen, [1; STORED_STENCIL as usize]);
     }
 
     #[test]

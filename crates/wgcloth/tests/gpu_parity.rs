@@ -624,6 +624,71 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
     );
 }
 
+/// A device whose bindings hold 110 bytes per vertex of a 32² hanging
+/// cloth gets the topology (about 260 bytes per vertex), the matrix (160)
+/// and the multigrid operators (134) bound in parts, as lavapipe gets them
+/// at 1024² under its 128 MiB; the steps are bit for bit those of one
+/// binding each. A cloth too large even for three parts is one clear error.
+#[test]
+fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = hang_solved(32, Preconditioner::Multigrid, 40, 1e-3);
+    let whole = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    assert!(
+        whole.split_arrays().is_empty(),
+        "{:?}",
+        whole.split_arrays()
+    );
+
+    let adapter = GpuContext::pick_adapter().unwrap();
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 110 * 32 * 32,
+        ..adapter.limits()
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .unwrap();
+    let narrow = Kernels::new(&device).unwrap();
+    assert!(
+        narrow.split(),
+        "lavapipe binds 32 storage buffers per stage"
+    );
+    let parted = GpuSim::with_kernels(&narrow, &device, &queue, &scene).unwrap();
+    assert_eq!(
+        parted.split_arrays(),
+        [("topology", 3), ("matrix", 2), ("operators", 2)]
+    );
+    for _ in 0..30 {
+        whole.step();
+        parted.step();
+    }
+    let (a, b) = (
+        whole.read_positions().unwrap(),
+        parted.read_positions().unwrap(),
+    );
+    let (sa, sb) = (whole.read_state().unwrap(), parted.read_state().unwrap());
+    assert!(sa.cg_iterations_total > 30, "the solves ran: {sa:?}");
+    assert_eq!(sa.cg_iterations_total, sb.cg_iterations_total);
+    assert!(a.iter().all(|p| p.is_finite()));
+    assert_eq!(a, b, "positions differ once arrays are bound in parts");
+
+    let err = GpuSim::with_kernels(
+        &narrow,
+        &device,
+        &queue,
+        &hang_solved(48, Preconditioner::Multigrid, 40, 1e-3),
+    )
+    .err()
+    .expect("a 48² topology does not fit three 110 KiB bindings")
+    .to_string();
+    assert!(
+        err.contains("topology") && err.contains("max_storage_buffer_binding_size"),
+        "{err}"
+    );
+}
+
 /// The scene's GPU state holds at least the step's per-vertex vectors
 /// (x, v and their checkpoint copies, rest, b, r, z and q, both directions,
 /// P⁻¹: 13 `vec4`s) and grows with the cloth, not faster.

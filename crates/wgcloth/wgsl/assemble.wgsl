@@ -85,7 +85,7 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
             rhs += beta * h * (r.force - sym_mul(sym_unpack(r.damping), cloth_velocity(c)));
         }
     }
-    matrix[i] = sym_pack(diag);
+    matrix_set(i, sym_pack(diag));
     b[i] = vec4<f32>(rhs, 0.0);
 }
 
@@ -101,16 +101,16 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
     // kernel with a uniform-only branch at each dispatch.
     let along = spring_triangles(s);
     for (var side = 0u; side < 2u; side++) {
-        let t = select(along.z, along.x, side == 0u);
-        let edge = select(along.w, along.y, side == 0u);
-        if t == NO_TRIANGLE {
+        if along[side] == NO_TRIANGLE {
             continue;
         }
+        let t = along[side] / 3u;
+        let edge = along[side] % 3u;
         for (var e = next_triangle_contact(t, 0u); e != 0u; e = next_triangle_contact(t, e)) {
             let c = contacts[params.n_vertices + e - 1u];
             let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
             off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + e - 1u], c.normal), weight));
         }
     }
-    matrix[params.n_vertices + s] = sym_pack(off);
+    matrix_set(params.n_vertices + s, sym_pack(off));
 }

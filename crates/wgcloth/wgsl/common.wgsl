@@ -17,6 +17,8 @@ struct Params {
     supertiles_y: u32, net_width: u32, net_rows: u32, net_outputs: u32,
     max_speed: f32, springs_at: u32, adjacency_at: u32, pinned_at: u32,
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
+    // Where parts 1 and 2 of an array bound in parts start (gpu::shaders).
+    topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>, pad: vec2<u32>,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each

@@ -16,7 +16,8 @@ struct Grid {
     ny: u32,
     // ω D⁻¹ blocks, one per node, in `operators`.
     smoothers_at: u32,
-    // STENCIL blocks per node (coarse levels), in `operators`.
+    // STORED_STENCIL blocks per node (coarse levels), in `operators`: the
+    // upper half of its stencil (`stencil_block`).
     stencil_at: u32,
     // Right-hand side and correction, one vec4 per node each, in `vectors`.
     rhs_at: u32,
@@ -61,6 +62,18 @@ fn neighbour(g: Grid, c: vec2<u32>, dx: i32, dy: i32) -> i32 {
 
 fn stencil_slot(dx: i32, dy: i32) -> u32 {
     return u32((dy + 2) * 5 + dx + 2);
+}
+
+// Block (i, j) of coarse level g, j at (dx, dy) from i. Blocks and A are
+// symmetric, so a node stores the centre and the offsets after it, and the
+// others are its neighbours' (multigrid::stored_at).
+fn stencil_block(g: Grid, i: u32, j: u32, dx: i32, dy: i32) -> Sym3 {
+    let slot = stencil_slot(dx, dy);
+    let centre = STENCIL / 2u;
+    if slot >= centre {
+        return sym_unpack(operators_at(g.stencil_at + i * STORED_STENCIL + slot - centre));
+    }
+    return sym_unpack(operators_at(g.stencil_at + j * STORED_STENCIL + centre - slot));
 }
 
 // The coarse parents of fine coordinate c and their weights (multigrid::parents).
@@ -158,7 +171,7 @@ fn interpolate(j: u32) -> vec3<f32> {
 // The fine level's guess at node j: its pre-smoothing ω D⁻¹ r, plus the
 // interpolated coarse correction on the way up.
 fn guess(j: u32, up: bool) -> vec3<f32> {
-    var e = sym_mul(sym_unpack(operators[hop.fine.smoothers_at + j]), fine_rhs(j));
+    var e = sym_mul(sym_unpack(operators_at(hop.fine.smoothers_at + j)), fine_rhs(j));
     if up {
         e += interpolate(j);
     }
@@ -169,9 +182,9 @@ fn guess(j: u32, up: bool) -> vec3<f32> {
 fn row_guess(i: u32, up: bool) -> vec3<f32> {
     let g = hop.fine;
     if g.level == 0u {
-        var acc = sym_mul(sym_unpack(matrix[i]), guess(i, up));
+        var acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
         for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-            acc += sym_mul(sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]), guess(adjacent_vertex(k), up));
+            acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), guess(adjacent_vertex(k), up));
         }
         return acc;
     }
@@ -181,8 +194,7 @@ fn row_guess(i: u32, up: bool) -> vec3<f32> {
         for (var dx = -2; dx <= 2; dx++) {
             let j = neighbour(g, c, dx, dy);
             if j >= 0 {
-                let block = sym_unpack(operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]);
-                acc += sym_mul(block, guess(u32(j), up));
+                acc += sym_mul(stencil_block(g, i, u32(j), dx, dy), guess(u32(j), up));
             }
         }
     }
@@ -241,9 +253,9 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             if g.level == 0u {
-                add_entry(cc, wi, i, sym_unpack(matrix[i]));
+                add_entry(cc, wi, i, sym_unpack(matrix_at(i)));
                 for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-                    add_entry(cc, wi, adjacent_vertex(k), sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]));
+                    add_entry(cc, wi, adjacent_vertex(k), sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))));
                 }
             } else {
                 let c = vec2<u32>(x, y);
@@ -251,15 +263,16 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
                     for (var dx = -2; dx <= 2; dx++) {
                         let j = neighbour(g, c, dx, dy);
                         if j >= 0 {
-                            add_entry(cc, wi, u32(j), sym_unpack(operators[g.stencil_at + i * STENCIL + stencil_slot(dx, dy)]));
+                            add_entry(cc, wi, u32(j), stencil_block(g, i, u32(j), dx, dy));
                         }
                     }
                 }
             }
         }
     }
-    for (var k = 0u; k < STENCIL; k++) {
-        operators[hop.coarse.stencil_at + I * STENCIL + k] = sym_pack(acc[k]);
+    // The full row gives the smoother; the upper half is kept.
+    for (var k = 0u; k < STORED_STENCIL; k++) {
+        operators_set(hop.coarse.stencil_at + I * STORED_STENCIL + k, sym_pack(acc[STENCIL / 2u + k]));
     }
     let centre = inverse(acc[stencil_slot(0, 0)]);
     var spread = 0.0;
@@ -268,21 +281,21 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
             spread += scaled_norm(centre, acc[k]);
         }
     }
-    operators[hop.coarse.smoothers_at + I] = sym_pack(smoother(centre, spread));
+    operators_set(hop.coarse.smoothers_at + I, sym_pack(smoother(centre, spread)));
     if g.level == 0u {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
             for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
                 let i = y * g.nx + x;
                 var m = sym_zero();
                 if !is_pinned(i) {
-                    let d = inverse(sym_unpack(matrix[i]));
+                    let d = inverse(sym_unpack(matrix_at(i)));
                     var spread = 0.0;
                     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-                        spread += scaled_norm(d, sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]));
+                        spread += scaled_norm(d, sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))));
                     }
                     m = smoother(d, spread);
                 }
-                operators[g.smoothers_at + i] = sym_pack(m);
+                operators_set(g.smoothers_at + i, sym_pack(m));
             }
         }
     }
@@ -323,7 +336,7 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
     let mine = lid < nodes(g);
     var e = vec3<f32>(0.0);
     if mine {
-        e = sym_mul(sym_unpack(operators[g.smoothers_at + lid]), vectors[g.rhs_at + lid].xyz);
+        e = sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors[g.rhs_at + lid].xyz);
         sweep[lid] = vec4<f32>(e, 0.0);
     }
     workgroupBarrier();
@@ -335,12 +348,11 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
                 for (var dx = -2; dx <= 2; dx++) {
                     let j = neighbour(g, c, dx, dy);
                     if j >= 0 {
-                        let block = sym_unpack(operators[g.stencil_at + lid * STENCIL + stencil_slot(dx, dy)]);
-                        row += sym_mul(block, sweep[j].xyz);
+                        row += sym_mul(stencil_block(g, lid, u32(j), dx, dy), sweep[j].xyz);
                     }
                 }
             }
-            e += sym_mul(sym_unpack(operators[g.smoothers_at + lid]), vectors[g.rhs_at + lid].xyz - row);
+            e += sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors[g.rhs_at + lid].xyz - row);
         }
         workgroupBarrier();
         if mine {
@@ -364,7 +376,7 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_in
     var rz = 0.0;
     if i < nodes(g) {
         let ri = fine_rhs(i);
-        let zi = guess(i, true) + sym_mul(sym_unpack(operators[g.smoothers_at + i]), ri - row_guess(i, true));
+        let zi = guess(i, true) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
         if g.level == 0u {
             zq[i] = vec4<f32>(zi, 0.0);
             rz = dot(ri, zi);

@@ -66,9 +66,9 @@ fn store_q(i: u32, value: vec3<f32>) {
 
 // Row i of A x and of A p (WGSL cannot pass storage pointers).
 fn row_x(i: u32) -> vec3<f32> {
-    var acc = sym_mul(sym_unpack(matrix[i]), x[i].xyz);
+    var acc = sym_mul(sym_unpack(matrix_at(i)), x[i].xyz);
     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-        acc += sym_mul(sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]), x[adjacent_vertex(k)].xyz);
+        acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), x[adjacent_vertex(k)].xyz);
     }
     return acc;
 }
@@ -84,9 +84,9 @@ fn next_direction(j: u32, beta: f32) -> vec3<f32> {
 
 // Row i of A p' for p' = next_direction(·, β).
 fn row_next(i: u32, beta: f32) -> vec3<f32> {
-    var acc = sym_mul(sym_unpack(matrix[i]), next_direction(i, beta));
+    var acc = sym_mul(sym_unpack(matrix_at(i)), next_direction(i, beta));
     for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-        acc += sym_mul(sym_unpack(matrix[params.n_vertices + adjacent_spring(k)]),
+        acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))),
                        next_direction(adjacent_vertex(k), beta));
     }
     return acc;
@@ -103,7 +103,7 @@ fn init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     var rr = 0.0;
     if i < params.n_vertices {
         let free = !is_pinned(i);
-        let m = select(vec3<f32>(0.0), 1.0 / sym_diag(sym_unpack(matrix[i])), free);
+        let m = select(vec3<f32>(0.0), 1.0 / sym_diag(sym_unpack(matrix_at(i))), free);
         inv_diag[i] = vec4<f32>(m, 0.0);
         let ri = select(vec3<f32>(0.0), b[i].xyz - row_x(i), free);
         r[i] = vec4<f32>(ri, 0.0);

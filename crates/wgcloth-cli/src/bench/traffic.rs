@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use wgcloth::error::Result;
 use wgcloth::gpu::{GpuContext, layout};
-use wgcloth::multigrid::{COARSE_SWEEPS, Level, STENCIL};
+use wgcloth::multigrid::{COARSE_SWEEPS, Level, STORED_STENCIL};
 use wgcloth::stage::Stage;
 
 /// How a backend stores the solver's data, in bytes.
@@ -107,7 +107,7 @@ impl Layout {
         let vertices = levels[0].nodes() as u64;
         let operator = |l: usize| match l {
             0 => self.matrix_bytes(vertices, springs),
-            _ => levels[l].nodes() as u64 * STENCIL as u64 * self.off_block,
+            _ => levels[l].nodes() as u64 * STORED_STENCIL as u64 * self.off_block,
         };
         let last = levels.len() - 1;
         let cycle: u64 = (0..last)

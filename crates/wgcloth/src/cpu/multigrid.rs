@@ -15,7 +15,8 @@ use rayon::prelude::*;
 use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
 use crate::multigrid::{
-    COARSE_SWEEPS, Level, STENCIL, levels, parents, row_weight, stencil_slot, weight,
+    COARSE_SWEEPS, Level, STENCIL, STORED_STENCIL, levels, parents, row_weight, stencil_slot,
+    stored_at, weight,
 };
 use crate::scene::Cloth;
 
@@ -23,7 +24,8 @@ use crate::scene::Cloth;
 #[derive(Clone, Debug)]
 pub struct Multigrid {
     levels: Vec<Level>,
-    /// Per coarse level (index l − 1): [`STENCIL`] blocks per node.
+    /// Per coarse level (index l − 1): [`STORED_STENCIL`] blocks per node,
+    /// the upper half of its stencil (`multigrid::stored_at`).
     stencils: Vec<Vec<Mat3>>,
     /// Per level: ω D⁻¹, zero where D is singular (a pinned node, or a coarse
     /// node whose fine nodes are all pinned).
@@ -75,7 +77,7 @@ impl Multigrid {
         Multigrid {
             stencils: levels[1..]
                 .iter()
-                .map(|l| vec![Mat3::ZERO; l.nodes() * STENCIL as usize])
+                .map(|l| vec![Mat3::ZERO; l.nodes() * STORED_STENCIL as usize])
                 .collect(),
             smoothers: levels.iter().map(|l| vec![Mat3::ZERO; l.nodes()]).collect(),
             rhs: coarse().collect(),
@@ -91,9 +93,24 @@ impl Multigrid {
         &self.levels
     }
 
-    /// Coarse level `l`'s stencil blocks (`l` ≥ 1), [`STENCIL`] per node.
-    pub fn stencil(&self, l: usize) -> &[Mat3] {
-        &self.stencils[l - 1]
+    /// Block (i, j) of coarse level `l`'s operator (`l` ≥ 1), zero where j
+    /// is outside i's stencil.
+    pub fn coarse_block(&self, l: usize, i: usize, j: usize) -> Mat3 {
+        let level = self.levels[l];
+        let ((ci, ri), (cj, rj)) = (coords(level, i), coords(level, j));
+        let (dx, dy) = (cj as i32 - ci as i32, rj as i32 - ri as i32);
+        if dx.abs() > 2 || dy.abs() > 2 {
+            return Mat3::ZERO;
+        }
+        self.stored_block(l, i, j, dx, dy)
+    }
+
+    /// Block (i, j) of coarse level `l`, j at (dx, dy) from i, from where
+    /// the upper half of the stencils keeps it.
+    fn stored_block(&self, l: usize, i: usize, j: usize, dx: i32, dy: i32) -> Mat3 {
+        let (at_neighbour, slot) = stored_at(dx, dy);
+        let node = if at_neighbour { j } else { i };
+        self.stencils[l - 1][node * STORED_STENCIL as usize + slot]
     }
 
     /// Calls `f(j, A_ij)` for every block of row `i` of level `l`'s operator.
@@ -115,13 +132,12 @@ impl Multigrid {
         }
         let level = self.levels[l];
         let (c, r) = coords(level, i);
-        let stencil = &self.stencils[l - 1][i * STENCIL as usize..][..STENCIL as usize];
         for dy in -2..=2i32 {
             for dx in -2..=2i32 {
                 let (cj, rj) = (c as i32 + dx, r as i32 + dy);
                 if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
                     let j = rj as usize * level.nx as usize + cj as usize;
-                    f(j, stencil[stencil_slot(dx, dy)]);
+                    f(j, self.stored_block(l, i, j, dx, dy));
                 }
             }
         }
@@ -197,13 +213,15 @@ impl Multigrid {
         for l in 0..self.levels.len() - 1 {
             let (from, to) = (self.levels[l], self.levels[l + 1]);
             let mut stencil = std::mem::take(&mut self.stencils[l]);
+            let mut smoothers = std::mem::take(&mut self.smoothers[l + 1]);
             stencil
-                .par_chunks_mut(STENCIL as usize)
+                .par_chunks_mut(STORED_STENCIL as usize)
+                .zip(smoothers.par_iter_mut())
                 .with_min_len(GRAIN / STENCIL as usize)
                 .enumerate()
-                .for_each(|(coarse, out)| {
+                .for_each(|(coarse, (stored, smoother_block))| {
                     let (cc, rc) = coords(to, coarse);
-                    out.fill(Mat3::ZERO);
+                    let mut out = [Mat3::ZERO; STENCIL as usize];
                     for i in Self::children(from, (cc, rc)) {
                         let wi = self.fine_weight(cloth, l, i, (cc, rc));
                         if wi == 0.0 {
@@ -226,16 +244,13 @@ impl Multigrid {
                             }
                         });
                     }
-                });
-            self.smoothers[l + 1] = stencil
-                .chunks(STENCIL as usize)
-                .map(|s| {
+                    // The full row gives the smoother; the upper half is kept.
                     let centre = stencil_slot(0, 0);
-                    let off = s.iter().enumerate().filter(|&(k, _)| k != centre);
-                    smoother(s[centre], off.map(|(_, block)| *block))
-                })
-                .collect();
-            self.stencils[l] = stencil;
+                    let off = out.iter().enumerate().filter(|&(k, _)| k != centre);
+                    *smoother_block = smoother(out[centre], off.map(|(_, block)| *block));
+                    stored.copy_from_slice(&out[centre..]);
+                });
+            (self.stencils[l], self.smoothers[l + 1]) = (stencil, smoothers);
         }
     }
 

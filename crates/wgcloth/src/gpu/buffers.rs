@@ -12,7 +12,8 @@ use crate::gpu::constants::{TILE, WORKGROUP, model, motion};
 use crate::gpu::layout::{
     BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, StepState, Sym3,
 };
-use crate::multigrid::{self, STENCIL};
+use crate::gpu::shaders::PARTS;
+use crate::multigrid::{self, STORED_STENCIL};
 use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
 
@@ -37,7 +38,7 @@ pub(crate) struct Buffers {
     pub(crate) x: wgpu::Buffer,
     pub(crate) v: wgpu::Buffer,
     pub(crate) rest: wgpu::Buffer,
-    pub(crate) topology: wgpu::Buffer,
+    pub(crate) topology: Parts,
     pub(crate) sections: Sections,
     /// Vertex–face slots (one per cloth vertex), then face–vertex ones
     /// (one per rigid vertex).
@@ -47,7 +48,7 @@ pub(crate) struct Buffers {
     /// per rigid vertex the next entry of its list (wgsl/collide.wgsl).
     pub(crate) triangle_contacts: wgpu::Buffer,
     /// A's diagonal blocks, then its off-diagonal ones.
-    pub(crate) matrix: wgpu::Buffer,
+    pub(crate) matrix: Parts,
     pub(crate) b: wgpu::Buffer,
     pub(crate) r: wgpu::Buffer,
     /// PCG: z = P⁻¹ r, then q = S A p (one `vec4` per vertex each).
@@ -61,7 +62,7 @@ pub(crate) struct Buffers {
     pub(crate) scalars: [wgpu::Buffer; 2],
     /// Multigrid: every level's smoother blocks, then every coarse level's
     /// stencils (one element when Jacobi preconditions).
-    pub(crate) operators: wgpu::Buffer,
+    pub(crate) operators: Parts,
     /// Multigrid: every coarse level's right-hand side and correction.
     pub(crate) vectors: wgpu::Buffer,
     /// Multigrid: one `Hop` per level, what its dispatches work between.
@@ -83,6 +84,62 @@ pub(crate) struct Buffers {
     /// The renderer's force segments (stage "lines") and their scale.
     pub(crate) lines: wgpu::Buffer,
     pub(crate) line_scale: wgpu::Buffer,
+}
+
+/// An array the kernels may bind in parts (`gpu::shaders::SPLIT_ARRAYS`):
+/// one buffer, bound as up to [`PARTS`] windows, part k under the WGSL name
+/// `name_k` (part 0: `name`).
+pub(crate) struct Parts {
+    pub(crate) buffer: wgpu::Buffer,
+    pub(crate) name: &'static str,
+    /// Part k's bytes are `bounds[k]..bounds[k + 1]`; an empty part is
+    /// never read, and is bound to the buffer's first bytes.
+    bounds: [u64; PARTS + 1],
+}
+
+impl Parts {
+    /// The window bound as the WGSL variable `name`, if it is one of these parts.
+    pub(crate) fn binding(&self, name: &str) -> Option<wgpu::BufferBinding<'_>> {
+        let k = match name.strip_prefix(self.name)? {
+            "" => 0,
+            part => part.strip_prefix('_')?.parse().ok()?,
+        };
+        let (start, end) = (*self.bounds.get(k)?, *self.bounds.get(k + 1)?);
+        let (offset, size) = match end > start {
+            true => (start, end - start),
+            false => (0, self.buffer.size().min(256)),
+        };
+        Some(wgpu::BufferBinding {
+            buffer: &self.buffer,
+            offset,
+            size: std::num::NonZeroU64::new(size),
+        })
+    }
+
+    /// The bindings the array takes.
+    pub(crate) fn count(&self) -> usize {
+        1 + self.bounds[1..].windows(2).filter(|w| w[0] < w[1]).count()
+    }
+}
+
+/// Where an array of `count` elements of `size` bytes is cut to bind it in
+/// at most [`PARTS`] windows of at most `bindable` bytes, each starting at a
+/// multiple of `align` bytes: the element indices where parts 1 and 2
+/// start (`count` for a part not needed); `None` if it does not fit.
+pub(crate) fn cuts(count: u64, size: u64, bindable: u64, align: u64) -> Option<[u64; 2]> {
+    if count * size <= bindable {
+        return Some([count; 2]);
+    }
+    // Elements per part: a multiple of the elements in lcm(size, align) bytes.
+    let gcd = |mut a: u64, mut b: u64| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let step = align / gcd(size, align);
+    let per = bindable / size / step * step;
+    (per > 0 && count <= PARTS as u64 * per).then(|| [per, (2 * per).min(count)])
 }
 
 /// The run's constants, as the kernels read them.
@@ -193,7 +250,7 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
             };
             smoothers += n;
             if coarse {
-                stencils += n * STENCIL;
+                stencils += n * STORED_STENCIL;
                 vectors += 2 * n;
             }
             g
@@ -256,7 +313,7 @@ impl Sizes {
             Some(last) => {
                 let n = last.nx as u64 * last.ny as u64;
                 (
-                    last.stencil_at as u64 + n * STENCIL as u64,
+                    last.stencil_at as u64 + n * STORED_STENCIL as u64,
                     last.correction_at as u64 + n,
                 )
             }
@@ -282,17 +339,14 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn all(&self) -> [(&'static str, u64); 16] {
+    pub(crate) fn whole(&self) -> [(&'static str, u64); 13] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
-            ("topology", self.topology),
             ("contacts", self.contacts),
             ("responses", self.responses),
             ("triangle contact lists", self.triangle_contacts),
-            ("system matrix", self.matrix),
             ("partial sums", self.partials),
-            ("multigrid operators", self.operators),
             ("multigrid vectors", self.vectors),
             ("placed body", self.rigid),
             ("tile bounds", self.bounds),
@@ -300,6 +354,17 @@ impl Sizes {
             ("network inputs", self.net_inputs),
             ("network outputs", self.net_outputs),
             ("force lines", self.lines),
+        ]
+    }
+
+    /// The arrays that may be bound in parts, in `SPLIT_ARRAYS` order: what
+    /// each holds, its bytes and its element's bytes.
+    pub(crate) fn parted(&self) -> [(&'static str, u64, u64); 3] {
+        let block = size_of::<Sym3>() as u64;
+        [
+            ("topology", self.topology, 4),
+            ("system matrix", self.matrix, block),
+            ("multigrid operators", self.operators, block),
         ]
     }
 }
@@ -350,6 +415,16 @@ impl Buffers {
             }))
         };
         let sizes = Sizes::of(scene, params, topology.len());
+        // `bytes` cut at `cuts` (elements of `size` bytes; at the end where
+        // a part is not needed).
+        let parts = |name, buffer: wgpu::Buffer, bytes: u64, cuts: [u32; 2], size: usize| {
+            let at = |k: u32| (k as u64 * size as u64).min(bytes);
+            Parts {
+                name,
+                bounds: [0, at(cuts[0]), at(cuts[1]), bytes],
+                buffer,
+            }
+        };
 
         let body = scene.rigid.as_ref();
         let body_vertices = body.map_or(vec![], |b| vec4s(&b.mesh.vertices, 1.0));
@@ -383,16 +458,28 @@ impl Buffers {
                 "rest positions",
                 bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
             ),
-            topology: init(
+            topology: parts(
                 "topology",
-                bytemuck::cast_slice(&topology),
-                wgpu::BufferUsages::INDEX,
+                init(
+                    "topology",
+                    bytemuck::cast_slice(&topology),
+                    wgpu::BufferUsages::INDEX,
+                ),
+                sizes.topology,
+                params.topology_splits,
+                4,
             ),
             sections,
             contacts: zeroed("contacts", sizes.contacts),
             responses: zeroed("responses", sizes.responses),
             triangle_contacts: zeroed("triangle contacts", sizes.triangle_contacts),
-            matrix: zeroed("system matrix", sizes.matrix),
+            matrix: parts(
+                "matrix",
+                zeroed("system matrix", sizes.matrix),
+                sizes.matrix,
+                params.matrix_splits,
+                size_of::<Sym3>(),
+            ),
             b: zeroed("b", sizes.per_vertex),
             r: zeroed("r", sizes.per_vertex),
             zq: zeroed("z and q", 2 * sizes.per_vertex),
@@ -411,7 +498,13 @@ impl Buffers {
                     mapped_at_creation: false,
                 }))
             }),
-            operators: zeroed("multigrid operators", sizes.operators),
+            operators: parts(
+                "operators",
+                zeroed("multigrid operators", sizes.operators),
+                sizes.operators,
+                params.operators_splits,
+                size_of::<Sym3>(),
+            ),
             vectors: zeroed("multigrid vectors", sizes.vectors),
             hops: hops(&multigrid_grids(scene))
                 .iter()
@@ -448,12 +541,62 @@ impl Buffers {
 }
 
 /// Refuses a scene the device cannot run, naming the limit, what the
-/// scene needs and what the device has, before anything is created.
-pub(crate) fn check_limits(limits: &wgpu::Limits, sizes: &Sizes, params: &Params) -> Result<()> {
+/// scene needs and what the device has, before anything is created. Where
+/// the kernels bind the largest arrays in parts (`split`), sets where each
+/// is cut (`Params::*_splits`); else each must fit one binding.
+pub(crate) fn check_limits(
+    limits: &wgpu::Limits,
+    sizes: &Sizes,
+    params: &mut Params,
+    split: bool,
+) -> Result<()> {
     let bindable = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
-    for (what, bytes) in sizes.all() {
+    let mut cut = Vec::new();
+    for (what, bytes, size) in sizes.parted() {
+        let count = bytes / size;
+        let whole = Some([count; 2]);
+        let parts = match split && bytes <= limits.max_buffer_size {
+            true => cuts(
+                count,
+                size,
+                bindable,
+                limits.min_storage_buffer_offset_alignment as u64,
+            ),
+            false => whole.filter(|_| bytes <= bindable),
+        };
+        let Some(parts) = parts else {
+            let (limit, value) = if bytes > limits.max_buffer_size {
+                ("max_buffer_size", limits.max_buffer_size)
+            } else {
+                (
+                    "max_storage_buffer_binding_size",
+                    limits.max_storage_buffer_binding_size,
+                )
+            };
+            let needed = match split {
+                true => format!("a {bytes}-byte buffer in at most {PARTS} bindings"),
+                false => format!(
+                    "a {bytes}-byte buffer (a device with {} storage buffers per shader stage binds it in parts)",
+                    crate::gpu::kernels::SPLIT_STORAGE_BUFFERS
+                ),
+            };
+            return Err(Error::Limit {
+                what: what.into(),
+                limit,
+                needed,
+                device: format!("{value} bytes"),
+            });
+        };
+        cut.push(parts.map(|k| k as u32));
+    }
+    (
+        params.topology_splits,
+        params.matrix_splits,
+        params.operators_splits,
+    ) = (cut[0], cut[1], cut[2]);
+    for (what, bytes) in sizes.whole() {
         if bytes > bindable {
             let (limit, value) = if bytes > limits.max_buffer_size {
                 ("max_buffer_size", limits.max_buffer_size)

@@ -55,7 +55,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 21] = [
+pub const SHARED: [(&str, u32); 22] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -73,6 +73,7 @@ pub const SHARED: [(&str, u32); 21] = [
     ("NOT_FINITE", health::NOT_FINITE),
     ("TOO_FAST", health::TOO_FAST),
     ("STENCIL", multigrid::STENCIL),
+    ("STORED_STENCIL", multigrid::STORED_STENCIL),
     ("COARSEST_NODES", multigrid::COARSEST_NODES),
     ("COARSE_SWEEPS", multigrid::COARSE_SWEEPS),
     ("MAX_LEVELS", multigrid::MAX_LEVELS),

@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
+use crate::gpu::buffers::Parts;
 use crate::gpu::shaders::{self, Binding, STAGES};
 
 /// Every entry point of every stage: pipelines are found by this, never
@@ -195,18 +196,33 @@ impl Kernel {
     /// Binds a stage's buffers, given by WGSL variable name: the ones this
     /// entry point uses, each of which must be among them.
     pub fn bind(&self, device: &wgpu::Device, buffers: &[(&str, &wgpu::Buffer)]) -> Bound {
+        self.bind_parts(device, buffers, &[])
+    }
+
+    /// [`Kernel::bind`] with arrays that may be bound in parts
+    /// (`gpu::shaders::SPLIT_ARRAYS`), each under its own name.
+    pub(crate) fn bind_parts(
+        &self,
+        device: &wgpu::Device,
+        buffers: &[(&str, &wgpu::Buffer)],
+        parted: &[&Parts],
+    ) -> Bound {
         let entries: Vec<wgpu::BindGroupEntry> = self
             .bindings
             .iter()
             .map(|(name, b)| {
-                let buffer = buffers
-                    .iter()
-                    .find(|(n, _)| n == name)
-                    .unwrap_or_else(|| panic!("{:?}: no buffer given for `{name}`", self.entry))
-                    .1;
+                let resource = match parted.iter().find_map(|p| p.binding(name)) {
+                    Some(part) => wgpu::BindingResource::Buffer(part),
+                    None => buffers
+                        .iter()
+                        .find(|(n, _)| n == name)
+                        .unwrap_or_else(|| panic!("{:?}: no buffer given for `{name}`", self.entry))
+                        .1
+                        .as_entire_binding(),
+                };
                 wgpu::BindGroupEntry {
                     binding: b.binding,
-                    resource: buffer.as_entire_binding(),
+                    resource,
                 }
             })
             .collect();
@@ -232,7 +248,15 @@ pub struct Kernels {
     params_layout: wgpu::BindGroupLayout,
     mlp_threads: u32,
     software: bool,
+    split: bool,
 }
+
+/// Storage buffers per shader stage a device must allow for the kernels to
+/// bind the largest arrays in parts (`gpu::shaders::SPLIT_ARRAYS`), which
+/// lets a scene pass the per-binding limit: a kernel then takes up to 12
+/// (8 at WebGPU's default, where each array is one binding). Lavapipe and
+/// native drivers allow 16 or more; a browser's default device does not.
+pub const SPLIT_STORAGE_BUFFERS: u32 = 16;
 
 /// Threads per edge of the network layer's tile (wgsl/mlp.wgsl): 16 × 16
 /// (64 × 64 outputs) where the adapter allows it, else 8 × 8.
@@ -273,6 +297,7 @@ impl Kernels {
 
     fn compile(device: &wgpu::Device) -> Result<Kernels> {
         let mlp_threads = mlp_threads(&device.limits());
+        let split = device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("params"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -288,11 +313,11 @@ impl Kernels {
         });
         let mut compiled = Vec::new();
         for (stage, _) in STAGES {
-            let mut reflected = shaders::reflect(stage, mlp_threads)
+            let mut reflected = shaders::reflect(stage, mlp_threads, split)
                 .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl: {e}")))?;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(stage),
-                source: wgpu::ShaderSource::Wgsl(shaders::source(stage, mlp_threads).into()),
+                source: wgpu::ShaderSource::Wgsl(shaders::source(stage, mlp_threads, split).into()),
             });
             for entry in Entry::ALL.into_iter().filter(|e| e.wgsl().0 == stage) {
                 let name = entry.wgsl().1;
@@ -321,6 +346,7 @@ impl Kernels {
             params_layout,
             mlp_threads,
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
+            split,
         })
     }
 
@@ -385,6 +411,12 @@ impl Kernels {
         self.software
     }
 
+    /// Whether the kernels bind the largest arrays in parts
+    /// ([`SPLIT_STORAGE_BUFFERS`]), so a scene may pass the per-binding limit.
+    pub fn split(&self) -> bool {
+        self.split
+    }
+
     /// Rows (and outputs) per workgroup tile of the network layer.
     pub fn mlp_tile(&self) -> u32 {
         4 * self.mlp_threads
@@ -418,7 +450,7 @@ mod tests {
             assert_eq!(entry as usize, k, "{entry:?} out of order");
         }
         for (stage, _) in STAGES {
-            let mut found: Vec<String> = shaders::reflect(stage, 16)
+            let mut found: Vec<String> = shaders::reflect(stage, 16, false)
                 .unwrap()
                 .into_iter()
                 .map(|e| e.name)

@@ -109,6 +109,15 @@ pub struct Params {
     pub body_triangles_at: u32,
     /// Start of [`Sections::bvh_order`].
     pub bvh_order_at: u32,
+    /// Where the topology's parts 1 and 2 start, in elements, when it is
+    /// bound in parts (`gpu::shaders::SPLIT_ARRAYS`); else unused.
+    pub topology_splits: [u32; 2],
+    /// The same for the system matrix.
+    pub matrix_splits: [u32; 2],
+    /// The same for the multigrid operators.
+    pub operators_splits: [u32; 2],
+    /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
+    pub pad: [u32; 2],
 }
 
 /// Clock and run statistics kept on the GPU.
@@ -314,7 +323,8 @@ pub struct Sections {
     pub pinned: u32,
     /// Start of each vertex's triangles: offsets per vertex, then 3 t + corner.
     pub vertex_triangles: u32,
-    /// Start of (triangle, corner) × 2 per spring, `NO_TRIANGLE` where none.
+    /// Start of the triangles along each spring: 3 t + edge, twice per
+    /// spring, `NO_TRIANGLE` where there is none.
     pub spring_triangles: u32,
     /// Start of the rigid body's triangles (three vertices each).
     pub body_triangles: u32,
@@ -326,10 +336,10 @@ pub struct Sections {
 pub fn topology(scene: &Scene) -> (Vec<u32>, Sections) {
     let cloth = &scene.cloth;
     let n = cloth.vertex_count();
-    // Vertex → 3 t + corner and spring → (triangle, edge) × 2: where the
+    // Vertex → 3 t + corner and spring → 3 t + edge, twice: where the
     // assembly finds the face–vertex contacts.
     let mut per_vertex: Vec<Vec<u32>> = vec![Vec::new(); n];
-    let mut spring_triangles = vec![[NO_TRIANGLE; 4]; cloth.springs.len()];
+    let mut spring_triangles = vec![[NO_TRIANGLE; 2]; cloth.springs.len()];
     for (ti, (tri, edges)) in cloth
         .triangles
         .iter()
@@ -339,9 +349,8 @@ pub fn topology(scene: &Scene) -> (Vec<u32>, Sections) {
         for corner in 0..3 {
             per_vertex[tri[corner] as usize].push(3 * ti as u32 + corner as u32);
             let slot = &mut spring_triangles[edges[corner] as usize];
-            let side = if slot[0] == NO_TRIANGLE { 0 } else { 2 };
-            slot[side] = ti as u32;
-            slot[side + 1] = corner as u32;
+            let side = if slot[0] == NO_TRIANGLE { 0 } else { 1 };
+            slot[side] = 3 * ti as u32 + corner as u32;
         }
     }
     let mut vertex_triangles = vec![0u32];
@@ -398,7 +407,7 @@ mod tests {
 
     /// The size naga gives the WGSL struct `name` in `stage`'s source.
     fn wgsl_size(stage: &str, name: &str) -> usize {
-        let source = crate::gpu::shaders::source(stage, 8);
+        let source = crate::gpu::shaders::source(stage, 8, true);
         let module = naga::front::wgsl::parse_str(&source).expect("the stage parses");
         let (_, ty) = module
             .types

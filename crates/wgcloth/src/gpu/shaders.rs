@@ -62,10 +62,84 @@ pub const INCLUDES: [(&str, &str, &[&str]); 4] = [
 /// Stages that do not depend on the scene and get no common code.
 pub const STANDALONE: [&str; 2] = ["batch", "mlp"];
 
+/// The arrays that can outgrow one binding (at 1024² the topology is
+/// 289 MB, the matrix 176 MB and the multigrid operators 143 MB; a binding
+/// holds 128 MiB on lavapipe and by WebGPU's default). The kernels read and
+/// write them only through `NAME_at(k)` and `NAME_set(k, value)`, which
+/// [`source`] writes: a plain index, or, where the kernels are compiled to
+/// split them, a choice among up to [`PARTS`] bindings (`NAME`, `NAME_1`,
+/// `NAME_2`: windows of the same buffer) at the element indices
+/// `params.NAME_splits`.
+pub const SPLIT_ARRAYS: [&str; 3] = ["topology", "matrix", "operators"];
+/// The most bindings a split array takes.
+pub const PARTS: usize = 3;
+/// Binding number of part k of a split array: its own number plus k times this.
+pub const PART_BINDING_STRIDE: u32 = 100;
+
+/// The accessors of every split array `text` declares (see [`SPLIT_ARRAYS`]).
+fn split_accessors(text: &str, split: bool) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let Some((head, declared)) = line.split_once(" var<storage, ") else {
+            continue;
+        };
+        let Some((mode, rest)) = declared.split_once("> ") else {
+            continue;
+        };
+        let Some((name, ty)) = rest.split_once(": array<") else {
+            continue;
+        };
+        if !SPLIT_ARRAYS.contains(&name) {
+            continue;
+        }
+        let ty = ty.trim_end_matches(">;");
+        let write = mode == "read_write";
+        if !split {
+            out += &format!("fn {name}_at(k: u32) -> {ty} {{ return {name}[k]; }}\n");
+            if write {
+                out += &format!("fn {name}_set(k: u32, value: {ty}) {{ {name}[k] = value; }}\n");
+            }
+            continue;
+        }
+        let binding: u32 = head
+            .split("@binding(")
+            .nth(1)
+            .and_then(|b| b.split(')').next())
+            .and_then(|b| b.parse().ok())
+            .unwrap_or_else(|| panic!("`{name}` has no binding number"));
+        let group = head.split(" @binding").next().unwrap_or(head);
+        for k in 1..PARTS as u32 {
+            let number = binding + k * PART_BINDING_STRIDE;
+            out += &format!(
+                "{group} @binding({number}) var<storage, {mode}> {name}_{k}: array<{ty}>;\n"
+            );
+        }
+        // Parts 1 and 2 start at the element indices params.NAME_splits.
+        let pick = |read: bool| {
+            let act = |part: &str, index: &str| match read {
+                true => format!("return {part}[{index}];"),
+                false => format!("{part}[{index}] = value; return;"),
+            };
+            format!(
+                "let s = params.{name}_splits; if k < s.x {{ {} }} if k < s.y {{ {} }} {}",
+                act(name, "k"),
+                act(&format!("{name}_1"), "k - s.x"),
+                act(&format!("{name}_2"), "k - s.y"),
+            )
+        };
+        out += &format!("fn {name}_at(k: u32) -> {ty} {{ {} }}\n", pick(true));
+        if write {
+            out += &format!("fn {name}_set(k: u32, value: {ty}) {{ {} }}\n", pick(false));
+        }
+    }
+    out
+}
+
 /// The shared constants ([`constants::prelude`], the network tile set to
-/// `mlp_threads` per edge), common code, the stage's includes, then the
-/// stage's own code.
-pub fn source(stage: &str, mlp_threads: u32) -> String {
+/// `mlp_threads` per edge), common code, the stage's includes, the stage's
+/// own code, then the accessors of its split arrays ([`SPLIT_ARRAYS`],
+/// bound in parts where `split`).
+pub fn source(stage: &str, mlp_threads: u32, split: bool) -> String {
     let body = STAGES
         .iter()
         .find(|(name, _)| *name == stage)
@@ -79,7 +153,11 @@ pub fn source(stage: &str, mlp_threads: u32) -> String {
     let prelude = constants::prelude(mlp_threads);
     match STANDALONE.contains(&stage) {
         true => format!("{prelude}\n{body}"),
-        false => format!("{prelude}\n{COMMON}\n{includes}{body}"),
+        false => {
+            let code = format!("{includes}{body}");
+            let accessors = split_accessors(&code, split);
+            format!("{prelude}\n{COMMON}\n{code}\n{accessors}")
+        }
     }
 }
 
@@ -114,8 +192,8 @@ pub struct EntryPoint {
 
 /// Parses and validates a stage with naga, returning a readable error, and
 /// lists its entry points with the bindings each uses.
-pub fn reflect(stage: &str, mlp_threads: u32) -> Result<Vec<EntryPoint>, String> {
-    let src = source(stage, mlp_threads);
+pub fn reflect(stage: &str, mlp_threads: u32, split: bool) -> Result<Vec<EntryPoint>, String> {
+    let src = source(stage, mlp_threads, split);
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
     let info = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
@@ -186,11 +264,43 @@ mod tests {
             .collect()
     }
 
+    /// The kernels as compiled for a device with WebGPU's default limits,
+    /// and as compiled to split the largest arrays ([`SPLIT_ARRAYS`]) where
+    /// the device allows [`SPLIT_STORAGE_BUFFERS`](crate::gpu::kernels::SPLIT_STORAGE_BUFFERS).
     #[test]
     fn every_entry_point_validates_and_fits_webgpu_default_limits() {
+        for split in [false, true] {
+            let limit = match split {
+                false => wgpu::Limits::default().max_storage_buffers_per_shader_stage,
+                true => crate::gpu::kernels::SPLIT_STORAGE_BUFFERS,
+            };
+            check_bindings(split, limit);
+        }
+    }
+
+    #[test]
+    fn split_arrays_are_reached_only_through_their_accessors() {
+        for (file, text) in files() {
+            for name in SPLIT_ARRAYS {
+                assert!(
+                    !text.contains(&format!("{name}[")),
+                    "wgsl/{file}.wgsl indexes `{name}` directly: use {name}_at / {name}_set"
+                );
+            }
+        }
+        for split in [false, true] {
+            let source = source("multigrid", 16, split);
+            assert_eq!(source.contains("operators_2"), split);
+            assert!(source.contains("fn operators_set("));
+            assert!(source.contains("fn matrix_at(") && !source.contains("fn matrix_set("));
+        }
+    }
+
+    fn check_bindings(split: bool, limit: u32) {
         let limits = wgpu::Limits::default();
         for (stage, _) in STAGES {
-            let entries = reflect(stage, 16).unwrap_or_else(|e| panic!("{stage}.wgsl:\n{e}"));
+            let entries =
+                reflect(stage, 16, split).unwrap_or_else(|e| panic!("{stage}.wgsl:\n{e}"));
             assert!(!entries.is_empty(), "{stage} has no entry point");
             for entry in entries {
                 let storage = entry
@@ -200,8 +310,7 @@ mod tests {
                     .count() as u32;
                 let uniform = entry.bindings.len() as u32 - storage;
                 assert!(
-                    storage <= limits.max_storage_buffers_per_shader_stage
-                        && uniform <= limits.max_uniform_buffers_per_shader_stage,
+                    storage <= limit && uniform <= limits.max_uniform_buffers_per_shader_stage,
                     "{stage}::{}: {storage} storage and {uniform} uniform buffers",
                     entry.name
                 );

@@ -89,9 +89,9 @@ impl GpuSim {
         scene: &Scene,
     ) -> Result<GpuSim> {
         let (topology, sections) = layout::topology(scene);
-        let params = params_for(scene, &sections);
+        let mut params = params_for(scene, &sections);
         let sizes = Sizes::of(scene, &params, topology.len());
-        check_limits(&device.limits(), &sizes, &params)?;
+        check_limits(&device.limits(), &sizes, &mut params, kernels.split())?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let sim = Self::build(kernels, device, queue, scene, params, (topology, sections));
@@ -184,7 +184,7 @@ impl GpuSim {
     pub fn body(&self) -> (&wgpu::Buffer, wgpu::BufferBinding<'_>) {
         let triangles = 3 * self.params.n_rigid_triangles as u64;
         let triangles = wgpu::BufferBinding {
-            buffer: &self.buffers.topology,
+            buffer: &self.buffers.topology.buffer,
             offset: 4 * self.buffers.sections.body_triangles as u64,
             size: std::num::NonZeroU64::new(4 * triangles.max(1)),
         };
@@ -195,6 +195,18 @@ impl GpuSim {
     /// of the step (a network's weights and activations not counted).
     pub fn state_bytes(&self) -> u64 {
         self.buffers.storage_bytes
+    }
+
+    /// The arrays bound in more than one part, because they pass the
+    /// device's per-binding limit, with the bindings each takes (see
+    /// [`Kernels::split`]); empty when every array fits one binding.
+    pub fn split_arrays(&self) -> Vec<(&'static str, usize)> {
+        let b = &self.buffers;
+        [&b.topology, &b.matrix, &b.operators]
+            .into_iter()
+            .filter(|p| p.count() > 1)
+            .map(|p| (p.name, p.count()))
+            .collect()
     }
 
     /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
@@ -254,7 +266,7 @@ impl GpuSim {
     /// buffer whose first [`Self::index_count`] indices are the cloth's
     /// (the simulator's other connectivity follows them).
     pub fn indices(&self) -> &wgpu::Buffer {
-        &self.buffers.topology
+        &self.buffers.topology.buffer
     }
 
     /// The kernel running a network model's network.
@@ -396,7 +408,7 @@ impl GpuSim {
     /// blocks, and b.
     pub fn read_system(&self) -> Result<(Vec<layout::Sym3>, Vec<layout::Sym3>, Vec<Vec3>)> {
         let b = self.read_vec3(&self.buffers.b)?;
-        let mut diagonal: Vec<layout::Sym3> = self.read(&self.buffers.matrix)?;
+        let mut diagonal: Vec<layout::Sym3> = self.read(&self.buffers.matrix.buffer)?;
         let n = self.params.n_vertices as usize;
         let mut off = diagonal.split_off(n);
         off.truncate(self.params.n_springs as usize);

@@ -18,14 +18,16 @@ impl Assemble {
         let buffers = [
             ("v", &b.v),
             ("x", &b.x),
-            ("topology", &b.topology),
             ("contacts", &b.contacts),
             ("responses", &b.responses),
             ("triangle_contacts", &b.triangle_contacts),
-            ("matrix", &b.matrix),
             ("b", &b.b),
         ];
-        let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+        let bind = |entry| {
+            kernels
+                .kernel(entry)
+                .bind_parts(device, &buffers, &[&b.topology, &b.matrix])
+        };
         Assemble {
             vertex: bind(Entry::AssembleVertex),
             spring: bind(Entry::AssembleSpring),

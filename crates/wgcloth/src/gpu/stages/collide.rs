@@ -19,7 +19,6 @@ impl Collide {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Collide {
         let buffers = [
             ("x", &b.x),
-            ("topology", &b.topology),
             ("body_vertices", &b.body_vertices),
             ("body_face_normals", &b.body_face_normals),
             ("bvh_nodes", &b.bvh_nodes),
@@ -30,7 +29,11 @@ impl Collide {
             ("triangle_contacts", &b.triangle_contacts),
             ("state", &b.state),
         ];
-        let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+        let bind = |entry| {
+            kernels
+                .kernel(entry)
+                .bind_parts(device, &buffers, &[&b.topology])
+        };
         Collide {
             tiles: bind(Entry::CollideTiles),
             supertiles: bind(Entry::CollideSupertiles),

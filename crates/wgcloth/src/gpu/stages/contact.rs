@@ -30,13 +30,16 @@ impl Contact {
             ("contacts", &b.contacts),
             ("responses", &b.responses),
             ("x", &b.x),
-            ("topology", &b.topology),
             ("rigid", &b.rigid),
             ("net_batch", &b.net_batch),
             ("net_inputs", &b.net_inputs),
             ("net_outputs", &b.net_outputs),
         ];
-        let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+        let bind = |entry| {
+            kernels
+                .kernel(entry)
+                .bind_parts(device, &buffers, &[&b.topology])
+        };
         Contact {
             respond_slots: bind(Entry::ContactRespondSlots),
             reset_batch: bind(Entry::ContactResetBatch),

@@ -16,11 +16,14 @@ impl Integrate {
             ("x", &b.x),
             ("v", &b.v),
             ("rest_positions", &b.rest),
-            ("topology", &b.topology),
             ("state", &b.state),
         ];
         Integrate {
-            integrate: kernels.kernel(Entry::Integrate).bind(device, &buffers),
+            integrate: kernels.kernel(Entry::Integrate).bind_parts(
+                device,
+                &buffers,
+                &[&b.topology],
+            ),
         }
     }
 

@@ -16,7 +16,6 @@ impl Measure {
         let buffers = [
             ("x", &b.x),
             ("v", &b.v),
-            ("topology", &b.topology),
             ("body_vertices", &b.body_vertices),
             ("body_face_normals", &b.body_face_normals),
             ("bvh_nodes", &b.bvh_nodes),
@@ -24,7 +23,9 @@ impl Measure {
             ("state", &b.state),
         ];
         Measure {
-            measure: kernels.kernel(Entry::Measure).bind(device, &buffers),
+            measure: kernels
+                .kernel(Entry::Measure)
+                .bind_parts(device, &buffers, &[&b.topology]),
         }
     }
 

@@ -30,18 +30,16 @@ impl Multigrid {
     ) -> Option<Multigrid> {
         let last = grids.len().checked_sub(1).filter(|&l| l > 0)?;
         let bind = |entry, l: usize| {
-            kernels.kernel(entry).bind(
+            kernels.kernel(entry).bind_parts(
                 device,
                 &[
                     ("hop", &b.hops[l]),
-                    ("matrix", &b.matrix),
-                    ("operators", &b.operators),
                     ("vectors", &b.vectors),
                     ("r", &b.r),
                     ("zq", &b.zq),
                     ("partials", &b.partials),
-                    ("topology", &b.topology),
                 ],
+                &[&b.topology, &b.matrix, &b.operators],
             )
         };
         let hops = |entry| (0..last).map(|l| bind(entry, l)).collect();

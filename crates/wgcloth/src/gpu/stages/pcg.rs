@@ -39,8 +39,6 @@ impl Pcg {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers, scene: &Scene) -> Pcg {
         let side = |k: usize| {
             let buffers = [
-                ("matrix", &b.matrix),
-                ("topology", &b.topology),
                 ("b", &b.b),
                 ("x", &b.v),
                 ("r", &b.r),
@@ -53,7 +51,11 @@ impl Pcg {
                 ("scalars_next", &b.scalars[1 - k]),
                 ("state", &b.state),
             ];
-            let bind = |entry| kernels.kernel(entry).bind(device, &buffers);
+            let bind = |entry| {
+                kernels
+                    .kernel(entry)
+                    .bind_parts(device, &buffers, &[&b.topology, &b.matrix])
+            };
             Side {
                 init: bind(Entry::PcgInit),
                 init_scalars: bind(Entry::PcgInitScalars),
