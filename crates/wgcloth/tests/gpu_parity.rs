@@ -652,7 +652,7 @@ fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
     .unwrap();
     let narrow = Kernels::new(&device).unwrap();
     assert!(
-        narrow.split(),
+        narrow.splittable(),
         "lavapipe binds 32 storage buffers per stage"
     );
     let parted = GpuSim::with_kernels(&narrow, &device, &queue, &scene).unwrap();

@@ -543,17 +543,18 @@ impl Buffers {
 /// Refuses a scene the device cannot run, naming the limit, what the
 /// scene needs and what the device has, before anything is created. Where
 /// the kernels bind the largest arrays in parts (`split`), sets where each
-/// is cut (`Params::*_splits`); else each must fit one binding.
+/// is cut (`Params::*_splits`); else each must fit one binding. Returns
+/// whether any is cut, and so needs `Kernels::in_parts`.
 pub(crate) fn check_limits(
     limits: &wgpu::Limits,
     sizes: &Sizes,
     params: &mut Params,
     split: bool,
-) -> Result<()> {
+) -> Result<bool> {
     let bindable = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
-    let mut cut = Vec::new();
+    let (mut cut, mut parted) = (Vec::new(), false);
     for (what, bytes, size) in sizes.parted() {
         let count = bytes / size;
         let whole = Some([count; 2]);
@@ -589,6 +590,7 @@ pub(crate) fn check_limits(
                 device: format!("{value} bytes"),
             });
         };
+        parted |= parts[0] < count;
         cut.push(parts.map(|k| k as u32));
     }
     (
@@ -628,5 +630,5 @@ pub(crate) fn check_limits(
             device: limits.max_compute_workgroups_per_dimension.to_string(),
         });
     }
-    Ok(())
+    Ok(parted)
 }

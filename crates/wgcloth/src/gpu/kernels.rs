@@ -4,6 +4,7 @@
 //! `params` for every scene stage, group 1 its own buffers.
 
 use std::collections::BTreeMap;
+use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
 use crate::gpu::buffers::Parts;
@@ -248,14 +249,23 @@ pub struct Kernels {
     params_layout: wgpu::BindGroupLayout,
     mlp_threads: u32,
     software: bool,
-    split: bool,
+    /// Whether the device binds enough storage buffers per stage
+    /// ([`SPLIT_STORAGE_BUFFERS`]) for kernels that bind in parts.
+    splittable: bool,
+    /// Whether these kernels bind the largest arrays in parts.
+    parted: bool,
+    /// The same kernels binding them in parts, compiled the first time a
+    /// scene on this device needs them ([`Kernels::in_parts`]).
+    in_parts: OnceLock<Box<Kernels>>,
 }
 
-/// Storage buffers per shader stage a device must allow for the kernels to
+/// Storage buffers per shader stage a device must allow for kernels that
 /// bind the largest arrays in parts (`gpu::shaders::SPLIT_ARRAYS`), which
-/// lets a scene pass the per-binding limit: a kernel then takes up to 12
-/// (8 at WebGPU's default, where each array is one binding). Lavapipe and
-/// native drivers allow 16 or more; a browser's default device does not.
+/// lets a scene pass the per-binding limit: such a kernel takes up to 14
+/// (8 bound whole, as at WebGPU's default). Lavapipe and native drivers
+/// allow 16 or more; a browser's default device does not. Only a scene
+/// that needs them gets them: their choice of binding per read made
+/// lavapipe's PCG 1.5× slower on scenes that fit whole.
 pub const SPLIT_STORAGE_BUFFERS: u32 = 16;
 
 /// Threads per edge of the network layer's tile (wgsl/mlp.wgsl): 16 × 16
@@ -284,8 +294,26 @@ impl Kernels {
     /// [`Kernels::new`] as a future: on the web the error scope resolves
     /// only once the event loop runs.
     pub async fn create(device: &wgpu::Device) -> Result<Kernels> {
+        Self::compiled(device, false).await
+    }
+
+    /// The kernels for a scene whose largest arrays pass one binding: these
+    /// bound in parts, compiled on first use (see [`SPLIT_STORAGE_BUFFERS`]).
+    pub(crate) async fn in_parts(&self, device: &wgpu::Device) -> Result<&Kernels> {
+        if self.parted {
+            return Ok(self);
+        }
+        if self.in_parts.get().is_none() {
+            let parted = Self::compiled(device, true).await?;
+            // Another scene may have set it meanwhile: the same kernels.
+            let _ = self.in_parts.set(Box::new(parted));
+        }
+        Ok(self.in_parts.get().expect("set above"))
+    }
+
+    async fn compiled(device: &wgpu::Device, parted: bool) -> Result<Kernels> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let kernels = Self::compile(device);
+        let kernels = Self::compile(device, parted);
         if let Some(e) = scope.pop().await {
             return Err(Error::Gpu(format!(
                 "compiling the kernels: {}",
@@ -295,9 +323,10 @@ impl Kernels {
         kernels
     }
 
-    fn compile(device: &wgpu::Device) -> Result<Kernels> {
+    fn compile(device: &wgpu::Device, split: bool) -> Result<Kernels> {
         let mlp_threads = mlp_threads(&device.limits());
-        let split = device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
+        let splittable =
+            device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("params"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -346,7 +375,9 @@ impl Kernels {
             params_layout,
             mlp_threads,
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
-            split,
+            splittable,
+            parted: split,
+            in_parts: OnceLock::new(),
         })
     }
 
@@ -411,10 +442,10 @@ impl Kernels {
         self.software
     }
 
-    /// Whether the kernels bind the largest arrays in parts
+    /// Whether the device can bind the largest arrays in parts
     /// ([`SPLIT_STORAGE_BUFFERS`]), so a scene may pass the per-binding limit.
-    pub fn split(&self) -> bool {
-        self.split
+    pub fn splittable(&self) -> bool {
+        self.splittable
     }
 
     /// Rows (and outputs) per workgroup tile of the network layer.

@@ -91,7 +91,11 @@ impl GpuSim {
         let (topology, sections) = layout::topology(scene);
         let mut params = params_for(scene, &sections);
         let sizes = Sizes::of(scene, &params, topology.len());
-        check_limits(&device.limits(), &sizes, &mut params, kernels.split())?;
+        let kernels =
+            match check_limits(&device.limits(), &sizes, &mut params, kernels.splittable())? {
+                false => kernels,
+                true => kernels.in_parts(device).await?,
+            };
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let sim = Self::build(kernels, device, queue, scene, params, (topology, sections));
