@@ -203,7 +203,7 @@ impl GpuSim {
 
     /// The arrays bound in more than one part, because they pass the
     /// device's per-binding limit, with the bindings each takes (see
-    /// [`Kernels::split`]); empty when every array fits one binding.
+    /// [`Kernels::splittable`]); empty when every array fits one binding.
     pub fn split_arrays(&self) -> Vec<(&'static str, usize)> {
         let b = &self.buffers;
         [&b.topology, &b.matrix, &b.operators]
