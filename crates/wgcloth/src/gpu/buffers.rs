@@ -632,3 +632,36 @@ pub(crate) fn check_limits(
     }
     Ok(parted)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn arrays_are_cut_at_aligned_elements_into_at_most_three_parts() {
+        // Fits one binding: no cut.
+        assert_eq!(cuts(100, 24, 2400, 256), Some([100, 100]));
+        // 24-byte blocks, 256-byte alignment: parts of a multiple of 32
+        // blocks (768 bytes), as many as a 10,000-byte binding holds (416).
+        assert_eq!(cuts(500, 24, 10_000, 256), Some([416, 500]));
+        assert_eq!(cuts(1000, 24, 10_000, 256), Some([416, 832]));
+        for (count, size) in [(500u64, 24u64), (1000, 24), (7000, 4)] {
+            let [a, b] = cuts(count, size, 10_000, 256).unwrap();
+            // An empty part is never read (it binds the first bytes).
+            for (start, end) in [(0, a), (a, b), (b, count)]
+                .into_iter()
+                .filter(|(s, e)| s < e)
+            {
+                assert_eq!(start * size % 256, 0, "{count} × {size}: part at {start}");
+                assert!(
+                    (end - start) * size <= 10_000,
+                    "{count} × {size}: part {start}..{end}"
+                );
+            }
+        }
+        // More than three parts' worth, or not one aligned step: refused.
+        assert_eq!(cuts(1248, 24, 10_000, 256), Some([416, 832]));
+        assert_eq!(cuts(1249, 24, 10_000, 256), None);
+        assert_eq!(cuts(100, 24, 700, 256), None);
+    }
+}
