@@ -27,6 +27,8 @@ bash scripts/check-library.sh
 cargo test --release --workspace
 # The embedding example (the crate docs' example) on a default-limits device.
 cargo run --release -p wgcloth --example embed
+# The library in a real browser: the demo page in headless Chromium's WebGPU.
+bash scripts/test-web.sh
 
 # The interactive viewer (examples/viewer.rs, feature `viewer`): without a
 # display it must fail with one clear line and exit code 2; with Xvfb here

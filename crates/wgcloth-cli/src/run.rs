@@ -15,7 +15,7 @@ use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::mlp::NetworkKernel;
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels, context::describe};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
 use wgcloth::stage::Stage;
@@ -474,51 +474,6 @@ fn describe_network(scene: &Scene, kernel: Option<NetworkKernel>) -> Option<Stri
     ))
 }
 
-/// How many PCG iterations the next GPU step records: enough for twice
-/// the most any of the last [`Budget::WINDOW`] steps took, never more
-/// than `solver.cg_iters`; a step that ran out before the tolerance sends
-/// the next ones back to the whole cap. Converged iterations dispatch no
-/// work, but each recorded one costs its dispatches' overhead (about 90 µs
-/// each on lavapipe).
-struct Budget {
-    cap: u32,
-    tol: f32,
-    recent: std::collections::VecDeque<u32>,
-}
-
-impl Budget {
-    const WINDOW: usize = 32;
-    const LEAST: u32 = 12;
-
-    fn new(cap: u32, tol: f32) -> Budget {
-        Budget {
-            cap,
-            tol,
-            recent: Default::default(),
-        }
-    }
-
-    fn next(&self) -> u32 {
-        match self.recent.iter().max() {
-            Some(&most) => (2 * most).max(Self::LEAST).min(self.cap),
-            None => self.cap,
-        }
-    }
-
-    /// A step that took `iterations` of a budget of `budget` and ended at
-    /// relative residual `residual`; true when the budget cut it short of
-    /// the tolerance (a budget at the cap cuts nothing).
-    fn observe(&mut self, iterations: u32, budget: u32, residual: f32) -> bool {
-        let ran_out = iterations >= budget && residual > self.tol;
-        if self.recent.len() == Self::WINDOW {
-            self.recent.pop_front();
-        }
-        self.recent
-            .push_back(if ran_out { self.cap } else { iterations });
-        ran_out && budget < self.cap
-    }
-}
-
 /// Runs `scene` on the GPU with up to [`in_flight::DEPTH`] steps in
 /// flight, each step's statistics read asynchronously; the host waits for
 /// a step only when the ring is full, or to draw, monitor or checkpoint
@@ -546,7 +501,7 @@ fn run_gpu(
     let mut timings = Timings::default();
     let (mut divergence, mut last_good) = (None, None);
     let mut residuals = Residuals::default();
-    let mut budget = Budget::new(config.solver.cg_iters, config.solver.cg_tol);
+    let mut budget = CgBudget::new(config.solver.cg_iters, config.solver.cg_tol);
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut cut) = (0u64, 0u64, 0u64);
@@ -908,33 +863,5 @@ mod tests {
             (sampled - all_median).abs() <= series.stride as f64,
             "{sampled} vs {all_median}"
         );
-    }
-
-    /// The budget records twice the recent most, within [LEAST, cap]; a step
-    /// that ran out sends the next back to the cap, and the window forgets.
-    #[test]
-    fn the_iteration_budget_follows_recent_steps() {
-        let mut b = Budget::new(100, 1e-3);
-        assert_eq!(b.next(), 100, "no step seen yet");
-        assert!(!b.observe(3, 100, 5e-4));
-        assert_eq!(b.next(), Budget::LEAST);
-        b.observe(20, 100, 9e-4);
-        assert_eq!(b.next(), 40);
-        // Out of budget above the tolerance: the whole cap.
-        assert!(b.observe(40, 40, 2e-3), "a cut step");
-        assert_eq!(b.next(), 100);
-        // Converged on the budget's last iteration is not running out.
-        let mut b = Budget::new(100, 1e-3);
-        assert!(!b.observe(30, 30, 8e-4));
-        assert_eq!(b.next(), 60);
-        // Only the last WINDOW steps count.
-        for _ in 0..Budget::WINDOW {
-            b.observe(5, 60, 1e-4);
-        }
-        assert_eq!(b.next(), Budget::LEAST);
-        // The thesis's solve (tolerance 0) never converges early: the cap.
-        let mut b = Budget::new(25, 0.0);
-        assert!(!b.observe(25, 25, 0.1), "the cap cuts nothing");
-        assert_eq!(b.next(), 25);
     }
 }

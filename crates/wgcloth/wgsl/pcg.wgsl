@@ -196,8 +196,11 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
 }
 
 // pᵀq > 0 and finite (as the CPU twin asks); anything else is a breakdown.
+// The bound is f32's largest finite value written exactly: browsers' WGSL
+// compilers (Tint) read the decimal 3.4028235e38 as just above it, and
+// refuse it.
 fn usable(pq: f32) -> bool {
-    return pq > 0.0 && pq <= 3.4028235e38;
+    return pq > 0.0 && pq <= 0x1.fffffep+127f;
 }
 
 // α = δ / pᵀq, or 0 at a breakdown (which `next` or `conclude` records).

@@ -4,6 +4,7 @@
 //! in `stages` binds the one to the other and records itself, and
 //! [`GpuSim`] runs them as a step.
 
+pub mod budget;
 pub(crate) mod buffers;
 pub mod constants;
 pub mod context;
@@ -15,6 +16,7 @@ pub mod shaders;
 pub mod sim;
 pub(crate) mod stages;
 
+pub use budget::CgBudget;
 pub use context::GpuContext;
 pub use kernels::Kernels;
 pub use mlp::GpuMlp;
