@@ -113,12 +113,25 @@ fn show() {
     });
 }
 
+/// Records the first error. From the panic hook the status may be
+/// borrowed already; then the message still reaches the screen.
 fn fail(error: String) {
-    STATUS.with_borrow_mut(|s| {
-        s.finite = s.finite && s.steps > 0;
-        s.error.get_or_insert(error);
+    let recorded = STATUS.with(|status| match status.try_borrow_mut() {
+        Ok(mut s) => {
+            s.finite = s.finite && s.steps > 0;
+            s.error.get_or_insert(error.clone());
+            true
+        }
+        Err(_) => false,
     });
-    show();
+    match recorded {
+        true => show(),
+        false => {
+            if let Some(message) = element("message") {
+                message.set_text_content(Some(&error));
+            }
+        }
+    }
 }
 
 /// Pauses or resumes the stepping; returns whether it is paused now.

@@ -425,6 +425,10 @@ impl Buffers {
                 buffer,
             }
         };
+        // Arrays of symmetric blocks, zeroed, bound in parts where cut.
+        let blocks = |name, label, bytes, cuts| {
+            parts(name, zeroed(label, bytes), bytes, cuts, size_of::<Sym3>())
+        };
 
         let body = scene.rigid.as_ref();
         let body_vertices = body.map_or(vec![], |b| vec4s(&b.mesh.vertices, 1.0));
@@ -473,12 +477,11 @@ impl Buffers {
             contacts: zeroed("contacts", sizes.contacts),
             responses: zeroed("responses", sizes.responses),
             triangle_contacts: zeroed("triangle contacts", sizes.triangle_contacts),
-            matrix: parts(
+            matrix: blocks(
                 "matrix",
-                zeroed("system matrix", sizes.matrix),
+                "system matrix",
                 sizes.matrix,
                 params.matrix_splits,
-                size_of::<Sym3>(),
             ),
             b: zeroed("b", sizes.per_vertex),
             r: zeroed("r", sizes.per_vertex),
@@ -498,12 +501,11 @@ impl Buffers {
                     mapped_at_creation: false,
                 }))
             }),
-            operators: parts(
+            operators: blocks(
                 "operators",
-                zeroed("multigrid operators", sizes.operators),
+                "multigrid operators",
                 sizes.operators,
                 params.operators_splits,
-                size_of::<Sym3>(),
             ),
             vectors: zeroed("multigrid vectors", sizes.vectors),
             hops: hops(&multigrid_grids(scene))
