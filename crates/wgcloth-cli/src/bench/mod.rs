@@ -346,6 +346,10 @@ pub struct ConvergedRow {
     /// run loop's budget among them).
     pub residual_max: f32,
     pub steps_above_goal: u64,
+    /// Of those, the steps the run loop's budget cut (`Report::cg_steps_cut`):
+    /// the budget follows steps read back a few steps late, so a sudden
+    /// jump in iterations (the sphere reaching the cloth) can outrun it once.
+    pub steps_cut: u64,
     /// This row's ms/step over the thesis-solve row's (same backend, model
     /// and grid; not solved to any tolerance).
     pub times_thesis_step: Option<f64>,
@@ -511,6 +515,7 @@ fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
                 iterations_max: report.cg_iterations_max,
                 residual_max: report.cg_residual_max,
                 steps_above_goal: report.cg_steps_above_goal,
+                steps_cut: report.cg_steps_cut,
                 times_thesis_step: thesis.map(|t| report.ms_per_step / t.report.ms_per_step),
             }
         })
