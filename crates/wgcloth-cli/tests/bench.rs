@@ -103,6 +103,13 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
 
     assert_eq!(report.bandwidth.len(), backends.len());
     assert!(report.bandwidth.iter().all(|b| b.gb_per_s > 0.0));
+    assert_eq!(report.arithmetic.len(), backends.len());
+    assert!(
+        report
+            .arithmetic
+            .iter()
+            .all(|a| a.g_multiply_adds_per_s > 0.0)
+    );
     assert_eq!(report.cg_traffic.len(), backends.len() * grids.len());
     for t in &report.cg_traffic {
         let row = report
@@ -227,6 +234,25 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             assert!(t.bytes >= 12 * row.particles as u64, "{t:?}");
         }
         assert!(t.bytes > 0 && t.floor_ms > 0.0, "{t:?}");
+        // Only the contact stage runs the network: its contacts times the
+        // row's multiply-adds per contact, and the floor is the longer one.
+        let expected = if t.stage == "contact" {
+            row.report.contacts_mean * row.network_multiply_adds as f64
+        } else {
+            0.0
+        };
+        assert!(row.network_multiply_adds > 0, "friction-net runs a network");
+        assert_eq!(t.multiply_adds, expected, "{t:?}");
+        assert_eq!(
+            t.floor_ms,
+            t.memory_floor_ms.max(t.arithmetic_floor_ms),
+            "{t:?}"
+        );
+        assert_eq!(
+            t.bound == "arithmetic",
+            t.arithmetic_floor_ms > t.memory_floor_ms,
+            "{t:?}"
+        );
         assert!(
             (t.times_floor - t.measured_ms / t.floor_ms).abs() < 1e-9 * t.times_floor,
             "{t:?}"

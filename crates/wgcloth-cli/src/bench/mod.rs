@@ -6,7 +6,8 @@
 //! stay for comparison. Then the networks' throughput over batches of
 //! contacts, and the thesis's headline measure, seconds per sphere period
 //! with the analytic force against each network on the same backend.
-//! [`traffic`] sets each PCG iteration against its memory-traffic floor;
+//! [`traffic`] sets each PCG iteration against its memory-traffic floor
+//! and every other stage against its floor of memory or arithmetic;
 //! [`plot`] draws the figure.
 
 pub mod plot;
@@ -264,6 +265,9 @@ pub struct StepRow {
     /// Σ stage_ms / ms_per_step: how much of the step the stages account
     /// for (on the GPU the rest is submission and waiting).
     pub stage_coverage: f64,
+    /// A contact's network multiply-adds with the Jacobian in reverse mode
+    /// (0 for an analytic model).
+    pub network_multiply_adds: usize,
     #[serde(flatten)]
     pub report: Report,
 }
@@ -355,8 +359,9 @@ pub struct ConvergedRow {
     pub times_thesis_step: Option<f64>,
 }
 
-/// One stage of the default model's thesis-solve rows against its
-/// memory-traffic floor on the same backend.
+/// One stage of the default model's thesis-solve rows against its floor
+/// on the same backend: the time its bytes take at the copy bandwidth or
+/// its multiply-adds at the arithmetic rate, whichever is longer.
 #[derive(Clone, Debug, Serialize)]
 pub struct StageTrafficRow {
     pub backend: String,
@@ -364,8 +369,15 @@ pub struct StageTrafficRow {
     pub stage: &'static str,
     /// [`traffic::Layout::stage_bytes`] for this backend's layout.
     pub bytes: u64,
-    /// Those bytes at the measured copy bandwidth.
+    /// [`traffic::stage_multiply_adds`].
+    pub multiply_adds: f64,
+    /// The bytes at the measured copy bandwidth.
+    pub memory_floor_ms: f64,
+    /// The multiply-adds at the measured arithmetic rate.
+    pub arithmetic_floor_ms: f64,
+    /// The larger of the two, and which it is ("memory" or "arithmetic").
     pub floor_ms: f64,
+    pub bound: &'static str,
     /// The stage's median time in the row.
     pub measured_ms: f64,
     pub times_floor: f64,
@@ -383,6 +395,7 @@ pub struct BenchReport {
     pub converged: Vec<ConvergedRow>,
     pub scaling: Vec<ScalingRow>,
     pub bandwidth: Vec<traffic::Bandwidth>,
+    pub arithmetic: Vec<traffic::Arithmetic>,
     pub cg_traffic: Vec<TrafficRow>,
     pub iterations: Vec<IterationRow>,
     pub stage_traffic: Vec<StageTrafficRow>,
@@ -415,6 +428,10 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                 let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
                 let triangles = scene.cloth.triangles.len();
                 let body_vertices = scene.rigid.as_ref().map_or(0, |b| b.mesh.vertices.len());
+                let network_multiply_adds = scene
+                    .network
+                    .as_ref()
+                    .map_or(0, |n| n.jacobian_multiply_adds());
                 let report = run::run(backend, scene, opts.steps, Default::default())?;
                 let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
                 rows.push(StepRow {
@@ -425,16 +442,19 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                     triangles,
                     body_vertices,
                     stage_coverage,
+                    network_multiply_adds,
                     report,
                 });
             }
         }
     }
-    progress("copy bandwidth");
+    progress("copy bandwidth and arithmetic rate");
     let mut bandwidth = vec![traffic::cpu_bandwidth()];
+    let mut arithmetic = vec![traffic::cpu_arithmetic()];
     for backend in &chosen {
         if let Some(ctx) = backend.context() {
             bandwidth.push(traffic::gpu_bandwidth(ctx)?);
+            arithmetic.push(traffic::gpu_arithmetic(ctx)?);
         }
     }
     let mut periods = Vec::new();
@@ -485,8 +505,9 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         scaling: scaling(&rows),
         cg_traffic: cg_traffic(&rows, &bandwidth),
         iterations,
-        stage_traffic: stage_traffic(&rows, &bandwidth),
+        stage_traffic: stage_traffic(&rows, &bandwidth, &arithmetic),
         bandwidth,
+        arithmetic,
         rows,
         networks,
         periods,
@@ -677,15 +698,22 @@ fn solver_iterations(
 }
 
 /// Every stage but pcg (and but contact in a row without contacts) of the
-/// friction-net rows (thesis solve) against the floor of their backend.
-fn stage_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<StageTrafficRow> {
+/// friction-net rows (thesis solve) against the floors of their backend.
+fn stage_traffic(
+    rows: &[StepRow],
+    bandwidth: &[traffic::Bandwidth],
+    arithmetic: &[traffic::Arithmetic],
+) -> Vec<StageTrafficRow> {
     let mut out = Vec::new();
     for r in rows
         .iter()
         .filter(|r| !r.converged && r.label == ModelKind::FrictionNet.name())
     {
         let backend = r.report.backend.as_str();
-        let Some(b) = bandwidth.iter().find(|b| b.backend == backend) else {
+        let (Some(b), Some(a)) = (
+            bandwidth.iter().find(|b| b.backend == backend),
+            arithmetic.iter().find(|a| a.backend == backend),
+        ) else {
             continue;
         };
         let layout = if backend == "gpu" {
@@ -699,6 +727,7 @@ fn stage_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Stag
             triangles: r.triangles as u64,
             body_vertices: r.body_vertices as u64,
             contacts: r.report.contacts_mean,
+            network_multiply_adds: r.network_multiply_adds as u64,
         };
         for stage in Stage::ALL {
             let (Some(bytes), Some(&measured_ms)) = (
@@ -711,13 +740,24 @@ fn stage_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Stag
             if bytes == 0 {
                 continue;
             }
-            let floor_ms = bytes as f64 / (b.gb_per_s * 1e9) * 1e3;
+            let multiply_adds = traffic::stage_multiply_adds(stage, &extent);
+            let memory_floor_ms = bytes as f64 / (b.gb_per_s * 1e9) * 1e3;
+            let arithmetic_floor_ms = multiply_adds / (a.g_multiply_adds_per_s * 1e9) * 1e3;
+            let (floor_ms, bound) = if arithmetic_floor_ms > memory_floor_ms {
+                (arithmetic_floor_ms, "arithmetic")
+            } else {
+                (memory_floor_ms, "memory")
+            };
             out.push(StageTrafficRow {
                 backend: backend.into(),
                 grid: r.report.grid[0],
                 stage: stage.name(),
                 bytes,
+                multiply_adds,
+                memory_floor_ms,
+                arithmetic_floor_ms,
                 floor_ms,
+                bound,
                 measured_ms,
                 times_floor: measured_ms / floor_ms,
             });
@@ -935,6 +975,17 @@ impl BenchReport {
         );
         section(
             &mut out,
+            &self.arithmetic,
+            "\nmultiply-add rate\n".into(),
+            |a| {
+                format!(
+                    "{:<8}{:>8.1} G/s  {}\n",
+                    a.backend, a.g_multiply_adds_per_s, a.method
+                )
+            },
+        );
+        section(
+            &mut out,
             &self.cg_traffic,
             format!(
                 "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
@@ -982,17 +1033,27 @@ impl BenchReport {
             &mut out,
             &self.stage_traffic,
             format!(
-                "\neach other stage against its memory-traffic floor (friction-net rows)\n{:<8}{:>6}{:>11}{:>12}{:>12}{:>13}{:>9}\n",
-                "backend", "grid", "stage", "MB", "floor ms", "measured ms", "× floor"
+                "\neach other stage against its floor, memory or arithmetic (friction-net rows)\n{:<8}{:>6}{:>11}{:>10}{:>10}{:>12}{:>12}{:>13}{:>9}\n",
+                "backend",
+                "grid",
+                "stage",
+                "MB",
+                "M madds",
+                "floor ms",
+                "bound",
+                "measured ms",
+                "× floor"
             ),
             |t| {
                 format!(
-                    "{:<8}{:>6}{:>11}{:>12.3}{:>12.4}{:>13.4}{:>9.1}\n",
+                    "{:<8}{:>6}{:>11}{:>10.3}{:>10.2}{:>12.4}{:>12}{:>13.4}{:>9.1}\n",
                     t.backend,
                     t.grid,
                     t.stage,
                     t.bytes as f64 * 1e-6,
+                    t.multiply_adds * 1e-6,
                     t.floor_ms,
+                    t.bound,
                     t.measured_ms,
                     t.times_floor
                 )
@@ -1021,12 +1082,12 @@ impl BenchReport {
             &mut out,
             &self.networks,
             format!(
-                "\nnetwork and input Jacobian over a batch\n{:<40}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
+                "\nnetwork and input Jacobian over a batch\n{:<54}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
                 "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
             ),
             |n| {
                 format!(
-                    "{:<40}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
+                    "{:<54}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
                     n.network,
                     n.backend,
                     n.kernel,

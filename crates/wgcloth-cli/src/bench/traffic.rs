@@ -1,8 +1,9 @@
-//! Memory-traffic floors: the bytes a Jacobi PCG iteration (wgsl/pcg.wgsl
-//! `next` and `update`; the fused loops of src/cpu/pcg.rs), a multigrid
-//! one (src/cpu/multigrid.rs) and each other
-//! stage of a step must move between memory and the processor if every
-//! array they touch crosses once, and the copy bandwidth that moves them.
+//! Floors: the bytes a Jacobi PCG iteration (wgsl/pcg.wgsl `next` and
+//! `update`; the fused loops of src/cpu/pcg.rs), a multigrid one
+//! (src/cpu/multigrid.rs) and each other stage of a step must move between
+//! memory and the processor if every array they touch crosses once, and
+//! the copy bandwidth that moves them; the multiply-adds the contact
+//! stage's network must do, and the rate of independent multiply-adds.
 
 use std::time::Instant;
 
@@ -42,6 +43,21 @@ pub struct Extent {
     pub body_vertices: u64,
     /// Contacts per step (the row's mean).
     pub contacts: f64,
+    /// A contact's network multiply-adds, forward and reverse-mode
+    /// Jacobian (`Network::jacobian_multiply_adds`; 0 for an analytic model).
+    pub network_multiply_adds: u64,
+}
+
+/// Multiply-adds `stage` must do once per step over `e`: the contact
+/// stage's network, by reverse mode (the least of the two modes for these
+/// networks: one pass per output, where forward mode takes one per
+/// Jacobian input). The other stages' arithmetic is a few operations per
+/// byte they move, and is left to the memory floor.
+pub fn stage_multiply_adds(stage: Stage, e: &Extent) -> f64 {
+    match stage {
+        Stage::Contact => e.contacts * e.network_multiply_adds as f64,
+        _ => 0.0,
+    }
 }
 
 /// wgsl/pcg.wgsl: `vec4<f32>` vectors, packed `Sym3` blocks (6 floats), u32
@@ -237,5 +253,177 @@ pub fn gpu_bandwidth(ctx: &GpuContext) -> Result<Bandwidth> {
             bytes >> 20
         ),
         gb_per_s: 2.0 * (copies as u64 * bytes) as f64 / best * 1e-9,
+    })
+}
+
+/// Multiply-add rate of one backend: the floor of a stage whose work is
+/// arithmetic (the network), as the copy bandwidth is of one that streams.
+#[derive(Clone, Debug, Serialize)]
+pub struct Arithmetic {
+    pub backend: String,
+    /// How it was measured.
+    pub method: String,
+    /// Multiply-adds per second, in billions.
+    pub g_multiply_adds_per_s: f64,
+}
+
+/// Independent multiply-add chains per CPU thread, one 8-lane vector each:
+/// enough in flight to cover the latency on both FMA pipes, few enough to
+/// stay in the 16 AVX2 registers.
+const CPU_CHAINS: usize = 12;
+const CPU_LANES: usize = 8;
+const CPU_CHAIN_STEPS: usize = 1 << 23;
+
+/// a ← a m + c along every chain with AVX2's fused multiply-add; the sum
+/// keeps the work observable. Written with the intrinsics: the compiler
+/// does not vectorise the same loop over arrays.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn chains_avx2_fma(seed: f32) -> f32 {
+    use std::arch::x86_64::{__m256, _mm256_add_ps, _mm256_fmadd_ps, _mm256_set1_ps};
+    let (m, c) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
+    let mut acc = [_mm256_set1_ps(seed); CPU_CHAINS];
+    for _ in 0..CPU_CHAIN_STEPS {
+        for a in &mut acc {
+            *a = _mm256_fmadd_ps(*a, m, c);
+        }
+    }
+    let sum = acc
+        .into_iter()
+        .fold(_mm256_set1_ps(0.0), |s, a| _mm256_add_ps(s, a));
+    // SAFETY: __m256 is eight f32s.
+    let lanes: [f32; CPU_LANES] = unsafe { std::mem::transmute::<__m256, [f32; CPU_LANES]>(sum) };
+    lanes.iter().sum()
+}
+
+/// The same chains unfused, with whatever vectors the build's baseline has.
+fn chains_baseline(seed: f32) -> f32 {
+    let mut acc = [[seed; CPU_LANES]; CPU_CHAINS];
+    for _ in 0..CPU_CHAIN_STEPS {
+        for a in acc.iter_mut().flatten() {
+            *a = *a * 0.999_999 + 1e-7;
+        }
+    }
+    acc.iter().flatten().sum()
+}
+
+/// The chains with the instructions `nn::Mlp` picks at run time (AVX2 and
+/// FMA where the CPU has them), and what they were.
+fn cpu_chains(seed: f32) -> (f32, &'static str) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has both features, checked just above.
+        return (unsafe { chains_avx2_fma(seed) }, "AVX2 fused");
+    }
+    (chains_baseline(seed), "baseline unfused")
+}
+
+/// Independent multiply-add chains on every rayon thread at once.
+pub fn cpu_arithmetic() -> Arithmetic {
+    let threads = rayon::current_num_threads();
+    let mut best = f64::INFINITY;
+    let mut instructions = "";
+    for _ in 0..REPEATS {
+        let start = Instant::now();
+        let out = rayon::broadcast(|c| cpu_chains(c.index() as f32 * 1e-6));
+        best = best.min(start.elapsed().as_secs_f64());
+        instructions = out[0].1;
+        std::hint::black_box(out);
+    }
+    let per_thread = (CPU_CHAINS * CPU_LANES * CPU_CHAIN_STEPS) as f64;
+    Arithmetic {
+        backend: "cpu".into(),
+        method: format!(
+            "{CPU_CHAINS} × {CPU_LANES}-lane chains per thread, {instructions}, {threads} threads, best of {REPEATS}"
+        ),
+        g_multiply_adds_per_s: per_thread * threads as f64 / best * 1e-9,
+    }
+}
+
+/// Three independent vec4 chains per invocation: on a CPU adapter each
+/// lane of a SIMD register is an invocation, so three vec4s are 12 of its
+/// 16 AVX2 registers; a GPU hides the latency with other invocations.
+const GPU_CHAINS_WGSL: &str = "
+@group(0) @binding(0) var<storage, read_write> out: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn chains(@builtin(global_invocation_id) id: vec3<u32>) {
+    let m = vec4<f32>(0.999999);
+    let c = vec4<f32>(1e-7);
+    var a = vec4<f32>(f32(id.x) * 1e-9);
+    var b = a + 1.0;
+    var d = a + 2.0;
+    for (var i = 0u; i < 4096u; i++) {
+        a = fma(a, m, c);
+        b = fma(b, m, c);
+        d = fma(d, m, c);
+    }
+    out[id.x] = a + b + d;
+}
+";
+const GPU_CHAIN_MULTIPLY_ADDS: u64 = 3 * 4 * 4096;
+const GPU_GROUPS: u32 = 2048;
+
+/// The chains of `GPU_CHAINS_WGSL` over 131,072 invocations per dispatch,
+/// dispatched more times per pass until a pass takes 50 ms.
+pub fn gpu_arithmetic(ctx: &GpuContext) -> Result<Arithmetic> {
+    let device = &ctx.device;
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("arithmetic"),
+        source: wgpu::ShaderSource::Wgsl(GPU_CHAINS_WGSL.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("arithmetic"),
+        layout: None,
+        module: &module,
+        entry_point: Some("chains"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let invocations = GPU_GROUPS as u64 * 64;
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("arithmetic"),
+        size: invocations * 16,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("arithmetic"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: out.as_entire_binding(),
+        }],
+    });
+    let run = |dispatches: u32| {
+        let start = Instant::now();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            for _ in 0..dispatches {
+                pass.dispatch_workgroups(GPU_GROUPS, 1, 1);
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.finish()?;
+        Ok(start.elapsed().as_secs_f64())
+    };
+    let mut dispatches = 1;
+    while run(dispatches)? < 0.05 && dispatches < 1 << 12 {
+        dispatches *= 2;
+    }
+    let mut best = f64::INFINITY;
+    for _ in 0..REPEATS {
+        best = best.min(run(dispatches)?);
+    }
+    let multiply_adds = (dispatches as u64 * invocations * GPU_CHAIN_MULTIPLY_ADDS) as f64;
+    Ok(Arithmetic {
+        backend: "gpu".into(),
+        method: format!(
+            "3 vec4 fma chains per invocation, {dispatches} × {invocations} invocations per submission, best of {REPEATS}"
+        ),
+        g_multiply_adds_per_s: multiply_adds / best * 1e-9,
     })
 }
