@@ -1,7 +1,8 @@
 //! Samples of a run taken every K steps (`run --monitor FILE.csv`): the
-//! state's energy and fastest vertex, the process's resident memory and
-//! the GPU allocator's bytes. A soak reads them to show the run stays
-//! finite, its energy bounded and its memory flat.
+//! state's energy and fastest vertex, the cloth triangle pairs that pass
+//! through each other, the process's resident memory and the GPU
+//! allocator's bytes. A soak reads them to show the run stays finite, its
+//! energy bounded and its memory flat.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -11,9 +12,9 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
-use wgcloth::cpu;
 use wgcloth::error::{Error, Result};
 use wgcloth::scene::Scene;
+use wgcloth::{cpu, intersections};
 
 /// One row of the monitor file.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -29,6 +30,9 @@ pub struct Sample {
     /// The fastest vertex's speed, m/s.
     pub max_speed: f32,
     pub finite: bool,
+    /// Cloth triangle pairs that share no vertex and intersect
+    /// (`wgcloth::intersections`).
+    pub self_intersections: usize,
     /// Resident set size of this process (Linux `VmRSS`), bytes.
     pub rss_bytes: Option<u64>,
     /// Device memory the GPU allocator has handed out and has reserved
@@ -37,13 +41,13 @@ pub struct Sample {
     pub gpu_reserved_bytes: Option<u64>,
 }
 
-const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,finite,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
+const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,finite,self_intersections,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
 
 impl Sample {
     fn csv(&self) -> String {
         let opt = |v: Option<u64>| v.map(|b| b.to_string()).unwrap_or_default();
         format!(
-            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{},{},{},{}",
+            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{},{},{},{},{}",
             self.step,
             self.seconds,
             self.backend,
@@ -51,6 +55,7 @@ impl Sample {
             self.kinetic,
             self.max_speed,
             self.finite,
+            self.self_intersections,
             opt(self.rss_bytes),
             opt(self.gpu_allocated_bytes),
             opt(self.gpu_reserved_bytes)
@@ -121,6 +126,7 @@ impl Monitor {
             kinetic: energy.kinetic,
             max_speed: v.iter().map(|v| v.length()).fold(0.0, f32::max),
             finite: x.iter().chain(v).all(|p| p.is_finite()),
+            self_intersections: intersections::intersecting_pairs(x, &scene.cloth.triangles).len(),
             rss_bytes: resident_bytes(),
             gpu_allocated_bytes: allocator.as_ref().map(|r| r.total_allocated_bytes),
             gpu_reserved_bytes: allocator.as_ref().map(|r| r.total_reserved_bytes),
@@ -147,8 +153,16 @@ impl Monitor {
                 .unwrap_or_else(|| "n/a".into())
         };
         let max_rss = self.samples.iter().filter_map(|s| s.rss_bytes).max();
+        let worst = self.samples.iter().map(|s| s.self_intersections).max();
+        let worst = worst.unwrap_or(0);
+        let crossed = self
+            .samples
+            .iter()
+            .filter(|s| s.self_intersections > 0)
+            .count();
         format!(
             "monitor      {} samples in {}: energy {lo:.4} to {hi:.4} J, {}\n\
+             self         {crossed} samples with intersecting cloth triangle pairs, at most {worst}\n\
              memory       resident {} at step {} → {} at step {} (max {}); GPU allocated {} → {}",
             self.samples.len(),
             self.path.display(),

@@ -77,6 +77,7 @@ fn the_cli_writes_a_row_every_k_steps() {
     for row in &rows {
         assert_eq!(row[column("backend")], "cpu");
         assert_eq!(row[column("finite")], "true");
+        assert_eq!(row[column("self_intersections")], "0", "a hanging cloth");
         let rss: u64 = row[column("rss_bytes")].parse().expect("resident memory");
         assert!(rss > 1 << 20, "a process holds more than 1 MiB: {rss}");
         assert_eq!(

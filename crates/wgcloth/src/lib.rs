@@ -31,6 +31,8 @@
 //! - [`nn`]: the contact networks, their weights files and their inputs.
 //! - [`render`]: drawing a scene's frames from the simulator's buffers.
 //! - [`health`]: what a step must leave, and where divergence started.
+//! - [`intersections`]: the cloth triangle pairs that pass through each
+//!   other.
 
 pub mod bvh;
 pub mod config;
@@ -38,6 +40,7 @@ pub mod cpu;
 pub mod error;
 pub mod gpu;
 pub mod health;
+pub mod intersections;
 pub mod math;
 pub mod multigrid;
 pub mod nn;
