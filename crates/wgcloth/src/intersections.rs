@@ -12,62 +12,24 @@
 //! misjudged only within about 1e-12 m of touching. Touching pairs (an
 //! edge end on the other's plane) and coplanar overlaps do not count.
 //!
-//! The broad phase is a uniform grid of cells the size of the largest
-//! triangle's bounding box: each triangle is listed in every cell its box
-//! overlaps, the lists sorted by cell, and each pair whose boxes overlap is
-//! tested once, in the cell holding the low corner of the boxes' overlap.
+//! The broad phase is a uniform grid over the triangles' bounding boxes
+//! (`grid.rs`).
 
 use glam::{DVec3, Vec3};
-use rayon::prelude::*;
+
+use crate::grid::{Aabb, overlapping_pairs};
 
 /// Intersecting pairs of triangles that share no vertex, each as
 /// [lower index, higher index], in increasing order.
 pub fn intersecting_pairs(x: &[Vec3], triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    let bounds: Vec<Aabb> = triangles
-        .iter()
-        .map(|t| Aabb::of(t.map(|i| x[i as usize])))
+    let corners = |t: u32| triangles[t as usize].map(|i| x[i as usize]);
+    let boxes: Vec<Aabb> = (0..triangles.len() as u32)
+        .map(|t| Aabb::around(corners(t), 0.0))
         .collect();
-    let Some(cell) = bounds
-        .iter()
-        .map(|b| (b.hi - b.lo).max_element())
-        .reduce(f32::max)
-        .filter(|s| s.is_finite() && *s > 0.0)
-    else {
-        return Vec::new();
-    };
-    let grid = Grid { cell };
-    let mut listed: Vec<([i32; 3], u32)> = bounds
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(t, b)| grid.cells(b).map(move |c| (c, t as u32)))
-        .collect();
-    listed.par_sort_unstable();
-    let starts: Vec<usize> = (0..listed.len())
-        .filter(|&k| k == 0 || listed[k].0 != listed[k - 1].0)
-        .collect();
-    let mut pairs: Vec<[u32; 2]> = starts
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(s, &start)| {
-            let end = starts.get(s + 1).copied().unwrap_or(listed.len());
-            let (key, members) = (listed[start].0, &listed[start..end]);
-            let (bounds, grid) = (&bounds, &grid);
-            members.iter().enumerate().flat_map(move |(k, &(_, a))| {
-                members[k + 1..].iter().filter_map(move |&(_, b)| {
-                    let (ba, bb) = (&bounds[a as usize], &bounds[b as usize]);
-                    let overlap = ba.overlap(bb)?;
-                    let (ta, tb) = (triangles[a as usize], triangles[b as usize]);
-                    let first_cell = grid.cell_of(overlap.lo) == key;
-                    (first_cell
-                        && !ta.iter().any(|v| tb.contains(v))
-                        && intersect(ta.map(|i| x[i as usize]), tb.map(|i| x[i as usize])))
-                    .then_some([a.min(b), a.max(b)])
-                })
-            })
-        })
-        .collect();
-    pairs.par_sort_unstable();
-    pairs
+    overlapping_pairs(&boxes, |a, b| {
+        let (ta, tb) = (triangles[a as usize], triangles[b as usize]);
+        !ta.iter().any(|v| tb.contains(v)) && intersect(corners(a), corners(b))
+    })
 }
 
 /// Whether triangles p and q, assumed to share no vertex, intersect.
@@ -95,46 +57,6 @@ fn crosses((s, e): (DVec3, DVec3), t: [DVec3; 3]) -> bool {
 /// Six times the signed volume of the tetrahedron (a, b, c, d).
 fn orient(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
     (b - a).dot((c - a).cross(d - a))
-}
-
-#[derive(Clone, Copy, Debug)]
-struct Aabb {
-    lo: Vec3,
-    hi: Vec3,
-}
-
-impl Aabb {
-    fn of(v: [Vec3; 3]) -> Aabb {
-        Aabb {
-            lo: v[0].min(v[1]).min(v[2]),
-            hi: v[0].max(v[1]).max(v[2]),
-        }
-    }
-
-    /// The two boxes' common part, if they overlap.
-    fn overlap(&self, other: &Aabb) -> Option<Aabb> {
-        let (lo, hi) = (self.lo.max(other.lo), self.hi.min(other.hi));
-        lo.cmple(hi).all().then_some(Aabb { lo, hi })
-    }
-}
-
-struct Grid {
-    cell: f32,
-}
-
-impl Grid {
-    fn cell_of(&self, p: Vec3) -> [i32; 3] {
-        (p / self.cell).floor().as_ivec3().to_array()
-    }
-
-    /// Every cell `b` overlaps: at most 2 along each axis, as the cell is
-    /// at least as wide as any box.
-    fn cells(&self, b: &Aabb) -> impl Iterator<Item = [i32; 3]> + use<> {
-        let (lo, hi) = (self.cell_of(b.lo), self.cell_of(b.hi));
-        (lo[0]..=hi[0]).flat_map(move |i| {
-            (lo[1]..=hi[1]).flat_map(move |j| (lo[2]..=hi[2]).map(move |k| [i, j, k]))
-        })
-    }
 }
 
 #[cfg(test)]

@@ -32,13 +32,14 @@
 //! - [`render`]: drawing a scene's frames from the simulator's buffers.
 //! - [`health`]: what a step must leave, and where divergence started.
 //! - [`intersections`]: the cloth triangle pairs that pass through each
-//!   other.
+//!   other; [`separation`]: how far each vertex may move so that none does.
 
 pub mod bvh;
 pub mod config;
 pub mod cpu;
 pub mod error;
 pub mod gpu;
+mod grid;
 pub mod health;
 pub mod intersections;
 pub mod math;
@@ -46,6 +47,7 @@ pub mod multigrid;
 pub mod nn;
 pub mod render;
 pub mod scene;
+pub mod separation;
 pub mod stage;
 
 pub use config::Config;

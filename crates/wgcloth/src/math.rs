@@ -73,6 +73,43 @@ pub fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     a + ab * (vb * inv) + ac * (vc * inv)
 }
 
+/// The closest points of segments (p1, q1) and (p2, q2), one on each
+/// (Ericson, Real-Time Collision Detection, 5.1.9); a degenerate segment is
+/// its point.
+pub fn closest_between_segments(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> (Vec3, Vec3) {
+    let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
+    let (a, e, f) = (d1.dot(d1), d2.dot(d2), d2.dot(r));
+    let tiny = f32::EPSILON * (a + e).max(f32::MIN_POSITIVE);
+    let (s, t) = if a <= tiny && e <= tiny {
+        (0.0, 0.0)
+    } else if a <= tiny {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = d1.dot(r);
+        if e <= tiny {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = d1.dot(d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > tiny * a.max(e) {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    (p1 + d1 * s, p2 + d2 * t)
+}
+
 /// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations:
 /// returns the eigenvalues and the matrix whose columns are the eigenvectors.
 /// Jacobi is branch-light and fixed-cost, which is why the GPU twin uses it too.
@@ -145,6 +182,38 @@ mod tests {
             Vec3::new(f(7), f(8), f(9)),
         );
         symmetric_part(m)
+    }
+
+    #[test]
+    fn closest_points_of_segments_are_no_farther_than_any_sampled_pair() {
+        for seed in 0..200u32 {
+            let f = |k: u32| ((seed * 7919 + k * 104_729) % 2003) as f32 / 1001.0 - 1.0;
+            let v = |k: u32| Vec3::new(f(k), f(k + 1), f(k + 2));
+            // Every tenth pair parallel, every seventh a point.
+            let (p1, mut q1, p2) = (v(1), v(4), v(7));
+            let q2 = if seed % 10 == 0 {
+                p2 + (q1 - p1) * 0.7
+            } else {
+                v(10)
+            };
+            if seed % 7 == 0 {
+                q1 = p1;
+            }
+            let (c1, c2) = closest_between_segments(p1, q1, p2, q2);
+            let on = |c: Vec3, p: Vec3, q: Vec3| {
+                let t = (c - p).dot(q - p) / (q - p).length_squared().max(1e-30);
+                (p + (q - p) * t.clamp(0.0, 1.0) - c).length() < 1e-5
+            };
+            assert!(on(c1, p1, q1) && on(c2, p2, q2), "seed {seed}");
+            let best = (c1 - c2).length();
+            for i in 0..=40 {
+                for j in 0..=40 {
+                    let (s, t) = (i as f32 / 40.0, j as f32 / 40.0);
+                    let d = (p1 + (q1 - p1) * s - p2 - (q2 - p2) * t).length();
+                    assert!(best <= d + 1e-5, "seed {seed}: {best} > {d}");
+                }
+            }
+        }
     }
 
     #[test]
