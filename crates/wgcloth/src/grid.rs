@@ -35,49 +35,89 @@ impl Aabb {
     }
 }
 
+/// Boxes listed in every cell they overlap, sorted by cell. Cells are as
+/// wide as the widest box, so a box overlaps at most two along each axis.
+/// Boxes that are not finite are left out.
+pub struct Cells {
+    cell: f32,
+    listed: Vec<Listed>,
+}
+
+/// A box's index under a cell's key.
+type Listed = ([i32; 3], u32);
+
+impl Cells {
+    /// `None` when no box has a finite, positive width.
+    pub fn new(boxes: &[Aabb]) -> Option<Cells> {
+        let cell = boxes
+            .iter()
+            .map(|b| (b.hi - b.lo).max_element())
+            .filter(|s| s.is_finite())
+            .reduce(f32::max)
+            .filter(|s| *s > 0.0)?;
+        let mut cells = Cells {
+            cell,
+            listed: Vec::new(),
+        };
+        let key = |p| cells.key(p);
+        let mut listed: Vec<Listed> = boxes
+            .par_iter()
+            .enumerate()
+            .filter(|(_, b)| b.lo.is_finite() && b.hi.is_finite())
+            .flat_map_iter(|(i, b)| {
+                let (lo, hi) = (key(b.lo), key(b.hi));
+                (lo[0]..=hi[0]).flat_map(move |x| {
+                    (lo[1]..=hi[1])
+                        .flat_map(move |y| (lo[2]..=hi[2]).map(move |z| ([x, y, z], i as u32)))
+                })
+            })
+            .collect();
+        listed.par_sort_unstable();
+        cells.listed = listed;
+        Some(cells)
+    }
+
+    fn key(&self, p: Vec3) -> [i32; 3] {
+        (p / self.cell).floor().as_ivec3().to_array()
+    }
+
+    /// The boxes listed in the cell holding `p`: every box that contains
+    /// `p` among them.
+    pub fn at(&self, p: Vec3) -> impl Iterator<Item = u32> + '_ {
+        let key = self.key(p);
+        let start = self.listed.partition_point(|(k, _)| *k < key);
+        self.listed[start..]
+            .iter()
+            .take_while(move |(k, _)| *k == key)
+            .map(|(_, i)| *i)
+    }
+
+    /// Each cell's key and its boxes.
+    fn runs(&self) -> Vec<([i32; 3], &[Listed])> {
+        self.listed
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|run| (run[0].0, run))
+            .collect()
+    }
+}
+
 /// Every pair [a, b], a < b, of `boxes` that overlap and that `keep`
-/// accepts, each once, in increasing order. Cells are as wide as the
-/// widest box, so a box overlaps at most two along each axis. Boxes that
-/// are not finite take part in no pair.
+/// accepts, each once (in the cell holding the low corner of the boxes'
+/// overlap), in increasing order.
 pub fn overlapping_pairs(boxes: &[Aabb], keep: impl Fn(u32, u32) -> bool + Sync) -> Vec<[u32; 2]> {
-    let Some(cell) = boxes
-        .iter()
-        .map(|b| (b.hi - b.lo).max_element())
-        .filter(|s| s.is_finite())
-        .reduce(f32::max)
-        .filter(|s| *s > 0.0)
-    else {
+    let Some(cells) = Cells::new(boxes) else {
         return Vec::new();
     };
-    let cell_of = |p: Vec3| (p / cell).floor().as_ivec3().to_array();
-    let mut listed: Vec<([i32; 3], u32)> = boxes
+    let mut pairs: Vec<[u32; 2]> = cells
+        .runs()
         .par_iter()
-        .enumerate()
-        .filter(|(_, b)| b.lo.is_finite() && b.hi.is_finite())
-        .flat_map_iter(|(i, b)| {
-            let (lo, hi) = (cell_of(b.lo), cell_of(b.hi));
-            (lo[0]..=hi[0]).flat_map(move |x| {
-                (lo[1]..=hi[1])
-                    .flat_map(move |y| (lo[2]..=hi[2]).map(move |z| ([x, y, z], i as u32)))
-            })
-        })
-        .collect();
-    listed.par_sort_unstable();
-    let starts: Vec<usize> = (0..listed.len())
-        .filter(|&k| k == 0 || listed[k].0 != listed[k - 1].0)
-        .collect();
-    let mut pairs: Vec<[u32; 2]> = starts
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(s, &start)| {
-            let end = starts.get(s + 1).copied().unwrap_or(listed.len());
-            let (key, members) = (listed[start].0, &listed[start..end]);
-            let keep = &keep;
+        .flat_map_iter(|&(key, members)| {
+            let (keep, cells) = (&keep, &cells);
             members.iter().enumerate().flat_map(move |(k, &(_, a))| {
                 members[k + 1..].iter().filter_map(move |&(_, b)| {
                     let overlap = boxes[a as usize].overlap(&boxes[b as usize])?;
                     let (a, b) = (a.min(b), a.max(b));
-                    (cell_of(overlap.lo) == key && keep(a, b)).then_some([a, b])
+                    (cells.key(overlap.lo) == key && keep(a, b)).then_some([a, b])
                 })
             })
         })

@@ -14,7 +14,9 @@
 
 use glam::Vec3;
 
-use crate::grid::{Aabb, overlapping_pairs};
+use rayon::prelude::*;
+
+use crate::grid::{Aabb, Cells, overlapping_pairs};
 use crate::math::{closest_between_segments, closest_on_triangle};
 
 /// The cloth's primitives a bound looks at.
@@ -50,57 +52,60 @@ pub struct NearPair {
 /// Vertex–triangle and edge–edge pairs that share no vertex and lie within
 /// `radius` of each other.
 pub fn near_pairs(x: &[Vec3], p: &Primitives, radius: f32) -> Vec<NearPair> {
-    // Items: vertices, then edges, then triangles; every box grown by half
-    // the radius, so two items within it have overlapping boxes.
-    let (nv, ne) = (x.len(), p.edges.len());
-    let half = 0.5 * radius;
-    let boxes: Vec<Aabb> = x
+    let at = |i: u32| x[i as usize];
+    // Vertex–triangle: each vertex looks in the one cell it lies in, where
+    // every triangle whose box grown by the radius holds it is listed.
+    let grown: Vec<Aabb> = p
+        .triangles
         .iter()
-        .map(|&v| Aabb::around([v], half))
-        .chain(
-            p.edges
-                .iter()
-                .map(|e| Aabb::around(e.map(|i| x[i as usize]), half)),
-        )
-        .chain(
-            p.triangles
-                .iter()
-                .map(|t| Aabb::around(t.map(|i| x[i as usize]), half)),
-        )
+        .map(|t| Aabb::around(t.map(at), radius))
         .collect();
-    let pair = |a: u32, b: u32| -> Option<NearPair> {
-        let (a, b) = (a as usize, b as usize);
-        let at = |i: u32| x[i as usize];
-        let found = if a < nv && b >= nv + ne {
-            let t = p.triangles[b - nv - ne];
-            let v = a as u32;
-            if t.contains(&v) {
-                return None;
-            }
-            let c = closest_on_triangle(x[a], at(t[0]), at(t[1]), at(t[2]));
-            NearPair {
-                vertices: [v, t[0], t[1], t[2]],
-                separation: (x[a] - c).length(),
-            }
-        } else if (nv..nv + ne).contains(&a) && (nv..nv + ne).contains(&b) {
-            let (e, f) = (p.edges[a - nv], p.edges[b - nv]);
-            if e.iter().any(|v| f.contains(v)) {
-                return None;
-            }
-            let (c, d) = closest_between_segments(at(e[0]), at(e[1]), at(f[0]), at(f[1]));
-            NearPair {
-                vertices: [e[0], e[1], f[0], f[1]],
-                separation: (c - d).length(),
-            }
-        } else {
-            return None;
-        };
-        (found.separation < radius).then_some(found)
+    let mut pairs: Vec<NearPair> = match Cells::new(&grown) {
+        None => Vec::new(),
+        Some(cells) => (0..x.len() as u32)
+            .into_par_iter()
+            .flat_map_iter(|v| {
+                let (cells, grown) = (&cells, &grown);
+                cells.at(at(v)).filter_map(move |t| {
+                    let b = &grown[t as usize];
+                    let tri = p.triangles[t as usize];
+                    if tri.contains(&v) || !(b.lo.cmple(at(v)).all() && at(v).cmple(b.hi).all()) {
+                        return None;
+                    }
+                    let c = closest_on_triangle(at(v), at(tri[0]), at(tri[1]), at(tri[2]));
+                    Some(NearPair {
+                        vertices: [v, tri[0], tri[1], tri[2]],
+                        separation: (at(v) - c).length(),
+                    })
+                })
+            })
+            .filter(|pair| pair.separation < radius)
+            .collect(),
     };
-    overlapping_pairs(&boxes, |a, b| pair(a, b).is_some())
-        .into_iter()
-        .filter_map(|[a, b]| pair(a, b))
-        .collect()
+    // Edge–edge: boxes grown by half the radius overlap for edges within it.
+    let boxes: Vec<Aabb> = p
+        .edges
+        .iter()
+        .map(|e| Aabb::around(e.map(at), 0.5 * radius))
+        .collect();
+    let apart = |a: u32, b: u32| {
+        let (e, f) = (p.edges[a as usize], p.edges[b as usize]);
+        !e.iter().any(|v| f.contains(v))
+    };
+    pairs.extend(
+        overlapping_pairs(&boxes, apart)
+            .into_iter()
+            .map(|[a, b]| {
+                let (e, f) = (p.edges[a as usize], p.edges[b as usize]);
+                let (c, d) = closest_between_segments(at(e[0]), at(e[1]), at(f[0]), at(f[1]));
+                NearPair {
+                    vertices: [e[0], e[1], f[0], f[1]],
+                    separation: (c - d).length(),
+                }
+            })
+            .filter(|pair| pair.separation < radius),
+    );
+    pairs
 }
 
 /// What a bound keeps and how far it looks.
