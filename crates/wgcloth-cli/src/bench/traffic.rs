@@ -311,7 +311,7 @@ fn chains_baseline(seed: f32) -> f32 {
 /// FMA where the CPU has them), and what they were.
 fn cpu_chains(seed: f32) -> (f32, &'static str) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if wgcloth::nn::mlp::has_avx2_fma() {
         // SAFETY: the CPU has both features, checked just above.
         return (unsafe { chains_avx2_fma(seed) }, "AVX2 fused");
     }

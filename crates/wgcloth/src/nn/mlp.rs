@@ -115,8 +115,7 @@ impl Mlp {
     /// all of the block's work.
     fn block(&self, xs: &[f32], wrt: Range<usize>, values: &mut [f32], jacobians: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if has_avx2_fma() {
             // SAFETY: the CPU has both features, checked just above.
             return unsafe { self.block_avx2_fma(xs, wrt, values, jacobians) };
         }
@@ -245,6 +244,19 @@ impl Mlp {
                 }
             }
         }
+    }
+}
+
+/// Whether this CPU has AVX2 and FMA, which [`Mlp`] then uses (the x86-64
+/// baseline the build targets has neither).
+pub fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
