@@ -355,6 +355,7 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
 fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report> {
     let config = sim.scene.config.clone();
     let has_body = sim.scene.rigid.is_some();
+    let self_contact = config.self_contact.enabled;
     let first = sim.state.step;
     if first == 0 {
         if let Some(r) = obs.recording.as_deref_mut() {
@@ -381,7 +382,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
                 wall,
                 Stage::ALL
                     .iter()
-                    .filter(|stage| has_body || !stage.needs_body())
+                    .filter(|stage| stage.runs(has_body, self_contact))
                     .map(|stage| (stage.name(), s.stage_seconds[stage.index()] * 1e3)),
             );
         }

@@ -157,6 +157,14 @@ impl Bvh {
         self.traverse(|b| b.near(p, r), visit);
     }
 
+    /// Calls `visit` for every primitive whose box overlaps `b`.
+    pub fn query_box(&self, b: Aabb, visit: impl FnMut(u32)) {
+        self.traverse(
+            |n| b.min.cmple(n.max).all() && n.min.cmple(b.max).all(),
+            visit,
+        );
+    }
+
     /// Calls `visit` for every primitive whose box the ray o + t d (t ≥ 0)
     /// passes through.
     pub fn query_ray(&self, origin: Vec3, dir: Vec3, visit: impl FnMut(u32)) {

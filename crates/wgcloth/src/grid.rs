@@ -81,17 +81,6 @@ impl Cells {
         (p / self.cell).floor().as_ivec3().to_array()
     }
 
-    /// The boxes listed in the cell holding `p`: every box that contains
-    /// `p` among them.
-    pub fn at(&self, p: Vec3) -> impl Iterator<Item = u32> + '_ {
-        let key = self.key(p);
-        let start = self.listed.partition_point(|(k, _)| *k < key);
-        self.listed[start..]
-            .iter()
-            .take_while(move |(k, _)| *k == key)
-            .map(|(_, i)| *i)
-    }
-
     /// Each cell's key and its boxes.
     fn runs(&self) -> Vec<([i32; 3], &[Listed])> {
         self.listed

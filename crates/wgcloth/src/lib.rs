@@ -47,7 +47,6 @@ pub mod multigrid;
 pub mod nn;
 pub mod render;
 pub mod scene;
-pub mod separation;
 pub mod stage;
 
 pub use config::Config;

@@ -16,6 +16,9 @@ pub enum Stage {
     Assemble,
     /// Preconditioned CG (multigrid or Jacobi).
     Pcg,
+    /// How far each vertex may move without the cloth passing through
+    /// itself (issue 23), when `self_contact` is on.
+    Separate,
     /// x' = x + h v'.
     Integrate,
     /// The deepest penetration after the step.
@@ -24,12 +27,13 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the order a step runs them.
-    pub const ALL: [Stage; 7] = [
+    pub const ALL: [Stage; 8] = [
         Stage::Rigid,
         Stage::Collide,
         Stage::Contact,
         Stage::Assemble,
         Stage::Pcg,
+        Stage::Separate,
         Stage::Integrate,
         Stage::Measure,
     ];
@@ -42,6 +46,7 @@ impl Stage {
             Stage::Contact => "contact",
             Stage::Assemble => "assemble",
             Stage::Pcg => "pcg",
+            Stage::Separate => "separate",
             Stage::Integrate => "integrate",
             Stage::Measure => "measure",
         }
@@ -52,11 +57,13 @@ impl Stage {
         self as usize
     }
 
-    /// Stages with nothing to do in a scene without a rigid body.
-    pub const fn needs_body(self) -> bool {
-        matches!(
-            self,
-            Stage::Rigid | Stage::Collide | Stage::Contact | Stage::Measure
-        )
+    /// Whether a step of a scene runs this stage: the rigid-body stages
+    /// only with a body, [`Stage::Separate`] only with self-contact on.
+    pub const fn runs(self, has_body: bool, self_contact: bool) -> bool {
+        match self {
+            Stage::Rigid | Stage::Collide | Stage::Contact | Stage::Measure => has_body,
+            Stage::Separate => self_contact,
+            Stage::Assemble | Stage::Pcg | Stage::Integrate => true,
+        }
     }
 }

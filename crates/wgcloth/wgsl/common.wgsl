@@ -18,7 +18,8 @@ struct Params {
     max_speed: f32, springs_at: u32, adjacency_at: u32, pinned_at: u32,
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
     // Where parts 1 and 2 of an array bound in parts start (gpu::shaders).
-    topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>, pad: vec2<u32>,
+    topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>,
+    self_contact: u32, self_radius: f32, self_gamma: f32, self_floor: f32, pad: vec2<u32>,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each
@@ -254,6 +255,46 @@ fn closest_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -
     }
     let inv = 1.0 / (va + vb + vc);
     return a + ab * (vb * inv) + ac * (vc * inv);
+}
+
+// The closest points of segments (p1, q1) and (p2, q2), one on each; a
+// degenerate segment is its point (mirrors math::closest_between_segments;
+// Ericson 5.1.9). Returns them as columns 0 and 1.
+fn closest_between_segments(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec3<f32>) -> mat2x3<f32> {
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let r = p1 - p2;
+    let a = dot(d1, d1);
+    let e = dot(d2, d2);
+    let f = dot(d2, r);
+    // f32::EPSILON and f32::MIN_POSITIVE.
+    let tiny = 1.1920929e-7 * max(a + e, 0x1p-126f);
+    var s = 0.0;
+    var t = 0.0;
+    if a <= tiny && e <= tiny {
+    } else if a <= tiny {
+        t = clamp(f / e, 0.0, 1.0);
+    } else {
+        let c = dot(d1, r);
+        if e <= tiny {
+            s = clamp(-c / a, 0.0, 1.0);
+        } else {
+            let b = dot(d1, d2);
+            let denom = a * e - b * b;
+            if denom > tiny * max(a, e) {
+                s = clamp((b * f - c * e) / denom, 0.0, 1.0);
+            }
+            t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = clamp(-c / a, 0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = clamp((b - c) / a, 0.0, 1.0);
+            }
+        }
+    }
+    return mat2x3<f32>(p1 + d1 * s, p2 + d2 * t);
 }
 
 fn found(hit: vec4<f32>) -> bool {

@@ -152,6 +152,9 @@ impl Layout {
     ///   length and two adjacency entries read, its off-diagonal block
     ///   written, and where a layout stores spring terms (the CPU's) each
     ///   written once and read twice;
+    /// - separate: the positions read, each triangle's and spring's vertex
+    ///   indices read, a least separation written per vertex (the walks
+    ///   over the tiles not counted, as collide's are not);
     /// - integrate: x and v read, x written, the pinned flag read;
     /// - measure: the positions read.
     pub fn stage_bytes(&self, stage: Stage, e: &Extent) -> Option<u64> {
@@ -166,6 +169,7 @@ impl Layout {
                     + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
             Stage::Pcg => return None,
+            Stage::Separate => n * (v + 4) + t * 12 + s * 8,
             Stage::Integrate => n * (3 * v + self.flag),
             Stage::Measure => n * v,
         })

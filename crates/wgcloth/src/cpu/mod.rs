@@ -10,6 +10,7 @@ pub mod measure;
 pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
+pub mod separate;
 pub mod springs;
 
 #[cfg(not(target_arch = "wasm32"))]
@@ -92,6 +93,10 @@ pub struct CpuSim {
     matrix: BlockMatrix,
     rhs: Vec<Vec3>,
     scratch: PcgScratch,
+    /// The cloth's edges, for self-contact.
+    edges: Vec<[u32; 2]>,
+    /// How far each vertex may move this step (self-contact only).
+    bounds: Vec<f32>,
 }
 
 impl CpuSim {
@@ -122,6 +127,12 @@ impl CpuSim {
             matrix: BlockMatrix::new(n, cloth.springs.len()),
             rhs: vec![Vec3::ZERO; n],
             scratch: PcgScratch::default(),
+            edges: if cfg.self_contact.enabled {
+                separate::triangle_edges(&cloth.triangles)
+            } else {
+                Vec::new()
+            },
+            bounds: Vec::new(),
             params,
             state,
             scene,
@@ -244,7 +255,35 @@ impl CpuSim {
                     &mut self.scratch,
                 );
             }
-            Stage::Integrate => integrate::integrate(cloth, h, x, v),
+            Stage::Separate => {
+                let keep = &self.scene.config.self_contact;
+                if keep.enabled {
+                    // Collide refitted the BVH to x already, where there is a body.
+                    if body.is_none() {
+                        collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
+                    }
+                    let least = separate::least_separations(
+                        x,
+                        &cloth.triangles,
+                        &self.edges,
+                        &self.cloth_bvh,
+                        keep.radius,
+                    );
+                    self.bounds = least
+                        .into_iter()
+                        .map(|s| separate::displacement_bound(s, keep))
+                        .collect();
+                }
+            }
+            Stage::Integrate => {
+                let bounds = self
+                    .scene
+                    .config
+                    .self_contact
+                    .enabled
+                    .then_some(&self.bounds[..]);
+                integrate::integrate(cloth, h, x, v, bounds)
+            }
             Stage::Measure => {
                 if let Some(body) = body {
                     stats.max_penetration = measure::push_out(
@@ -252,6 +291,11 @@ impl CpuSim {
                         &self.frame,
                         self.tolerances.thickness,
                         &cloth.pinned,
+                        self.scene
+                            .config
+                            .self_contact
+                            .enabled
+                            .then_some((&self.bounds[..], h)),
                         x,
                         v,
                     );

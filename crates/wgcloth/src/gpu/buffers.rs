@@ -77,6 +77,8 @@ pub(crate) struct Buffers {
     pub(crate) frame: wgpu::Buffer,
     /// Tile bounds, then super-tile bounds.
     pub(crate) bounds: wgpu::Buffer,
+    /// Per vertex, its least separation's bits (stage "separate").
+    pub(crate) separations: wgpu::Buffer,
     /// The network batch's size, then its contact slots.
     pub(crate) net_batch: wgpu::Buffer,
     pub(crate) net_inputs: wgpu::Buffer,
@@ -197,6 +199,10 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         spring_triangles_at: sections.spring_triangles,
         body_triangles_at: sections.body_triangles,
         bvh_order_at: sections.bvh_order,
+        self_contact: cfg.self_contact.enabled as u32,
+        self_radius: cfg.self_contact.radius,
+        self_gamma: cfg.self_contact.gamma,
+        self_floor: cfg.self_contact.floor,
         ..Default::default()
     };
     if let Some(body) = &scene.rigid {
@@ -286,6 +292,7 @@ pub(crate) struct Sizes {
     pub(crate) vectors: u64,
     pub(crate) rigid: u64,
     pub(crate) bounds: u64,
+    pub(crate) separations: u64,
     pub(crate) net_batch: u64,
     pub(crate) net_inputs: u64,
     pub(crate) net_outputs: u64,
@@ -331,6 +338,7 @@ impl Sizes {
             vectors: size(vectors, 16),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             bounds: size(tiles, 32),
+            separations: size(if p.self_contact != 0 { n } else { 0 }, 4),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
             net_outputs: size(batch * (p.net_rows * p.net_outputs) as u64, 4),
@@ -339,7 +347,7 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn whole(&self) -> [(&'static str, u64); 13] {
+    pub(crate) fn whole(&self) -> [(&'static str, u64); 14] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
@@ -350,6 +358,7 @@ impl Sizes {
             ("multigrid vectors", self.vectors),
             ("placed body", self.rigid),
             ("tile bounds", self.bounds),
+            ("least separations", self.separations),
             ("network batch", self.net_batch),
             ("network inputs", self.net_inputs),
             ("network outputs", self.net_outputs),
@@ -525,8 +534,15 @@ impl Buffers {
                 &vec![0u8; sizes.rigid as usize],
                 wgpu::BufferUsages::VERTEX,
             ),
-            frame: zeroed("rigid frame", size_of::<RigidFrame>() as u64),
+            // Also a uniform: stage "measure" reads it as one.
+            frame: counted(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("rigid frame"),
+                size: size_of::<RigidFrame>() as u64,
+                usage: usage | wgpu::BufferUsages::UNIFORM,
+                mapped_at_creation: false,
+            })),
             bounds: zeroed("tile bounds", sizes.bounds),
+            separations: zeroed("least separations", sizes.separations),
             net_batch: zeroed("network batch", sizes.net_batch),
             net_inputs: zeroed("network inputs", sizes.net_inputs),
             net_outputs: zeroed("network outputs", sizes.net_outputs),

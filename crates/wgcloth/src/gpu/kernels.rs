@@ -63,6 +63,12 @@ pub enum Entry {
     MgCoarse,
     /// Interpolation and post-smoothing; z on the cloth (`multigrid::up`).
     MgUp,
+    /// Every vertex's least separation set to the radius (`separate::reset`).
+    SeparateReset,
+    /// Each vertex against the cloth triangles near it (`separate::vertices`).
+    SeparateVertices,
+    /// Each cloth edge against the edges near it (`separate::edges`).
+    SeparateEdges,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
     /// Penetration depth, the push-out and the contact total (`measure::main`).
@@ -79,7 +85,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 29] = [
+    pub const ALL: [Entry; 32] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -103,6 +109,9 @@ impl Entry {
         Entry::MgDown,
         Entry::MgCoarse,
         Entry::MgUp,
+        Entry::SeparateReset,
+        Entry::SeparateVertices,
+        Entry::SeparateEdges,
         Entry::Integrate,
         Entry::Measure,
         Entry::BatchPlan,
@@ -137,6 +146,9 @@ impl Entry {
             Entry::MgDown => ("multigrid", "down"),
             Entry::MgCoarse => ("multigrid", "coarse"),
             Entry::MgUp => ("multigrid", "up"),
+            Entry::SeparateReset => ("separate", "reset"),
+            Entry::SeparateVertices => ("separate", "vertices"),
+            Entry::SeparateEdges => ("separate", "edges"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
             Entry::BatchPlan => ("batch", "plan"),

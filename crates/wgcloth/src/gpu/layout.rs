@@ -116,6 +116,15 @@ pub struct Params {
     pub matrix_splits: [u32; 2],
     /// The same for the multigrid operators.
     pub operators_splits: [u32; 2],
+    /// 1 when the step keeps the cloth from passing through itself
+    /// (`self_contact.enabled`), else 0.
+    pub self_contact: u32,
+    /// `self_contact.radius`, m.
+    pub self_radius: f32,
+    /// `self_contact.gamma`.
+    pub self_gamma: f32,
+    /// `self_contact.floor`, m.
+    pub self_floor: f32,
     /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
     pub pad: [u32; 2],
 }

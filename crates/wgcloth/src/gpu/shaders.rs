@@ -8,12 +8,13 @@ use std::collections::BTreeMap;
 use crate::gpu::constants;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 11] = [
+pub const STAGES: [(&str, &str); 12] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
     ("assemble", include_str!("../../wgsl/assemble.wgsl")),
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
+    ("separate", include_str!("../../wgsl/separate.wgsl")),
     ("multigrid", include_str!("../../wgsl/multigrid.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
     ("measure", include_str!("../../wgsl/measure.wgsl")),
@@ -38,6 +39,7 @@ pub const INCLUDES: [(&str, &str, &[&str]); 4] = [
             "assemble",
             "pcg",
             "multigrid",
+            "separate",
             "integrate",
             "measure",
         ],

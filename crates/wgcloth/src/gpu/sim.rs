@@ -304,9 +304,9 @@ impl GpuSim {
 
     /// The passes a step records: the rigid-body ones only with a body.
     fn active_passes(&self) -> impl Iterator<Item = Stage> + '_ {
-        Stage::ALL
-            .into_iter()
-            .filter(move |stage| self.params.has_rigid != 0 || !stage.needs_body())
+        Stage::ALL.into_iter().filter(move |stage| {
+            stage.runs(self.params.has_rigid != 0, self.params.self_contact != 0)
+        })
     }
 
     /// Records one backward Euler step into `encoder`; nothing is read
@@ -328,7 +328,7 @@ impl GpuSim {
     /// nothing without a body. Returns the number of dispatches recorded.
     pub fn record_stage(&self, encoder: &mut wgpu::CommandEncoder, stage: Stage) -> u32 {
         let p = &self.params;
-        if p.has_rigid == 0 && stage.needs_body() {
+        if !stage.runs(p.has_rigid != 0, p.self_contact != 0) {
             return 0;
         }
         let s = &self.stages;
@@ -345,6 +345,7 @@ impl GpuSim {
             Stage::Pcg => s
                 .pcg
                 .encode(&mut pass, p, self.cg_budget.load(Ordering::Relaxed)),
+            Stage::Separate => s.separate.encode(&mut pass, p),
             Stage::Integrate => s.integrate.encode(&mut pass, p),
             Stage::Measure => s.measure.encode(&mut pass, p),
         }
@@ -405,6 +406,16 @@ impl GpuSim {
     /// The clock and run statistics, read back (blocks until the GPU is done).
     pub fn read_state(&self) -> Result<StepState> {
         Ok(self.read::<StepState>(&self.buffers.state)?[0])
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// Each vertex's least separation from the cloth it could reach, as
+    /// the last step's stage "separate" found it (self-contact only; the
+    /// twin of `cpu::separate::least_separations`).
+    pub fn read_separations(&self) -> Result<Vec<f32>> {
+        let bits: Vec<u32> = self.read(&self.buffers.separations)?;
+        let n = self.params.n_vertices as usize;
+        Ok(bits.iter().take(n).map(|&b| f32::from_bits(b)).collect())
     }
 
     #[cfg(not(target_arch = "wasm32"))]

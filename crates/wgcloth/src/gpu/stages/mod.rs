@@ -13,6 +13,7 @@ pub mod measure;
 pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
+pub mod separate;
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::kernels::Kernels;
@@ -28,6 +29,7 @@ pub(crate) struct Stages {
     pub(crate) contact: contact::Contact,
     pub(crate) assemble: assemble::Assemble,
     pub(crate) pcg: pcg::Pcg,
+    pub(crate) separate: separate::Separate,
     pub(crate) integrate: integrate::Integrate,
     pub(crate) measure: measure::Measure,
     pub(crate) lines: lines::Lines,
@@ -53,6 +55,7 @@ impl Stages {
             contact: contact::Contact::new(kernels, device, b, network),
             assemble: assemble::Assemble::new(kernels, device, b),
             pcg: pcg::Pcg::new(kernels, device, b, scene),
+            separate: separate::Separate::new(kernels, device, b),
             integrate: integrate::Integrate::new(kernels, device, b),
             measure: measure::Measure::new(kernels, device, b),
             lines: lines::Lines::new(kernels, device, b),
