@@ -641,7 +641,7 @@ fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
     let ctx = GpuContext::headless()?;
     let steps = config.solver.steps;
     let bar = progress_bar(steps);
-    let v = run::validate(&ctx, scene, steps, |k| bar.set_position(k))?;
+    let v = run::validate(&ctx, scene, steps, |k, _, _| bar.set_position(k))?;
     bar.finish_and_clear();
     // Contact amplifies rounding differences; the GPU may differ from the
     // CPU as much as the CPU differs from itself under a nudge of a few ulps.

@@ -647,7 +647,8 @@ fn run_gpu(
 }
 
 /// GPU against CPU on the same scene: the largest position deviation (m)
-/// after `steps` steps, and the contact totals of each.
+/// after `steps` steps, and the contact totals of each. `each_step` sees
+/// both after every step (its number from 1).
 ///
 /// Contact makes the dynamics discontinuous (a vertex entering the band
 /// gets k_d ḋ at once; friction switches between stick and slip), so
@@ -680,7 +681,7 @@ pub fn validate(
     ctx: &GpuContext,
     scene: Scene,
     steps: u64,
-    mut progress: impl FnMut(u64),
+    mut each_step: impl FnMut(u64, &GpuSim, &CpuSim),
 ) -> Result<Validation> {
     let kernels = Arc::new(Kernels::new(&ctx.device)?);
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene)?;
@@ -697,7 +698,7 @@ pub fn validate(
         gpu.step();
         cpu_contacts += cpu.step().contacts as u64;
         nudged.step();
-        progress(k + 1);
+        each_step(k + 1, &gpu, &cpu);
     }
     ctx.finish()?;
     let x = gpu.read_positions()?;

@@ -1,12 +1,21 @@
 //! The configs in `scenes/` load, build and step: what a user runs with
-//! `wgcloth run --config scenes/NAME.toml`.
+//! `wgcloth run --config scenes/NAME.toml`; the folding ones keep the cloth
+//! from passing through itself on both paths. Without an adapter the GPU
+//! tests fail under CI=true and skip elsewhere.
+
+#[path = "../../wgcloth/tests/common/mod.rs"]
+mod common;
 
 use std::path::Path;
 
+use wgcloth::bvh::{Bvh, triangle_boxes};
 use wgcloth::config::Config;
-use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::{CpuSim, separate};
+use wgcloth::gpu::GpuSim;
 use wgcloth::intersections::intersecting_pairs;
 use wgcloth::scene::Scene;
+use wgcloth::stage::Stage;
+use wgcloth_cli::run::validate;
 
 #[test]
 fn every_scene_config_loads_starts_untangled_and_steps_finite() {
@@ -39,4 +48,100 @@ fn every_scene_config_loads_starts_untangled_and_steps_finite() {
     }
     names.sort();
     assert_eq!(names, ["drape", "pleat"]);
+}
+
+fn scene_config(name: &str) -> Config {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.toml"));
+    Config::load(&path).unwrap()
+}
+
+/// Stage "separate" on the GPU finds each vertex's least separation as the
+/// CPU does, on a cloth pushed into pleats (the pleat scene after 1.2 s),
+/// the state uploaded to both.
+#[test]
+fn the_gpu_finds_the_cpus_least_separations_on_a_folded_cloth() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let scene = Scene::new(&scene_config("pleat")).unwrap();
+    let mut cpu = CpuSim::new(scene.clone());
+    for _ in 0..120 {
+        cpu.step();
+    }
+    let (x, v) = (&cpu.state.x, &cpu.state.v);
+    let keep = &scene.config.self_contact;
+    let h = scene.config.solver.dt;
+    let max_step = v.iter().map(|v| (h * *v).length()).fold(0.0, f32::max);
+    let radius = separate::reach(max_step, keep);
+    let triangles = &scene.cloth.triangles;
+    let bvh = Bvh::build(&triangle_boxes(x, triangles));
+    let edges = separate::triangle_edges(triangles);
+    let want = separate::least_separations(x, triangles, &edges, &bvh, radius);
+
+    let gpu = GpuSim::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(x, &cpu.state.v, cpu.state.step as u32);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    for stage in [Stage::Rigid, Stage::Collide, Stage::Separate] {
+        gpu.record_stage(&mut encoder, stage);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let (got, reach) = gpu.read_separations().unwrap();
+    assert!(
+        (reach - radius).abs() <= 1e-6 * radius,
+        "reach {reach} against {radius}"
+    );
+
+    let worst = got
+        .iter()
+        .zip(&want)
+        .map(|(g, w)| (g - w).abs())
+        .fold(0.0f32, f32::max);
+    let near = want.iter().filter(|&&s| s < radius).count();
+    eprintln!(
+        "{near} of {} vertices within the reach {radius} m of the cloth; worst difference {worst:.2e} m",
+        x.len()
+    );
+    assert!(
+        near > x.len() / 10,
+        "the cloth is folded: {near} vertices near it"
+    );
+    assert!(worst <= 1e-6, "GPU and CPU separations {worst} m apart");
+}
+
+/// Issue 23's guarantee on the scenes that fold the cloth: 2 s (200 steps)
+/// with not one pair of cloth triangles crossing after any step, on the
+/// CPU and on the GPU, finite, and the GPU within the scene's own
+/// sensitivity of the CPU (`wgcloth validate`'s test).
+#[test]
+fn folding_scenes_run_2_s_without_the_cloth_passing_through_itself() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    for name in ["drape", "pleat"] {
+        let config = scene_config(name);
+        assert!(config.self_contact.enabled, "{name}");
+        assert_eq!(config.solver.steps as f32 * config.solver.dt, 2.0);
+        let scene = Scene::new(&config).unwrap();
+        let triangles = scene.cloth.triangles.clone();
+        let mut worst = [0usize; 2];
+        let v = validate(&ctx, scene, config.solver.steps, |k, gpu, cpu| {
+            let gpu_x = gpu.read_positions().unwrap();
+            for (path, x) in [&cpu.state.x, &gpu_x].into_iter().enumerate() {
+                assert!(x.iter().all(|p| p.is_finite()), "{name}: step {k}");
+                worst[path] = worst[path].max(intersecting_pairs(x, &triangles).len());
+            }
+        })
+        .unwrap();
+        eprintln!(
+            "{name}: most intersecting pairs CPU {} GPU {}; deviation {:.3e} m, sensitivity {:.3e} m",
+            worst[0], worst[1], v.max_deviation, v.sensitivity
+        );
+        assert_eq!(worst, [0, 0], "{name}: cloth through itself (CPU, GPU)");
+        assert!(
+            v.max_deviation <= 1e-4 + 4.0 * v.sensitivity,
+            "{name}: GPU {} m from the CPU, sensitivity {} m",
+            v.max_deviation,
+            v.sensitivity
+        );
+    }
 }

@@ -17,7 +17,7 @@ fn thesis_scene_with_either_network_validates_against_the_cpu() {
         return;
     };
     for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
-        let v = wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_| {}).unwrap();
+        let v = wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_, _, _| {}).unwrap();
         eprintln!(
             "{model:?}: deviation {:.3e} m, sensitivity {:.3e} m, contacts {} vs {}",
             v.max_deviation, v.sensitivity, v.gpu_contacts, v.cpu_contacts

@@ -341,9 +341,8 @@ impl Default for ContactConfig {
 pub struct SelfContactConfig {
     /// Whether the step keeps the cloth from passing through itself.
     pub enabled: bool,
-    /// Gaps farther than this are not looked at, m. A vertex with no cloth
-    /// within it moves at most `gamma · (radius − floor)` in a step, so it
-    /// also caps the speed: 0.45 · 19 mm / 10 ms = 0.86 m/s by default.
+    /// Gaps farther than this are not looked at, m, unless the step's
+    /// longest stride h v' needs more (cpu/separate.rs `reach`).
     pub radius: f32,
     /// The share of a gap each of its vertices may close in a step (< 1/2).
     pub gamma: f32,

@@ -297,6 +297,17 @@ fn closest_between_segments(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec
     return mat2x3<f32>(p1 + d1 * s, p2 + d2 * t);
 }
 
+// Self-contact (cpu/separate.rs `reach`, `displacement_bound`): how far a
+// step looks for pairs, given its longest stride, and how far a vertex
+// whose least separation is s may move.
+fn self_reach(max_step: f32) -> f32 {
+    return max(params.self_radius, params.self_floor + max_step / params.self_gamma);
+}
+
+fn self_bound(s: f32, max_step: f32) -> f32 {
+    return params.self_gamma * max(min(s, self_reach(max_step)) - params.self_floor, 0.0);
+}
+
 fn found(hit: vec4<f32>) -> bool {
     return hit.y <= 1.0;
 }

@@ -16,7 +16,8 @@ fn finite3(a: vec3<f32>) -> bool {
 @group(1) @binding(2) var<storage, read_write> v: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> rest_positions: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> state: StepState;
-// Per vertex, its least separation's bits (self-contact only).
+// Per vertex, its least separation's bits, then the step's longest
+// stride's (self-contact only).
 @group(1) @binding(10) var<storage, read> separations: array<u32>;
 
 @compute @workgroup_size(WORKGROUP)
@@ -36,8 +37,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     } else {
         var step = params.dt * v[i].xyz;
         if params.self_contact != 0u {
-            let s = bitcast<f32>(separations[i]);
-            let bound = params.self_gamma * max(s - params.self_floor, 0.0);
+            let bound = self_bound(bitcast<f32>(separations[i]), bitcast<f32>(separations[params.n_vertices]));
             let length = length(step);
             if length > bound {
                 step *= bound / length;

@@ -12,7 +12,8 @@
 // A uniform, so the stage stays within 8 storage buffers.
 @group(1) @binding(4) var<uniform> frame: RigidFrame;
 @group(1) @binding(5) var<storage, read_write> state: StepState;
-// Per vertex, its least separation's bits (self-contact only).
+// Per vertex, its least separation's bits, then the step's longest
+// stride's (self-contact only).
 @group(1) @binding(10) var<storage, read> separations: array<u32>;
 
 fn corner(t: u32, k: u32) -> vec3<f32> {
@@ -105,8 +106,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let vi = v[i].xyz;
     var push = rotate(frame.rotation, out.surface) + frame.translation + params.thickness * n - x[i].xyz;
     if params.self_contact != 0u {
-        let s = bitcast<f32>(separations[i]);
-        let bound = params.self_gamma * max(s - params.self_floor, 0.0);
+        let bound = self_bound(bitcast<f32>(separations[i]), bitcast<f32>(separations[params.n_vertices]));
         let left = max(bound - length(params.dt * vi), 0.0);
         let length = length(push);
         if length > left {

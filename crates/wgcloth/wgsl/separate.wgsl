@@ -3,8 +3,9 @@
 // from passing through itself (issue 23; integrate.wgsl applies it).
 // CPU twin: src/cpu/separate.rs, which finds the same least separations.
 //
-// Vertex–triangle and edge–edge pairs sharing no vertex, within
-// params.self_radius. The broad phase is collide's tile hierarchy over the
+// Vertex–triangle and edge–edge pairs sharing no vertex, within the step's
+// reach (self_reach: the radius, or farther when the longest solved step
+// needs it). The broad phase is collide's tile hierarchy over the
 // cloth grid (refitted this step): a query box walks the super-tiles and
 // tiles it overlaps, then the cells whose box (of their four corners) it
 // overlaps, and tests the cell's two triangles. A pair lowers the
@@ -13,17 +14,19 @@
 // depend on the order pairs are met in.
 
 @group(1) @binding(1) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> v: array<vec4<f32>>;
 // The tiles' bounds, then the super-tiles' (collide.wgsl refits them).
 @group(1) @binding(6) var<storage, read> bounds: array<Bounds>;
-// Per vertex, its least separation's bits.
+// Per vertex, its least separation's bits; then the step's longest
+// stride |h v'|'s (zeroed before the pass).
 @group(1) @binding(10) var<storage, read_write> separations: array<atomic<u32>>;
 
 fn overlaps(lo: vec3<f32>, hi: vec3<f32>, b_lo: vec3<f32>, b_hi: vec3<f32>) -> bool {
     return all(lo <= b_hi) && all(b_lo <= hi);
 }
 
-fn note(vertices: vec4<u32>, s: f32) {
-    if s < params.self_radius {
+fn note(q: Query, vertices: vec4<u32>, s: f32) {
+    if s < q.reach {
         let bits = bitcast<u32>(s);
         atomicMin(&separations[vertices.x], bits);
         atomicMin(&separations[vertices.y], bits);
@@ -32,14 +35,19 @@ fn note(vertices: vec4<u32>, s: f32) {
     }
 }
 
-// A query: vertex `a` (edge false) or the edge (a, b), a < b, and the box
-// around it grown by the radius.
+// A query: vertex `a` (edge false) or the edge (a, b), a < b, the box
+// around it grown by the step's reach, and the reach.
 struct Query {
     lo: vec3<f32>,
     a: u32,
     hi: vec3<f32>,
     b: u32,
     edge: bool,
+    reach: f32,
+}
+
+fn reach() -> f32 {
+    return self_reach(bitcast<f32>(atomicLoad(&separations[params.n_vertices])));
 }
 
 // The query against cloth triangle t: the vertex against the triangle, or
@@ -54,7 +62,7 @@ fn against(q: Query, t: u32) {
         }
         let p = x[q.a].xyz;
         let c = closest_on_triangle(p, x[tri.x].xyz, x[tri.y].xyz, x[tri.z].xyz);
-        note(vec4<u32>(q.a, tri), length(p - c));
+        note(q, vec4<u32>(q.a, tri), length(p - c));
         return;
     }
     for (var k = 0u; k < 3u; k++) {
@@ -65,7 +73,7 @@ fn against(q: Query, t: u32) {
         let apart = f.x != q.a && f.x != q.b && f.y != q.a && f.y != q.b;
         if above && apart {
             let m = closest_between_segments(x[q.a].xyz, x[q.b].xyz, x[f.x].xyz, x[f.y].xyz);
-            note(vec4<u32>(q.a, q.b, f), length(m[0] - m[1]));
+            note(q, vec4<u32>(q.a, q.b, f), length(m[0] - m[1]));
         }
     }
 }
@@ -108,12 +116,14 @@ fn walk(q: Query) {
     }
 }
 
-// Every vertex starts at the radius: nothing nearer yet.
+// Every vertex starts with nothing near (+∞), and the step's longest
+// stride is taken.
 @compute @workgroup_size(WORKGROUP)
-fn reset(@builtin(global_invocation_id) id: vec3<u32>) {
+fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i < params.n_vertices {
-        atomicStore(&separations[i], bitcast<u32>(params.self_radius));
+        atomicStore(&separations[i], 0x7f800000u);
+        atomicMax(&separations[params.n_vertices], bitcast<u32>(length(params.dt * v[i].xyz)));
     }
 }
 
@@ -125,8 +135,8 @@ fn vertices(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let p = x[i].xyz;
-    let r = params.self_radius;
-    walk(Query(p - r, i, p + r, i, false));
+    let r = reach();
+    walk(Query(p - r, i, p + r, i, false, r));
 }
 
 // Each triangle edge (a spring along a triangle) against the edges within
@@ -140,8 +150,8 @@ fn edges(@builtin(global_invocation_id) id: vec3<u32>) {
     let ends = spring_ends(s);
     let a = min(ends.x, ends.y);
     let b = max(ends.x, ends.y);
-    let r = params.self_radius;
+    let r = reach();
     let lo = min(x[a].xyz, x[b].xyz) - r;
     let hi = max(x[a].xyz, x[b].xyz) + r;
-    walk(Query(lo, a, hi, b, true));
+    walk(Query(lo, a, hi, b, true, r));
 }

@@ -262,12 +262,13 @@ impl CpuSim {
                     if body.is_none() {
                         collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
                     }
+                    let max_step = v.iter().map(|v| (h * *v).length()).fold(0.0, f32::max);
                     let least = separate::least_separations(
                         x,
                         &cloth.triangles,
                         &self.edges,
                         &self.cloth_bvh,
-                        keep.radius,
+                        separate::reach(max_step, keep),
                     );
                     self.bounds = least
                         .into_iter()

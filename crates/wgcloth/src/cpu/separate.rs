@@ -11,7 +11,10 @@
 //! vertex is therefore allowed `gamma` (< 1/2) times the least separation
 //! of the pairs it belongs to, and `gamma · radius` where it belongs to
 //! none. A state with no intersecting pair keeps none when every vertex
-//! stays within its bound.
+//! stays within its bound. The radius a step looks within, its reach, is
+//! `self_contact.radius` or, when some vertex's solved step h v' is longer
+//! than that allows, as far as the longest step needs ([`reach`]): a
+//! vertex far from the rest of the cloth is never held back.
 //!
 //! The broad phase is the cloth's BVH (refitted by the caller): each vertex
 //! looks for triangles within the radius, each edge for triangles whose
@@ -98,6 +101,13 @@ pub fn least_separations(
         .into_iter()
         .map(|s| f32::from_bits(s.into_inner()))
         .collect()
+}
+
+/// How far a step looks for pairs: `self_contact.radius`, or far enough
+/// that a vertex with no pair within it may take the step's longest
+/// stride `max_step` (m), `floor + max_step / gamma`.
+pub fn reach(max_step: f32, keep: &SelfContactConfig) -> f32 {
+    keep.radius.max(keep.floor + max_step / keep.gamma)
 }
 
 /// A vertex's displacement bound from its least separation s:

@@ -77,7 +77,8 @@ pub(crate) struct Buffers {
     pub(crate) frame: wgpu::Buffer,
     /// Tile bounds, then super-tile bounds.
     pub(crate) bounds: wgpu::Buffer,
-    /// Per vertex, its least separation's bits (stage "separate").
+    /// Per vertex, its least separation's bits, then the step's longest
+    /// stride's (stage "separate").
     pub(crate) separations: wgpu::Buffer,
     /// The network batch's size, then its contact slots.
     pub(crate) net_batch: wgpu::Buffer,
@@ -338,7 +339,7 @@ impl Sizes {
             vectors: size(vectors, 16),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             bounds: size(tiles, 32),
-            separations: size(if p.self_contact != 0 { n } else { 0 }, 4),
+            separations: size(if p.self_contact != 0 { n + 1 } else { 0 }, 4),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
             net_outputs: size(batch * (p.net_rows * p.net_outputs) as u64, 4),

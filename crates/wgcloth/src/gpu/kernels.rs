@@ -63,8 +63,9 @@ pub enum Entry {
     MgCoarse,
     /// Interpolation and post-smoothing; z on the cloth (`multigrid::up`).
     MgUp,
-    /// Every vertex's least separation set to the radius (`separate::reset`).
-    SeparateReset,
+    /// Every vertex's least separation cleared, the step's longest stride
+    /// taken (`separate::prepare`).
+    SeparatePrepare,
     /// Each vertex against the cloth triangles near it (`separate::vertices`).
     SeparateVertices,
     /// Each cloth edge against the edges near it (`separate::edges`).
@@ -109,7 +110,7 @@ impl Entry {
         Entry::MgDown,
         Entry::MgCoarse,
         Entry::MgUp,
-        Entry::SeparateReset,
+        Entry::SeparatePrepare,
         Entry::SeparateVertices,
         Entry::SeparateEdges,
         Entry::Integrate,
@@ -146,7 +147,7 @@ impl Entry {
             Entry::MgDown => ("multigrid", "down"),
             Entry::MgCoarse => ("multigrid", "coarse"),
             Entry::MgUp => ("multigrid", "up"),
-            Entry::SeparateReset => ("separate", "reset"),
+            Entry::SeparatePrepare => ("separate", "prepare"),
             Entry::SeparateVertices => ("separate", "vertices"),
             Entry::SeparateEdges => ("separate", "edges"),
             Entry::Integrate => ("integrate", "main"),

@@ -332,8 +332,10 @@ impl GpuSim {
             return 0;
         }
         let s = &self.stages;
-        if stage == Stage::Collide {
-            s.collide.clear(encoder, p);
+        match stage {
+            Stage::Collide => s.collide.clear(encoder, p),
+            Stage::Separate => s.separate.clear(encoder, p),
+            _ => {}
         }
         let mut pass = self.pass(encoder, stage);
         s.begin(&mut pass);
@@ -409,13 +411,23 @@ impl GpuSim {
     }
 
     #[cfg(not(target_arch = "wasm32"))]
-    /// Each vertex's least separation from the cloth it could reach, as
-    /// the last step's stage "separate" found it (self-contact only; the
-    /// twin of `cpu::separate::least_separations`).
-    pub fn read_separations(&self) -> Result<Vec<f32>> {
+    /// Each vertex's least separation from the cloth within the step's
+    /// reach (the reach where none is nearer), as the last step's stage
+    /// "separate" found it, and the reach (self-contact only; the twin of
+    /// `cpu::separate::least_separations` and `reach`).
+    pub fn read_separations(&self) -> Result<(Vec<f32>, f32)> {
         let bits: Vec<u32> = self.read(&self.buffers.separations)?;
         let n = self.params.n_vertices as usize;
-        Ok(bits.iter().take(n).map(|&b| f32::from_bits(b)).collect())
+        let p = &self.params;
+        let keep = crate::config::SelfContactConfig {
+            enabled: p.self_contact != 0,
+            radius: p.self_radius,
+            gamma: p.self_gamma,
+            floor: p.self_floor,
+        };
+        let reach = crate::cpu::separate::reach(f32::from_bits(bits[n]), &keep);
+        let least = bits[..n].iter().map(|&b| f32::from_bits(b).min(reach));
+        Ok((least.collect(), reach))
     }
 
     #[cfg(not(target_arch = "wasm32"))]

@@ -12,15 +12,17 @@ pub(crate) struct Separate {
     /// (where collide does not run).
     tiles: Bound,
     supertiles: Bound,
-    reset: Bound,
+    prepare: Bound,
     vertices: Bound,
     edges: Bound,
+    separations: wgpu::Buffer,
 }
 
 impl Separate {
     pub(crate) fn new(kernels: &Kernels, device: &wgpu::Device, b: &Buffers) -> Separate {
         let buffers = [
             ("x", &b.x),
+            ("v", &b.v),
             ("bounds", &b.bounds),
             ("separations", &b.separations),
         ];
@@ -32,10 +34,16 @@ impl Separate {
         Separate {
             tiles: bind(Entry::CollideTiles),
             supertiles: bind(Entry::CollideSupertiles),
-            reset: bind(Entry::SeparateReset),
+            prepare: bind(Entry::SeparatePrepare),
             vertices: bind(Entry::SeparateVertices),
             edges: bind(Entry::SeparateEdges),
+            separations: b.separations.clone(),
         }
+    }
+
+    /// Before the pass: the longest stride, an atomic maximum, starts at 0.
+    pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
+        encoder.clear_buffer(&self.separations, 4 * p.n_vertices as u64, Some(4));
     }
 
     pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
@@ -45,7 +53,7 @@ impl Separate {
             let supertiles = p.supertiles_x * p.supertiles_y;
             self.supertiles.dispatch(pass, supertiles, WORKGROUP);
         }
-        self.reset.dispatch(pass, p.n_vertices, WORKGROUP);
+        self.prepare.dispatch(pass, p.n_vertices, WORKGROUP);
         self.vertices.dispatch(pass, p.n_vertices, WORKGROUP);
         self.edges.dispatch(pass, p.n_springs, WORKGROUP);
         3 + 2 * refit as u32
