@@ -333,18 +333,16 @@ impl Default for ContactConfig {
     }
 }
 
-/// The cloth against itself (`[self_contact]`, issue 23): each step every
-/// vertex moves at most a share of its gap to the nearest cloth primitive
-/// it could reach (cpu/separate.rs), so no two triangles cross.
+/// The cloth against itself (`[self_contact]`, issue 23): each step is held
+/// back where the cloth would otherwise pass through itself
+/// (cpu/separate.rs), so no two triangles cross.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SelfContactConfig {
     /// Whether the step keeps the cloth from passing through itself.
     pub enabled: bool,
-    /// Gaps farther than this are not looked at, m, unless the step's
-    /// longest stride h v' needs more (cpu/separate.rs `reach`).
-    pub radius: f32,
-    /// The share of a gap each of its vertices may close in a step (< 1/2).
+    /// The share of its gap a held vertex may close in a step (< 1/2); a
+    /// pair's two sides may close twice that between them.
     pub gamma: f32,
     /// The gap no pair closes below, m (far above the spacing of f32
     /// positions, whose rounding would otherwise cross a vanishing gap).
@@ -355,7 +353,6 @@ impl Default for SelfContactConfig {
     fn default() -> Self {
         SelfContactConfig {
             enabled: false,
-            radius: 0.02,
             gamma: 0.45,
             floor: 1e-3,
         }
@@ -596,17 +593,7 @@ impl Config {
         finite("solver.gravity", &s.gravity)?;
         positive("solver.max_speed", &[s.max_speed])?;
         let sc = &self.self_contact;
-        positive("self_contact.radius", &[sc.radius])?;
         positive("self_contact.floor", &[sc.floor])?;
-        if sc.radius <= sc.floor {
-            return Err(Error::config(
-                "self_contact.radius",
-                format!(
-                    "must exceed self_contact.floor ({}), got {}",
-                    sc.floor, sc.radius
-                ),
-            ));
-        }
         if !(sc.gamma > 0.0 && sc.gamma < 0.5) {
             return Err(Error::config(
                 "self_contact.gamma",

@@ -16,13 +16,13 @@ pub enum Stage {
     Assemble,
     /// Preconditioned CG (multigrid or Jacobi).
     Pcg,
-    /// How far each vertex may move without the cloth passing through
-    /// itself (issue 23), when `self_contact` is on.
-    Separate,
     /// x' = x + h v'.
     Integrate,
     /// The deepest penetration after the step.
     Measure,
+    /// Each vertex's step held back where the cloth would otherwise pass
+    /// through itself (issue 23), when `self_contact` is on.
+    Separate,
 }
 
 impl Stage {
@@ -33,9 +33,9 @@ impl Stage {
         Stage::Contact,
         Stage::Assemble,
         Stage::Pcg,
-        Stage::Separate,
         Stage::Integrate,
         Stage::Measure,
+        Stage::Separate,
     ];
 
     /// The stage's name: its cpu/ module, its wgsl/ file and its `stage_ms` key.

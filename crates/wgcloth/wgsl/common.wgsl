@@ -19,7 +19,7 @@ struct Params {
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
     // Where parts 1 and 2 of an array bound in parts start (gpu::shaders).
     topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>,
-    self_contact: u32, self_radius: f32, self_gamma: f32, self_floor: f32, pad: vec2<u32>,
+    self_contact: u32, self_gamma: f32, self_floor: f32, self_pad: u32, pad: vec2<u32>,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each
@@ -43,7 +43,13 @@ struct StepState {
     last_residual: f32,
     // NOT_FINITE | TOO_FAST of wgsl/integrate.wgsl, sticky.
     health: atomic<u32>,
-    pad: u32,
+    // Self-contact (separate.wgsl): the most near pairs a step found, the
+    // steps that fell back to holding every near vertex, the vertex steps
+    // held back, and the steps whose pairs overflowed the list.
+    self_pairs_max: u32,
+    self_fallbacks: u32,
+    self_held_total: atomic<u32>,
+    self_overflows: u32,
 }
 
 // A symmetric 3×3 block as the kernels compute with it: a = (xx, yy, zz,
@@ -295,17 +301,6 @@ fn closest_between_segments(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec
         }
     }
     return mat2x3<f32>(p1 + d1 * s, p2 + d2 * t);
-}
-
-// Self-contact (cpu/separate.rs `reach`, `displacement_bound`): how far a
-// step looks for pairs, given its longest stride, and how far a vertex
-// whose least separation is s may move.
-fn self_reach(max_step: f32) -> f32 {
-    return max(params.self_radius, params.self_floor + max_step / params.self_gamma);
-}
-
-fn self_bound(s: f32, max_step: f32) -> f32 {
-    return params.self_gamma * max(min(s, self_reach(max_step)) - params.self_floor, 0.0);
 }
 
 fn found(hit: vec4<f32>) -> bool {

@@ -1,8 +1,7 @@
 // Stage "integrate": x' = x + h v'; pinned vertices return to their
-// prescribed positions with zero velocity; with self-contact, a step
-// longer than its vertex's bound, gamma (s − floor) from the least
-// separation s (separate.wgsl), is shortened to it, and v' to the step; the clock advances; a vertex
-// left not finite or faster than `max_speed` raises its flag in
+// prescribed positions with zero velocity; with self-contact, x is kept
+// as where the step started (separate.wgsl holds the step back from it);
+// the clock advances; a vertex left not finite or faster than `max_speed` raises its flag in
 // `state.health` (src/health.rs diagnoses it).
 // CPU twin: src/cpu/integrate.rs.
 
@@ -16,9 +15,8 @@ fn finite3(a: vec3<f32>) -> bool {
 @group(1) @binding(2) var<storage, read_write> v: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> rest_positions: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> state: StepState;
-// Per vertex, its least separation's bits, then the step's longest
-// stride's (self-contact only).
-@group(1) @binding(10) var<storage, read> separations: array<u32>;
+// Where the step started (self-contact only).
+@group(1) @binding(5) var<storage, read_write> x_start: array<vec4<f32>>;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -31,20 +29,14 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= params.n_vertices {
         return;
     }
+    if params.self_contact != 0u {
+        x_start[i] = x[i];
+    }
     if is_pinned(i) {
         x[i] = vec4<f32>(rest_positions[i].xyz, 1.0);
         v[i] = vec4<f32>(0.0);
     } else {
-        var step = params.dt * v[i].xyz;
-        if params.self_contact != 0u {
-            let bound = self_bound(bitcast<f32>(separations[i]), bitcast<f32>(separations[params.n_vertices]));
-            let length = length(step);
-            if length > bound {
-                step *= bound / length;
-                v[i] = vec4<f32>(step / params.dt, 0.0);
-            }
-        }
-        x[i] = vec4<f32>(x[i].xyz + step, 1.0);
+        x[i] = vec4<f32>(x[i].xyz + params.dt * v[i].xyz, 1.0);
     }
     let xi = x[i].xyz;
     let vi = v[i].xyz;

@@ -9,12 +9,8 @@
 @group(1) @binding(6) var<storage, read_write> v: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> body_vertices: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> body_face_normals: array<vec4<f32>>;
-// A uniform, so the stage stays within 8 storage buffers.
-@group(1) @binding(4) var<uniform> frame: RigidFrame;
+@group(1) @binding(4) var<storage, read> frame: RigidFrame;
 @group(1) @binding(5) var<storage, read_write> state: StepState;
-// Per vertex, its least separation's bits, then the step's longest
-// stride's (self-contact only).
-@group(1) @binding(10) var<storage, read> separations: array<u32>;
 
 fn corner(t: u32, k: u32) -> vec3<f32> {
     return body_vertices[body_index(3u * t + k)].xyz;
@@ -81,8 +77,6 @@ fn way_out(p: vec3<f32>) -> WayOut {
 // The push-out (cpu::measure::push_out): a free vertex the step left inside
 // moves to the nearest surface point and ε beyond it along the normal, and
 // loses the velocity with which it moves into the body relative to it.
-// With self-contact it moves only as far as the step h v left of its bound
-// (separate.wgsl), so the push-out cannot pass the cloth through itself.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -103,16 +97,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let n = rotate(frame.rotation, body_face_normals[out.triangle].xyz);
+    x[i] = vec4<f32>(rotate(frame.rotation, out.surface) + frame.translation + params.thickness * n, 1.0);
     let vi = v[i].xyz;
-    var push = rotate(frame.rotation, out.surface) + frame.translation + params.thickness * n - x[i].xyz;
-    if params.self_contact != 0u {
-        let bound = self_bound(bitcast<f32>(separations[i]), bitcast<f32>(separations[params.n_vertices]));
-        let left = max(bound - length(params.dt * vi), 0.0);
-        let length = length(push);
-        if length > left {
-            push *= left / length;
-        }
-    }
-    x[i] = vec4<f32>(x[i].xyz + push, 1.0);
     v[i] = vec4<f32>(vi + max(dot(frame.velocity, n) - dot(vi, n), 0.0) * n, 0.0);
 }

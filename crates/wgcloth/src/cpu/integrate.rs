@@ -6,15 +6,13 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
-use crate::cpu::separate::within;
 use crate::health::{NOT_FINITE, TOO_FAST};
 use crate::scene::Cloth;
 
 /// x' = x + h v' for every free vertex, with h = `dt` and v' the solved
 /// velocities in `v`; pinned vertices go back to their rest positions with
-/// zero velocity. With self-contact, each step h v' is shortened to within
-/// its vertex's bound (cpu/separate.rs) and v' to the step taken.
-pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3], bounds: Option<&[f32]>) {
+/// zero velocity.
+pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3]) {
     x.par_iter_mut()
         .with_min_len(GRAIN)
         .zip(v.par_iter_mut())
@@ -24,15 +22,7 @@ pub fn integrate(cloth: &Cloth, dt: f32, x: &mut [Vec3], v: &mut [Vec3], bounds:
                 *x = cloth.rest_positions[i];
                 *v = Vec3::ZERO;
             } else {
-                let step = dt * *v;
-                match bounds {
-                    Some(b) if step.length() > b[i] => {
-                        let kept = within(step, b[i]);
-                        *x += kept;
-                        *v = kept / dt;
-                    }
-                    _ => *x += step,
-                }
+                *x += dt * *v;
             }
         });
 }

@@ -9,7 +9,6 @@ use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
 use crate::cpu::rigid::RigidFrame;
-use crate::cpu::separate::within;
 use crate::math::closest_on_triangle;
 use crate::scene::RigidBody;
 
@@ -92,36 +91,27 @@ pub fn penetration_depth(body: &RigidBody, frame: &RigidFrame, x: Vec3) -> f32 {
 /// the full penalty ε k_n), and loses the velocity with which it moves
 /// into the body relative to the surface (an inelastic impact). Contacts
 /// only see points within `max_depth` of a face, so this is what keeps a
-/// vertex from staying inside, or a fast body from tunnelling. With
-/// self-contact (`self_bounds`: each vertex's bound for the step, and h),
-/// a vertex moves out only as far as the step h v left of its bound, so
-/// the push-out cannot pass the cloth through itself; the rest waits for
-/// the next step. Returns how deep the deepest vertex (pinned ones too)
-/// was before it moved, m.
+/// vertex from staying inside, or a fast body from tunnelling. Returns how
+/// deep the deepest vertex (pinned ones too) was before it moved, m.
 pub fn push_out(
     body: &RigidBody,
     frame: &RigidFrame,
     thickness: f32,
     pinned: &[bool],
-    self_bounds: Option<(&[f32], f32)>,
     x: &mut [Vec3],
     v: &mut [Vec3],
 ) -> f32 {
     x.par_iter_mut()
         .with_min_len(GRAIN)
         .zip(v.par_iter_mut())
-        .enumerate()
-        .map(|(i, (xi, vi))| {
+        .zip(pinned)
+        .map(|((xi, vi), &pinned)| {
             let Some(out) = way_out(body, frame.to_body(*xi)) else {
                 return 0.0;
             };
-            if !pinned[i] {
+            if !pinned {
                 let n = frame.rotation * out.normal;
-                let push = frame.rotation * out.surface + frame.translation + thickness * n - *xi;
-                *xi += match self_bounds {
-                    Some((bounds, h)) => within(push, (bounds[i] - (h * *vi).length()).max(0.0)),
-                    None => push,
-                };
+                *xi = frame.rotation * out.surface + frame.translation + thickness * n;
                 *vi += (frame.velocity.dot(n) - vi.dot(n)).max(0.0) * n;
             }
             out.depth

@@ -43,6 +43,8 @@ pub struct StepStats {
     /// Deepest cloth vertex inside the rigid surface after the solve, m,
     /// before the push-out moved it back onto the surface.
     pub max_penetration: f32,
+    /// What self-contact held back (`self_contact` on).
+    pub separation: separate::Separation,
     /// Seconds spent in each of [`Stage::ALL`].
     pub stage_seconds: [f64; Stage::ALL.len()],
 }
@@ -95,8 +97,8 @@ pub struct CpuSim {
     scratch: PcgScratch,
     /// The cloth's edges, for self-contact.
     edges: Vec<[u32; 2]>,
-    /// How far each vertex may move this step (self-contact only).
-    bounds: Vec<f32>,
+    /// Positions at the start of the step (self-contact only).
+    x_start: Vec<Vec3>,
 }
 
 impl CpuSim {
@@ -132,7 +134,7 @@ impl CpuSim {
             } else {
                 Vec::new()
             },
-            bounds: Vec::new(),
+            x_start: Vec::new(),
             params,
             state,
             scene,
@@ -255,35 +257,11 @@ impl CpuSim {
                     &mut self.scratch,
                 );
             }
-            Stage::Separate => {
-                let keep = &self.scene.config.self_contact;
-                if keep.enabled {
-                    // Collide refitted the BVH to x already, where there is a body.
-                    if body.is_none() {
-                        collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
-                    }
-                    let max_step = v.iter().map(|v| (h * *v).length()).fold(0.0, f32::max);
-                    let least = separate::least_separations(
-                        x,
-                        &cloth.triangles,
-                        &self.edges,
-                        &self.cloth_bvh,
-                        separate::reach(max_step, keep),
-                    );
-                    self.bounds = least
-                        .into_iter()
-                        .map(|s| separate::displacement_bound(s, keep))
-                        .collect();
-                }
-            }
             Stage::Integrate => {
-                let bounds = self
-                    .scene
-                    .config
-                    .self_contact
-                    .enabled
-                    .then_some(&self.bounds[..]);
-                integrate::integrate(cloth, h, x, v, bounds)
+                if self.scene.config.self_contact.enabled {
+                    self.x_start.clone_from(x);
+                }
+                integrate::integrate(cloth, h, x, v)
             }
             Stage::Measure => {
                 if let Some(body) = body {
@@ -292,14 +270,25 @@ impl CpuSim {
                         &self.frame,
                         self.tolerances.thickness,
                         &cloth.pinned,
-                        self.scene
-                            .config
-                            .self_contact
-                            .enabled
-                            .then_some((&self.bounds[..], h)),
                         x,
                         v,
                     );
+                }
+            }
+            Stage::Separate => {
+                let keep = &self.scene.config.self_contact;
+                if keep.enabled {
+                    // Collide refits it to where the next step starts.
+                    let swept = separate::swept_boxes(&self.x_start, x, &cloth.triangles);
+                    self.cloth_bvh.refit(&swept);
+                    let within = separate::Within {
+                        triangles: &cloth.triangles,
+                        edges: &self.edges,
+                        bvh: &self.cloth_bvh,
+                        keep,
+                        h,
+                    };
+                    stats.separation = within.keep_apart(&self.x_start, x, v);
                 }
             }
         }

@@ -7,8 +7,9 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use crate::config::{ModelKind, Preconditioner};
+use crate::cpu::separate;
 use crate::error::{Error, Result};
-use crate::gpu::constants::{TILE, WORKGROUP, model, motion};
+use crate::gpu::constants::{TILE, WORKGROUP, model, motion, self_header};
 use crate::gpu::layout::{
     BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, StepState, Sym3,
 };
@@ -77,9 +78,15 @@ pub(crate) struct Buffers {
     pub(crate) frame: wgpu::Buffer,
     /// Tile bounds, then super-tile bounds.
     pub(crate) bounds: wgpu::Buffer,
-    /// Per vertex, its least separation's bits, then the step's longest
-    /// stride's (stage "separate").
+    /// Stage "separate": per vertex its least separation's bits, then its
+    /// flags, then the header (`constants::self_header`).
     pub(crate) separations: wgpu::Buffer,
+    /// Stage "separate": its rounds' indirect dispatches.
+    pub(crate) self_dispatches: wgpu::Buffer,
+    /// Stage "separate": the near pairs, five words each.
+    pub(crate) self_pairs: wgpu::Buffer,
+    /// Where the step started (self-contact only).
+    pub(crate) x_start: wgpu::Buffer,
     /// The network batch's size, then its contact slots.
     pub(crate) net_batch: wgpu::Buffer,
     pub(crate) net_inputs: wgpu::Buffer,
@@ -201,7 +208,6 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         body_triangles_at: sections.body_triangles,
         bvh_order_at: sections.bvh_order,
         self_contact: cfg.self_contact.enabled as u32,
-        self_radius: cfg.self_contact.radius,
         self_gamma: cfg.self_contact.gamma,
         self_floor: cfg.self_contact.floor,
         ..Default::default()
@@ -294,6 +300,8 @@ pub(crate) struct Sizes {
     pub(crate) rigid: u64,
     pub(crate) bounds: u64,
     pub(crate) separations: u64,
+    pub(crate) self_pairs: u64,
+    pub(crate) x_start: u64,
     pub(crate) net_batch: u64,
     pub(crate) net_inputs: u64,
     pub(crate) net_outputs: u64,
@@ -315,6 +323,8 @@ impl Sizes {
             .as_ref()
             .map_or(0, |net| slots * net.kind.evaluations() as u64);
         let tiles = (p.tiles_x * p.tiles_y + p.supertiles_x * p.supertiles_y) as u64;
+        // Vertices self-contact keeps arrays for (none without it).
+        let self_n = if p.self_contact != 0 { n } else { 0 };
         let size = |n: u64, of: usize| n * of as u64;
         let grids = multigrid_grids(scene);
         let (operators, vectors) = match grids.last() {
@@ -339,7 +349,9 @@ impl Sizes {
             vectors: size(vectors, 16),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             bounds: size(tiles, 32),
-            separations: size(if p.self_contact != 0 { n + 1 } else { 0 }, 4),
+            separations: size(self_n * 2 + self_header::WORDS as u64, 4),
+            self_pairs: size(self_n * separate::PAIRS_PER_VERTEX as u64, 20),
+            x_start: size(self_n, 16),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
             net_outputs: size(batch * (p.net_rows * p.net_outputs) as u64, 4),
@@ -348,7 +360,7 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn whole(&self) -> [(&'static str, u64); 14] {
+    pub(crate) fn whole(&self) -> [(&'static str, u64); 16] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
@@ -360,6 +372,8 @@ impl Sizes {
             ("placed body", self.rigid),
             ("tile bounds", self.bounds),
             ("least separations", self.separations),
+            ("self-contact pairs", self.self_pairs),
+            ("step start", self.x_start),
             ("network batch", self.net_batch),
             ("network inputs", self.net_inputs),
             ("network outputs", self.net_outputs),
@@ -535,15 +549,17 @@ impl Buffers {
                 &vec![0u8; sizes.rigid as usize],
                 wgpu::BufferUsages::VERTEX,
             ),
-            // Also a uniform: stage "measure" reads it as one.
-            frame: counted(device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("rigid frame"),
-                size: size_of::<RigidFrame>() as u64,
-                usage: usage | wgpu::BufferUsages::UNIFORM,
-                mapped_at_creation: false,
-            })),
+            frame: zeroed("rigid frame", size_of::<RigidFrame>() as u64),
             bounds: zeroed("tile bounds", sizes.bounds),
             separations: zeroed("least separations", sizes.separations),
+            self_dispatches: counted(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("self-contact dispatches"),
+                size: 4 * self_header::DISPATCH_WORDS as u64,
+                usage: usage | wgpu::BufferUsages::INDIRECT,
+                mapped_at_creation: false,
+            })),
+            self_pairs: zeroed("self-contact pairs", sizes.self_pairs),
+            x_start: zeroed("step start", sizes.x_start),
             net_batch: zeroed("network batch", sizes.net_batch),
             net_inputs: zeroed("network inputs", sizes.net_inputs),
             net_outputs: zeroed("network outputs", sizes.net_outputs),

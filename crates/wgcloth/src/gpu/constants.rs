@@ -2,6 +2,7 @@
 //! stage is compiled with [`prelude`] in front of it, and no WGSL file
 //! declares one of these itself (a test checks both directions).
 
+use crate::cpu::separate;
 use crate::health;
 use crate::multigrid;
 
@@ -26,6 +27,31 @@ pub const WORLD_FRAME_ROWS: u32 = 2;
 /// Invocations per workgroup of the network batch's kernels (`batch::plan`,
 /// `mlp::per_contact`).
 pub const BATCH_GROUP: u32 = 64;
+
+/// Words of stage "separate"'s header (wgsl/separate.wgsl), after its
+/// per-vertex least separations and flags.
+pub mod self_header {
+    /// Near pairs found (listed up to the capacity).
+    pub const PAIR_COUNT: u32 = 0;
+    /// Vertices the last round held for the first time.
+    pub const CHANGED: u32 = 1;
+    /// 1 when the last round held anything new.
+    pub const UNSETTLED: u32 = 2;
+    /// The header's length.
+    pub const WORDS: u32 = 3;
+    /// In the dispatch buffer (a buffer of its own: a dispatch cannot read
+    /// its arguments from a buffer it writes), three words each: the next
+    /// round over the list.
+    pub const ROUND_ARGS: u32 = 0;
+    /// The next settle.
+    pub const SETTLE_ARGS: u32 = 3;
+    /// The next round's vertex walks, when the list overflowed.
+    pub const RECHECK_VERTEX_ARGS: u32 = 6;
+    /// The next round's edge walks, when the list overflowed.
+    pub const RECHECK_EDGE_ARGS: u32 = 9;
+    /// The dispatch buffer's length.
+    pub const DISPATCH_WORDS: u32 = 12;
+}
 
 /// `Params::motion_kind`: how the rigid body moves (wgsl/rigid.wgsl).
 pub mod motion {
@@ -55,13 +81,22 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 22] = [
+pub const SHARED: [(&str, u32); 31] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
     ("BATCH_GROUP", BATCH_GROUP),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),
+    ("SELF_PAIRS_PER_VERTEX", separate::PAIRS_PER_VERTEX),
+    ("EDGE_PAIR", separate::EDGE_PAIR),
+    ("SELF_PAIR_COUNT", self_header::PAIR_COUNT),
+    ("SELF_CHANGED", self_header::CHANGED),
+    ("SELF_UNSETTLED", self_header::UNSETTLED),
+    ("SELF_ROUND_ARGS", self_header::ROUND_ARGS),
+    ("SELF_SETTLE_ARGS", self_header::SETTLE_ARGS),
+    ("SELF_RECHECK_VERTEX_ARGS", self_header::RECHECK_VERTEX_ARGS),
+    ("SELF_RECHECK_EDGE_ARGS", self_header::RECHECK_EDGE_ARGS),
     ("MLP_MAX_WIDTH", MLP_MAX_WIDTH),
     ("MLP_MAX_LAYERS", MLP_MAX_LAYERS),
     ("MOTION_LINEAR", motion::LINEAR),

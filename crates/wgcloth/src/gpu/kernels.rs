@@ -63,17 +63,30 @@ pub enum Entry {
     MgCoarse,
     /// Interpolation and post-smoothing; z on the cloth (`multigrid::up`).
     MgUp,
-    /// Every vertex's least separation cleared, the step's longest stride
-    /// taken (`separate::prepare`).
-    SeparatePrepare,
-    /// Each vertex against the cloth triangles near it (`separate::vertices`).
-    SeparateVertices,
-    /// Each cloth edge against the edges near it (`separate::edges`).
-    SeparateEdges,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
     /// Penetration depth, the push-out and the contact total (`measure::main`).
     Measure,
+    /// Every vertex's least separation and flags cleared (`separate::prepare`).
+    SeparatePrepare,
+    /// Refits the cloth tiles to the boxes the step sweeps (`separate::tiles`).
+    SeparateTiles,
+    /// Each vertex against the cloth triangles near it (`separate::vertices`).
+    SeparateVertices,
+    /// Each cloth edge against the edges near it (`separate::edges`).
+    SeparateEdges,
+    /// A round of the relative test over the listed near pairs (`separate::round`).
+    SeparateRound,
+    /// A round's vertex walks when the list overflowed (`separate::recheck_vertices`).
+    SeparateRecheckVertices,
+    /// A round's edge walks when the list overflowed (`separate::recheck_edges`).
+    SeparateRecheckEdges,
+    /// The round's newly held vertices counted and folded in (`separate::settle`).
+    SeparateSettle,
+    /// The next round's dispatches (`separate::plan`).
+    SeparatePlan,
+    /// Each held vertex's step held back (`separate::finish`).
+    SeparateFinish,
     /// Sizes a network batch's indirect dispatches (`batch::plan`).
     BatchPlan,
     /// One dense network layer as a tiled matrix product (`mlp::layer`).
@@ -86,7 +99,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 32] = [
+    pub const ALL: [Entry; 39] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -110,11 +123,18 @@ impl Entry {
         Entry::MgDown,
         Entry::MgCoarse,
         Entry::MgUp,
-        Entry::SeparatePrepare,
-        Entry::SeparateVertices,
-        Entry::SeparateEdges,
         Entry::Integrate,
         Entry::Measure,
+        Entry::SeparatePrepare,
+        Entry::SeparateTiles,
+        Entry::SeparateVertices,
+        Entry::SeparateEdges,
+        Entry::SeparateRound,
+        Entry::SeparateRecheckVertices,
+        Entry::SeparateRecheckEdges,
+        Entry::SeparateSettle,
+        Entry::SeparatePlan,
+        Entry::SeparateFinish,
         Entry::BatchPlan,
         Entry::MlpLayer,
         Entry::MlpPerContact,
@@ -147,11 +167,18 @@ impl Entry {
             Entry::MgDown => ("multigrid", "down"),
             Entry::MgCoarse => ("multigrid", "coarse"),
             Entry::MgUp => ("multigrid", "up"),
-            Entry::SeparatePrepare => ("separate", "prepare"),
-            Entry::SeparateVertices => ("separate", "vertices"),
-            Entry::SeparateEdges => ("separate", "edges"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
+            Entry::SeparatePrepare => ("separate", "prepare"),
+            Entry::SeparateTiles => ("separate", "tiles"),
+            Entry::SeparateVertices => ("separate", "vertices"),
+            Entry::SeparateEdges => ("separate", "edges"),
+            Entry::SeparateRound => ("separate", "round"),
+            Entry::SeparateRecheckVertices => ("separate", "recheck_vertices"),
+            Entry::SeparateRecheckEdges => ("separate", "recheck_edges"),
+            Entry::SeparateSettle => ("separate", "settle"),
+            Entry::SeparatePlan => ("separate", "plan"),
+            Entry::SeparateFinish => ("separate", "finish"),
             Entry::BatchPlan => ("batch", "plan"),
             Entry::MlpLayer => ("mlp", "layer"),
             Entry::MlpPerContact => ("mlp", "per_contact"),

@@ -119,12 +119,12 @@ pub struct Params {
     /// 1 when the step keeps the cloth from passing through itself
     /// (`self_contact.enabled`), else 0.
     pub self_contact: u32,
-    /// `self_contact.radius`, m.
-    pub self_radius: f32,
     /// `self_contact.gamma`.
     pub self_gamma: f32,
     /// `self_contact.floor`, m.
     pub self_floor: f32,
+    /// Padding to the WGSL layout.
+    pub self_pad: u32,
     /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
     pub pad: [u32; 2],
 }
@@ -159,8 +159,16 @@ pub struct StepState {
     /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
     /// pass and kept until the state is replaced.
     pub health: u32,
-    /// Padding to the WGSL size.
-    pub pad: u32,
+    /// Self-contact: the most near pairs one step found (stage "separate").
+    pub self_pairs_max: u32,
+    /// Self-contact: steps whose rounds did not settle or whose pairs
+    /// overflowed the list, so that every vertex near the cloth was held.
+    pub self_fallbacks: u32,
+    /// Self-contact: vertex steps held back, summed over every step.
+    pub self_held_total: u32,
+    /// Self-contact: steps whose near pairs overflowed the list (their
+    /// rounds walked the cloth again instead: slower, the same result).
+    pub self_overflows: u32,
 }
 
 /// A symmetric 3×3 block as buffers hold it (mirrors `PackedSym3` in

@@ -411,23 +411,18 @@ impl GpuSim {
     }
 
     #[cfg(not(target_arch = "wasm32"))]
-    /// Each vertex's least separation from the cloth within the step's
-    /// reach (the reach where none is nearer), as the last step's stage
-    /// "separate" found it, and the reach (self-contact only; the twin of
-    /// `cpu::separate::least_separations` and `reach`).
-    pub fn read_separations(&self) -> Result<(Vec<f32>, f32)> {
-        let bits: Vec<u32> = self.read(&self.buffers.separations)?;
+    /// What the last step's stage "separate" found (self-contact only; the
+    /// twin of `cpu::separate::near_pairs`): each vertex's least
+    /// separation (+∞ in no near pair) and the number of near pairs.
+    pub fn read_separations(&self) -> Result<(Vec<f32>, u32)> {
+        use crate::gpu::constants::self_header;
+        let words: Vec<u32> = self.read(&self.buffers.separations)?;
         let n = self.params.n_vertices as usize;
-        let p = &self.params;
-        let keep = crate::config::SelfContactConfig {
-            enabled: p.self_contact != 0,
-            radius: p.self_radius,
-            gamma: p.self_gamma,
-            floor: p.self_floor,
-        };
-        let reach = crate::cpu::separate::reach(f32::from_bits(bits[n]), &keep);
-        let least = bits[..n].iter().map(|&b| f32::from_bits(b).min(reach));
-        Ok((least.collect(), reach))
+        let least = words[..n].iter().map(|&b| f32::from_bits(b));
+        Ok((
+            least.collect(),
+            words[2 * n + self_header::PAIR_COUNT as usize],
+        ))
     }
 
     #[cfg(not(target_arch = "wasm32"))]

@@ -1,6 +1,5 @@
 //! Stage "integrate" (wgsl/integrate.wgsl; CPU twin cpu/integrate.rs):
-//! x' = x + h v' (each step within its self-contact bound), the clock,
-//! and the health flags.
+//! x' = x + h v', the clock, and the health flags.
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
@@ -18,7 +17,7 @@ impl Integrate {
             ("v", &b.v),
             ("rest_positions", &b.rest),
             ("state", &b.state),
-            ("separations", &b.separations),
+            ("x_start", &b.x_start),
         ];
         Integrate {
             integrate: kernels.kernel(Entry::Integrate).bind_parts(

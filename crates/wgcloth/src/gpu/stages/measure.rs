@@ -21,7 +21,6 @@ impl Measure {
             ("bvh_nodes", &b.bvh_nodes),
             ("frame", &b.frame),
             ("state", &b.state),
-            ("separations", &b.separations),
         ];
         Measure {
             measure: kernels
