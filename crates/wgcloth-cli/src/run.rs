@@ -149,6 +149,23 @@ pub struct Report {
     pub contacts_mean: f64,
     /// Total energy (kinetic + gravitational + elastic) at the end, J.
     pub energy_final: f64,
+    /// What stage "separate" did (`[self_contact]` on).
+    pub self_contact: Option<SelfContactReport>,
+}
+
+/// What stage "separate" did over a run (cpu/separate.rs).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SelfContactReport {
+    /// The most near pairs one step found.
+    pub pairs_max: u64,
+    /// Vertex steps held back, summed over the run.
+    pub held_total: u64,
+    /// Steps whose rounds did not settle, so that every vertex in a near
+    /// pair was held.
+    pub unsettled_steps: u64,
+    /// GPU: steps whose near pairs overflowed the list (their rounds walked
+    /// the cloth again: slower, the same result); 0 on the CPU.
+    pub overflow_steps: u64,
 }
 
 /// The relative residual every step's solve should reach (issue 20); the
@@ -369,6 +386,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
     let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
     let mut residuals = Residuals::default();
     let mut max_penetration = 0.0f32;
+    let mut separated = SelfContactReport::default();
     let mut divergence = None;
     let mut last_good = sim.state.clone();
     let max_speed = config.solver.max_speed;
@@ -391,6 +409,10 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         breakdowns += s.pcg.breakdown as u64;
         residuals.push(s.pcg.relative_residual, s.pcg.iterations);
         max_penetration = max_penetration.max(s.max_penetration);
+        let sep = &s.separation;
+        separated.pairs_max = separated.pairs_max.max(sep.pairs as u64);
+        separated.held_total += sep.held as u64;
+        separated.unsettled_steps += u64::from(self_contact && !sep.settled);
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
         if health::failed(flags, s.pcg.breakdown) {
             let (matrix, b) = sim.system();
@@ -450,6 +472,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
+        self_contact: self_contact.then_some(separated),
     })
 }
 
@@ -643,6 +666,12 @@ fn run_gpu(
         cg_breakdowns: last.cg_breakdowns as u64,
         contacts_mean: contacts as f64 / done,
         energy_final: cpu::energy(scene, &x, &v).total(),
+        self_contact: config.self_contact.enabled.then(|| SelfContactReport {
+            pairs_max: last.self_pairs_max as u64,
+            held_total: last.self_held_total as u64,
+            unsettled_steps: last.self_fallbacks as u64,
+            overflow_steps: last.self_overflows as u64,
+        }),
     })
 }
 
@@ -800,6 +829,16 @@ impl Report {
             if self.finite { "finite" } else { "NOT FINITE" },
             self.energy_final,
         ) + &self
+            .self_contact
+            .as_ref()
+            .map(|c| {
+                format!(
+                    "\nself-contact {} near pairs at most in a step, {} vertex steps held back, {} steps unsettled, {} overflowed the GPU's pair list",
+                    c.pairs_max, c.held_total, c.unsettled_steps, c.overflow_steps
+                )
+            })
+            .unwrap_or_default()
+            + &self
             .device_fault
             .as_ref()
             .map(|f| {

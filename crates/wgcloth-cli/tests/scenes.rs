@@ -47,7 +47,7 @@ fn every_scene_config_loads_starts_untangled_and_steps_finite() {
         names.push(path.file_stem().unwrap().to_string_lossy().into_owned());
     }
     names.sort();
-    assert_eq!(names, ["drape", "pleat"]);
+    assert_eq!(names, ["drape", "pleat", "thesis"]);
 }
 
 fn scene_config(name: &str) -> Config {

@@ -61,6 +61,9 @@ pub struct Variant {
     pub network: Option<Shipped>,
     /// How its steps are solved.
     pub solve: Solve,
+    /// Whether the cloth is kept from passing through itself (stage
+    /// "separate").
+    pub self_contact: bool,
 }
 
 impl Variant {
@@ -69,6 +72,7 @@ impl Variant {
             model,
             network: None,
             solve: Solve::Thesis,
+            self_contact: false,
         }
     }
 
@@ -77,6 +81,7 @@ impl Variant {
             model,
             network: None,
             solve: Solve::Converged(preconditioner),
+            self_contact: false,
         }
     }
 
@@ -94,9 +99,13 @@ impl Variant {
                 )
             }
         };
-        match self.solve {
+        let solved = match self.solve {
             Solve::Thesis => model,
             Solve::Converged(p) => format!("{model}, 1e-3 {}", p.name()),
+        };
+        match self.self_contact {
+            true => format!("{solved}, self-contact"),
+            false => solved,
         }
     }
 
@@ -108,6 +117,7 @@ impl Variant {
             solver.preconditioner = p;
             (solver.cg_iters, solver.cg_tol) = (self.solve.cap(), RESIDUAL_GOAL);
         }
+        scene.config.self_contact.enabled = self.self_contact;
         if let Some(net) = self.network {
             scene.network = Some(Arc::new(net.read()?.network()));
             // Names the network in the report.
@@ -120,11 +130,18 @@ impl Variant {
 /// The default run: friction-net, every step solved with multigrid.
 pub const HEADLINE: Variant = Variant::converged(ModelKind::FrictionNet, Preconditioner::Multigrid);
 
+/// The default run with the cloth kept from passing through itself.
+pub const SELF_CONTACT: Variant = Variant {
+    self_contact: true,
+    ..HEADLINE
+};
+
 /// Every model with its default network and the friction model with the
 /// thesis-size network too, solved as the thesis did; then the default
 /// model and the analytic one solved to the goal with multigrid, and the
-/// default model with Jacobi.
-pub const VARIANTS: [Variant; 8] = [
+/// default model with Jacobi; last the default run with the cloth kept
+/// from passing through itself.
+pub const VARIANTS: [Variant; 9] = [
     Variant::of(ModelKind::Naive),
     Variant::of(ModelKind::Friction),
     Variant::of(ModelKind::NaiveNet),
@@ -133,10 +150,12 @@ pub const VARIANTS: [Variant; 8] = [
         model: ModelKind::FrictionNet,
         network: Some(weights::FRICTION_THESIS),
         solve: Solve::Thesis,
+        self_contact: false,
     },
     HEADLINE,
     Variant::converged(ModelKind::Friction, Preconditioner::Multigrid),
     Variant::converged(ModelKind::FrictionNet, Preconditioner::Jacobi),
+    SELF_CONTACT,
 ];
 
 /// Steps before the timed ones: the sphere reaches the cloth and pushes it

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use image::Rgb;
 
-use crate::bench::{BenchReport, HEADLINE, StepRow, VARIANTS};
+use crate::bench::{BenchReport, HEADLINE, SELF_CONTACT, StepRow, VARIANTS};
 use crate::plot::{Canvas, GRID, INK, LogAxis, decade_label};
 use wgcloth::config::ModelKind;
 use wgcloth::error::{Error, Result};
@@ -23,6 +23,7 @@ pub const VARIANT_COLORS: [Rgb<u8>; VARIANTS.len()] = [
     Rgb([20, 150, 80]),
     Rgb([90, 200, 220]),
     Rgb([240, 110, 170]),
+    Rgb([110, 80, 40]),
 ];
 
 /// One colour per entry of [`Stage::ALL`].
@@ -155,14 +156,15 @@ fn step_lines(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) -
     Ok(())
 }
 
-/// The per-stage panel between x = left and right, legend beyond it.
+/// The per-stage panel between x = left and right, legend beyond it: the
+/// default run, and beside it the same with self-contact ("+self").
 fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
     let (top, bottom) = (40.0, c.height() - 66.0);
-    let model = HEADLINE.label();
+    let (model, with_self) = (HEADLINE.label(), SELF_CONTACT.label());
     c.text(
         left - 40.0,
         16.0,
-        &format!("share of the step per stage, {model}"),
+        &format!("share of the step per stage, {model} (+self: self-contact)"),
         INK,
     );
     for pct in [0, 25, 50, 75, 100] {
@@ -170,7 +172,11 @@ fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
         c.line((left, py), (right, py), GRID, 1, None);
         c.text(left - 40.0, py - 4.0, &format!("{pct:>3}%"), INK);
     }
-    let bars: Vec<&StepRow> = report.rows.iter().filter(|r| r.label == model).collect();
+    let bars: Vec<&StepRow> = report
+        .rows
+        .iter()
+        .filter(|r| r.label == model || r.label == with_self)
+        .collect();
     let slot = (right - left) / bars.len().max(1) as f64;
     for (k, row) in bars.iter().enumerate() {
         let (x0, x1) = (
@@ -202,8 +208,11 @@ fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
             INK,
         );
         c.text(mid - 12.0, bottom + 18.0, &row.report.backend, INK);
+        if row.label == with_self {
+            c.text(mid - 14.0, bottom + 30.0, "+self", INK);
+        }
     }
-    c.text(left + 40.0, bottom + 36.0, "grid (N x N) and backend", INK);
+    c.text(left + 40.0, bottom + 44.0, "grid (N x N) and backend", INK);
     let (lx, mut ly) = (right + 24.0, top + 8.0);
     for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS).rev() {
         c.fill((lx, ly), (lx + 14.0, ly + 8.0), color);

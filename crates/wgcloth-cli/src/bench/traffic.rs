@@ -152,9 +152,10 @@ impl Layout {
     ///   length and two adjacency entries read, its off-diagonal block
     ///   written, and where a layout stores spring terms (the CPU's) each
     ///   written once and read twice;
-    /// - separate: the positions read, each triangle's and spring's vertex
-    ///   indices read, a least separation written per vertex (the walks
-    ///   over the tiles not counted, as collide's are not);
+    /// - separate: the step's start and end positions read, a least
+    ///   separation and a flag word written per vertex, each triangle's and
+    ///   spring's vertex indices read (the walks over the tiles and the
+    ///   rounds not counted, as collide's walks are not);
     /// - integrate: x and v read, x written, the pinned flag read;
     /// - measure: the positions read.
     pub fn stage_bytes(&self, stage: Stage, e: &Extent) -> Option<u64> {
@@ -169,7 +170,7 @@ impl Layout {
                     + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
             Stage::Pcg => return None,
-            Stage::Separate => n * (v + 4) + t * 12 + s * 8,
+            Stage::Separate => n * (2 * v + 8) + t * 12 + s * 8,
             Stage::Integrate => n * (3 * v + self.flag),
             Stage::Measure => n * v,
         })
