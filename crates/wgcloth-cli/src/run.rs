@@ -666,7 +666,7 @@ fn run_gpu(
         cg_breakdowns: last.cg_breakdowns as u64,
         contacts_mean: contacts as f64 / done,
         energy_final: cpu::energy(scene, &x, &v).total(),
-        self_contact: config.self_contact.enabled.then(|| SelfContactReport {
+        self_contact: config.self_contact.enabled.then_some(SelfContactReport {
             pairs_max: last.self_pairs_max as u64,
             held_total: last.self_held_total as u64,
             unsettled_steps: last.self_fallbacks as u64,
