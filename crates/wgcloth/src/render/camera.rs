@@ -29,16 +29,21 @@ const VIEW: Vec3 = Vec3::new(0.55, 0.35, -1.0);
 impl Camera {
     /// Frames everything the scene occupies over `duration` seconds.
     pub fn framing(scene: &Scene, duration: f32) -> Camera {
-        let mut points = scene.cloth.rest_positions.clone();
+        let cloth = &scene.cloth;
+        let mut points = cloth.rest_positions.clone();
+        // A cloth pinned nowhere falls: as far as its own width below its
+        // start, draped over the body or hanging from it.
+        if !cloth.pinned.iter().any(|&p| p) {
+            let (lo, hi) = extent(&points);
+            let fall = (hi - lo).max_element() * Vec3::from_array(scene.config.solver.gravity).normalize_or_zero();
+            points.extend(cloth.rest_positions.iter().map(|&p| p + fall));
+        }
         if let Some(body) = &scene.rigid {
             for k in 0..=16 {
                 points.extend(body.placed_vertices(duration * k as f32 / 16.0));
             }
         }
-        let (lo, hi) = points.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
+        let (lo, hi) = extent(&points);
         let target = 0.5 * (lo + hi);
         let radius = (0.5 * (hi - lo).length()).max(1e-3);
         let fov_y = 40f32.to_radians();
@@ -64,4 +69,12 @@ impl Camera {
         directx::perspective(fov_y, aspect, 0.01 * distance, 10.0 * distance)
             * look_at_mat4(self.eye, self.target, Vec3::Y)
     }
+}
+
+/// The least and greatest corners of `points`' box.
+fn extent(points: &[Vec3]) -> (Vec3, Vec3) {
+    points.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
 }
