@@ -4,9 +4,9 @@
 // (`Within::keep_apart`), which finds the same pairs and holds the same
 // vertices.
 //
-// 1. `prepare`, `tiles` (and collide's `supertiles`): flags cleared, the
-//    tile hierarchy over the cloth grid refitted to the boxes its vertices
-//    sweep from x_start to x.
+// 1. `prepare`, `tiles` (and collide's `supertiles`): flags cleared, each
+//    grid cell's swept box (of its corners from x_start to x), and the tile
+//    hierarchy over the cells refitted to them.
 // 2. `vertices`, `edges`: the near pairs, vertex–triangle and edge–edge
 //    pairs sharing no vertex whose swept boxes, the first grown by the
 //    floor, overlap and that could fail the relative test. A query box
@@ -32,8 +32,8 @@
 // Positions where the solve and push-out left them; held back in `finish`.
 @group(1) @binding(2) var<storage, read_write> x: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> v: array<vec4<f32>>;
-// The tiles' bounds, then the super-tiles', around what the step sweeps
-// (`tiles`, then collide.wgsl's `supertiles`).
+// The tiles' bounds, then the super-tiles', then the cells', around what
+// the step sweeps (`prepare`, `tiles`, then collide.wgsl's `supertiles`).
 @group(1) @binding(6) var<storage, read_write> bounds: array<Bounds>;
 // Per vertex its least separation's bits, then per vertex its flags, then
 // the header (gpu::constants::self_header's words, at 2 n; zeroed before
@@ -148,41 +148,72 @@ fn note(q: Query, vertices: vec4<u32>, s: f32) {
     }
 }
 
-// The query against cloth triangle t: the vertex against the triangle, or
-// the edge against each of its edges above it (each pair from its lower
-// edge, as on the CPU, and once per triangle along the upper one).
-fn against(q: Query, t: u32) {
+// The vertex against cloth triangle t.
+fn vertex_against(q: Query, t: u32) {
     let tri = vec3<u32>(cloth_index(3u * t), cloth_index(3u * t + 1u), cloth_index(3u * t + 2u));
-    if !q.edge {
-        let lo = min(min(swept_lo(tri.x), swept_lo(tri.y)), swept_lo(tri.z));
-        let hi = max(max(swept_hi(tri.x), swept_hi(tri.y)), swept_hi(tri.z));
-        if any(tri == vec3<u32>(q.a)) || !overlaps(q.lo, q.hi, lo, hi) {
-            return;
-        }
-        let p = x_start[q.a].xyz;
-        let c = closest_on_triangle(p, x_start[tri.x].xyz, x_start[tri.y].xyz, x_start[tri.z].xyz);
-        note(q, vec4<u32>(q.a, tri), length(p - c));
+    if any(tri == vec3<u32>(q.a)) {
         return;
     }
-    for (var k = 0u; k < 3u; k++) {
-        let u = tri[k];
-        let w = tri[(k + 1u) % 3u];
-        let f = vec2<u32>(min(u, w), max(u, w));
-        let above = f.x > q.a || (f.x == q.a && f.y > q.b);
-        let apart = f.x != q.a && f.x != q.b && f.y != q.a && f.y != q.b;
-        let lo = min(swept_lo(f.x), swept_lo(f.y));
-        let hi = max(swept_hi(f.x), swept_hi(f.y));
-        if above && apart && overlaps(q.lo, q.hi, lo, hi) {
-            let m = closest_between_segments(x_start[q.a].xyz, x_start[q.b].xyz, x_start[f.x].xyz,
-                                             x_start[f.y].xyz);
-            note(q, vec4<u32>(q.a, q.b, f), length(m[0] - m[1]));
+    let lo = min(min(swept_lo(tri.x), swept_lo(tri.y)), swept_lo(tri.z));
+    let hi = max(max(swept_hi(tri.x), swept_hi(tri.y)), swept_hi(tri.z));
+    if !overlaps(q.lo, q.hi, lo, hi) {
+        return;
+    }
+    let p = x_start[q.a].xyz;
+    let c = closest_on_triangle(p, x_start[tri.x].xyz, x_start[tri.y].xyz, x_start[tri.z].xyz);
+    note(q, vec4<u32>(q.a, tri), length(p - c));
+}
+
+// The edge against edge (u, w) when it is above it (each pair from its
+// lower edge, as on the CPU).
+fn edge_against(q: Query, u: u32, w: u32) {
+    let f = vec2<u32>(min(u, w), max(u, w));
+    let above = f.x > q.a || (f.x == q.a && f.y > q.b);
+    let apart = f.x != q.a && f.x != q.b && f.y != q.a && f.y != q.b;
+    if !(above && apart) {
+        return;
+    }
+    let lo = min(swept_lo(f.x), swept_lo(f.y));
+    let hi = max(swept_hi(f.x), swept_hi(f.y));
+    if overlaps(q.lo, q.hi, lo, hi) {
+        let m = closest_between_segments(x_start[q.a].xyz, x_start[q.b].xyz, x_start[f.x].xyz,
+                                         x_start[f.y].xyz);
+        note(q, vec4<u32>(q.a, q.b, f), length(m[0] - m[1]));
+    }
+}
+
+// The query against grid cell (cx, cy): a vertex against its two
+// triangles; an edge against the edges the cell owns, so that each is met
+// once: its bottom, its left and its diagonal (alternating as
+// scene::cloth lays them), and its right and top on the grid's last column
+// and row. An edge near the query lies in every cell that holds it, and
+// those cells' boxes hold its box, so its owner is walked.
+fn against(q: Query, cx: u32, cy: u32) {
+    let c = cy * params.cells_x + cx;
+    if !q.edge {
+        vertex_against(q, 2u * c);
+        vertex_against(q, 2u * c + 1u);
+        return;
+    }
+    let nx = params.cells_x + 1u;
+    let a = cy * nx + cx;
+    let b = a + 1u;
+    let up = a + nx;
+    let d = up + 1u;
+    let diagonal = select(vec2<u32>(a, d), vec2<u32>(b, up), (cx + cy) % 2u == 0u);
+    // Bottom, left, diagonal, then right and top where the grid ends (one
+    // call site, so the segment test is compiled once).
+    let owned = array<vec2<u32>, 5>(vec2<u32>(a, b), vec2<u32>(a, up), diagonal, vec2<u32>(b, d), vec2<u32>(up, d));
+    let last = 3u + select(0u, 1u, cx + 1u == params.cells_x);
+    for (var k = 0u; k < 5u; k++) {
+        if k < last || (k == 4u && cy + 1u == params.cells_y) {
+            edge_against(q, owned[k].x, owned[k].y);
         }
     }
 }
 
-// Every cloth triangle in a cell whose swept box the query's overlaps.
+// Every grid cell whose swept box the query's overlaps.
 fn walk(q: Query) {
-    let nx = params.cells_x + 1u;
     let tiles = params.tiles_x * params.tiles_y;
     for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
         let sb = bounds[tiles + s];
@@ -199,13 +230,10 @@ fn walk(q: Query) {
                 }
                 for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
                     for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
-                        let k = cy * nx + cx;
-                        let lo = min(min(swept_lo(k), swept_lo(k + 1u)), min(swept_lo(k + nx), swept_lo(k + nx + 1u)));
-                        let hi = max(max(swept_hi(k), swept_hi(k + 1u)), max(swept_hi(k + nx), swept_hi(k + nx + 1u)));
-                        if overlaps(q.lo, q.hi, lo, hi) {
-                            let t = 2u * (cy * params.cells_x + cx);
-                            against(q, t);
-                            against(q, t + 1u);
+                        let c = cy * params.cells_x + cx;
+                        let cb = bounds[cell_at(c)];
+                        if overlaps(q.lo, q.hi, cb.lo.xyz, cb.hi.xyz) {
+                            against(q, cx, cy);
                         }
                     }
                 }
@@ -214,8 +242,13 @@ fn walk(q: Query) {
     }
 }
 
-// Nothing near any vertex yet (+∞), none held; `plan` reads its first
-// round as changed.
+// Where cell c's swept box is in `bounds`.
+fn cell_at(c: u32) -> u32 {
+    return params.tiles_x * params.tiles_y + params.supertiles_x * params.supertiles_y + c;
+}
+
+// Nothing near any vertex yet (+∞), none held, `plan` reading its first
+// round as changed; the box cell i sweeps.
 @compute @workgroup_size(WORKGROUP)
 fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -225,6 +258,13 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     if i < params.n_vertices {
         atomicStore(&separations[i], 0x7f800000u);
         atomicStore(&separations[params.n_vertices + i], 0u);
+    }
+    if i < params.cells_x * params.cells_y {
+        let nx = params.cells_x + 1u;
+        let k = (i / params.cells_x) * nx + i % params.cells_x;
+        let lo = min(min(swept_lo(k), swept_lo(k + 1u)), min(swept_lo(k + nx), swept_lo(k + nx + 1u)));
+        let hi = max(max(swept_hi(k), swept_hi(k + 1u)), max(swept_hi(k + nx), swept_hi(k + nx + 1u)));
+        bounds[cell_at(i)] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
     }
 }
 
@@ -237,16 +277,16 @@ fn tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let tx = k % params.tiles_x;
     let ty = k / params.tiles_x;
-    let nx = params.cells_x + 1u;
-    var lo = vec3<f32>(3.4e38);
-    var hi = vec3<f32>(-3.4e38);
-    for (var r = ty * TILE; r <= min(ty * TILE + TILE, params.cells_y); r++) {
-        for (var c = tx * TILE; c <= min(tx * TILE + TILE, params.cells_x); c++) {
-            lo = min(lo, swept_lo(r * nx + c));
-            hi = max(hi, swept_hi(r * nx + c));
+    var lo = vec4<f32>(3.4e38);
+    var hi = vec4<f32>(-3.4e38);
+    for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
+        for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
+            let cb = bounds[cell_at(cy * params.cells_x + cx)];
+            lo = min(lo, cb.lo);
+            hi = max(hi, cb.hi);
         }
     }
-    bounds[k] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
+    bounds[k] = Bounds(lo, hi);
 }
 
 // Vertex i against the triangles near its path.

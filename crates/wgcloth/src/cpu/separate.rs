@@ -120,9 +120,8 @@ fn overlap(a: &Aabb, b: &Aabb) -> bool {
 
 /// The near pairs: those sharing no vertex whose swept boxes, the first
 /// grown by the floor, overlap and that [could fail](NearPair::could_fail)
-/// (vertex–triangle, then edge–edge; an edge–edge pair once per triangle
-/// along its upper edge), and each vertex's least separation at the start
-/// over them (+∞ in none). Pairs that cannot fail need no bound, so they
+/// (vertex–triangle, then edge–edge, each once), and each vertex's least
+/// separation at the start over them (+∞ in none). Pairs that cannot fail need no bound, so they
 /// are left out of both. `bvh` holds [`swept_boxes`].
 pub fn near_pairs(
     start: &[Vec3],
@@ -191,6 +190,10 @@ pub fn near_pairs(
             })
             .filter(|pair| pair.could_fail(&d, keep)),
     );
+    // An edge–edge pair is met from both triangles along its upper edge.
+    let first_edge_pair = pairs.partition_point(|p| !p.edges);
+    pairs[first_edge_pair..].par_sort_unstable_by_key(|p| p.vertices);
+    pairs.dedup_by_key(|p| (p.vertices, p.edges));
     let mut least = vec![f32::INFINITY; start.len()];
     for pair in &pairs {
         for &v in &pair.vertices {

@@ -76,7 +76,8 @@ pub(crate) struct Buffers {
     /// The placed body: its vertices, then their normals.
     pub(crate) rigid: wgpu::Buffer,
     pub(crate) frame: wgpu::Buffer,
-    /// Tile bounds, then super-tile bounds.
+    /// Tile bounds, then super-tile bounds (then, with self-contact, each
+    /// cell's swept box: stage "separate").
     pub(crate) bounds: wgpu::Buffer,
     /// Stage "separate": per vertex its least separation's bits, then its
     /// flags, then the header (`constants::self_header`).
@@ -325,6 +326,11 @@ impl Sizes {
         let tiles = (p.tiles_x * p.tiles_y + p.supertiles_x * p.supertiles_y) as u64;
         // Vertices self-contact keeps arrays for (none without it).
         let self_n = if p.self_contact != 0 { n } else { 0 };
+        let self_cells = if p.self_contact != 0 {
+            (p.cells_x * p.cells_y) as u64
+        } else {
+            0
+        };
         let size = |n: u64, of: usize| n * of as u64;
         let grids = multigrid_grids(scene);
         let (operators, vectors) = match grids.last() {
@@ -348,7 +354,8 @@ impl Sizes {
             operators: size(operators, size_of::<Sym3>()),
             vectors: size(vectors, 16),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
-            bounds: size(tiles, 32),
+            // With self-contact, each cell's swept box after them.
+            bounds: size(tiles + self_cells, 32),
             separations: size(self_n * 2 + self_header::WORDS as u64, 4),
             self_pairs: size(self_n * separate::PAIRS_PER_VERTEX as u64, 20),
             x_start: size(self_n, 16),

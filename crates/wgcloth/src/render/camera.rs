@@ -35,7 +35,8 @@ impl Camera {
         // start, draped over the body or hanging from it.
         if !cloth.pinned.iter().any(|&p| p) {
             let (lo, hi) = extent(&points);
-            let fall = (hi - lo).max_element() * Vec3::from_array(scene.config.solver.gravity).normalize_or_zero();
+            let fall = (hi - lo).max_element()
+                * Vec3::from_array(scene.config.solver.gravity).normalize_or_zero();
             points.extend(cloth.rest_positions.iter().map(|&p| p + fall));
         }
         if let Some(body) = &scene.rigid {
