@@ -32,7 +32,8 @@
 //! - [`render`]: drawing a scene's frames from the simulator's buffers.
 //! - [`health`]: what a step must leave, and where divergence started.
 //! - [`intersections`]: the cloth triangle pairs that pass through each
-//!   other; [`separation`]: how far each vertex may move so that none does.
+//!   other; [`cpu::separate`] (and its WGSL twin) holds each step back so
+//!   that none does, with `[self_contact]` on.
 
 pub mod bvh;
 pub mod config;

@@ -16,7 +16,7 @@
 //    started) of its four vertices (an atomic minimum over the bits of a
 //    non-negative f32, which order as the floats do) and joins the pair
 //    list (SELF_PAIRS_PER_VERTEX per vertex).
-// 3. SELF_ROUNDS rounds of `round` (or, when the list overflowed,
+// 3. cpu::separate::ROUNDS rounds of `round` (or, when the list overflowed,
 //    `recheck_vertices` and `recheck_edges`, which walk again for the same
 //    pairs), `settle` and `plan`: a pair whose sides' displacements differ
 //    by more than 2 gamma (s − floor) holds its four vertices (flag bit 1,

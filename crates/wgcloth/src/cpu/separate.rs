@@ -46,7 +46,7 @@ pub fn triangle_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
 
 /// Rounds of the relative test ([`hold`]) before a step falls back to
 /// holding every vertex in a near pair to its bound.
-pub const ROUNDS: u32 = 4;
+pub const ROUNDS: u32 = 8;
 /// Near pairs the GPU's list holds per cloth vertex (wgsl/separate.wgsl);
 /// past that the step falls back as when the rounds do not settle.
 pub const PAIRS_PER_VERTEX: u32 = 8;
