@@ -16,8 +16,6 @@
 // The placed body: its vertices, then their normals.
 @group(1) @binding(4) var<storage, read> rigid: array<vec4<f32>>;
 @group(1) @binding(5) var<storage, read> frame: RigidFrame;
-// The tiles' bounds, then the super-tiles'.
-@group(1) @binding(6) var<storage, read_write> bounds: array<Bounds>;
 @group(1) @binding(7) var<storage, read_write> contacts: array<Contact>;
 // Per cloth triangle the head of its face–vertex contact list, then per
 // rigid vertex the next entry of the list it is in (entries: rigid vertex
@@ -63,16 +61,7 @@ fn supertiles(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let sx = k % params.supertiles_x;
     let sy = k / params.supertiles_x;
-    var lo = vec4<f32>(3.4e38);
-    var hi = vec4<f32>(-3.4e38);
-    for (var ty = sy * TILE; ty < min(sy * TILE + TILE, params.tiles_y); ty++) {
-        for (var tx = sx * TILE; tx < min(sx * TILE + TILE, params.tiles_x); tx++) {
-            let b = bounds[ty * params.tiles_x + tx];
-            lo = min(lo, b.lo);
-            hi = max(hi, b.hi);
-        }
-    }
-    bounds[params.tiles_x * params.tiles_y + k] = Bounds(lo, hi);
+    bounds[params.tiles_x * params.tiles_y + k] = block_bounds(0u, params.tiles_x, params.tiles_y, sx, sy);
 }
 
 // (a) The rigid triangle closest to each cloth vertex.

@@ -32,9 +32,6 @@
 // Positions where the solve and push-out left them; held back in `finish`.
 @group(1) @binding(2) var<storage, read_write> x: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> v: array<vec4<f32>>;
-// The tiles' bounds, then the super-tiles', then the cells', around what
-// the step sweeps (`prepare`, `tiles`, then collide.wgsl's `supertiles`).
-@group(1) @binding(6) var<storage, read_write> bounds: array<Bounds>;
 // Per vertex its least separation's bits, then per vertex its flags, then
 // the header (gpu::constants::self_header's words, at 2 n; zeroed before
 // the pass).
@@ -268,7 +265,8 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// The box tile k (collide.wgsl's `tiles`: cells [8 tx, 8 tx + 8)) sweeps.
+// The box tile k (collide.wgsl's `tiles`: cells [8 tx, 8 tx + 8)) sweeps:
+// the union of its cells' (tiles.wgsl).
 @compute @workgroup_size(WORKGROUP)
 fn tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
@@ -277,16 +275,7 @@ fn tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let tx = k % params.tiles_x;
     let ty = k / params.tiles_x;
-    var lo = vec4<f32>(3.4e38);
-    var hi = vec4<f32>(-3.4e38);
-    for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
-        for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
-            let cb = bounds[cell_at(cy * params.cells_x + cx)];
-            lo = min(lo, cb.lo);
-            hi = max(hi, cb.hi);
-        }
-    }
-    bounds[k] = Bounds(lo, hi);
+    bounds[k] = block_bounds(cell_at(0u), params.cells_x, params.cells_y, tx, ty);
 }
 
 // Vertex i against the triangles near its path.

@@ -29,7 +29,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 4] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 5] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -48,6 +48,11 @@ pub const INCLUDES: [(&str, &str, &[&str]); 4] = [
         "bvh",
         include_str!("../../wgsl/bvh.wgsl"),
         &["collide", "measure"],
+    ),
+    (
+        "tiles",
+        include_str!("../../wgsl/tiles.wgsl"),
+        &["collide", "separate"],
     ),
     (
         "springs",
