@@ -11,8 +11,8 @@
 //    pairs sharing no vertex whose swept boxes, the first grown by the
 //    floor, overlap and that could fail the relative test. A query box
 //    walks the super-tiles and tiles it overlaps, then the cells whose
-//    swept box (of their four corners) it overlaps, and tests the cell's
-//    two triangles. A pair lowers the least separation (where the step
+//    swept box it overlaps, and tests the cell's two triangles (a vertex)
+//    or the edges the cell owns (an edge). A pair lowers the least separation (where the step
 //    started) of its four vertices (an atomic minimum over the bits of a
 //    non-negative f32, which order as the floats do) and joins the pair
 //    list (SELF_PAIRS_PER_VERTEX per vertex).
