@@ -19,7 +19,7 @@ struct Params {
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
     // Where parts 1 and 2 of an array bound in parts start (gpu::shaders).
     topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>,
-    self_contact: u32, self_gamma: f32, self_floor: f32, self_pad: u32, pad: vec2<u32>,
+    self_contact: u32, self_gamma: f32, self_floor: f32, self_capacity: u32, pad: vec2<u32>,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each

@@ -15,7 +15,8 @@
 //    or the edges the cell owns (an edge). A pair lowers the least separation (where the step
 //    started) of its four vertices (an atomic minimum over the bits of a
 //    non-negative f32, which order as the floats do) and joins the pair
-//    list (SELF_PAIRS_PER_VERTEX per vertex).
+//    list (params.self_capacity long: 8 per vertex, or what one binding
+//    holds).
 // 3. cpu::separate::ROUNDS rounds of `round` (or, when the list overflowed,
 //    `recheck_vertices` and `recheck_edges`, which walk again for the same
 //    pairs), `settle` and `plan`: a pair whose sides' displacements differ
@@ -48,7 +49,7 @@ fn header(k: u32) -> u32 {
 }
 
 fn capacity() -> u32 {
-    return SELF_PAIRS_PER_VERTEX * params.n_vertices;
+    return params.self_capacity;
 }
 
 fn step_of(i: u32) -> vec3<f32> {

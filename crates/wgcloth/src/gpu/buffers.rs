@@ -211,6 +211,10 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         self_contact: cfg.self_contact.enabled as u32,
         self_gamma: cfg.self_contact.gamma,
         self_floor: cfg.self_contact.floor,
+        self_capacity: match cfg.self_contact.enabled {
+            true => separate::PAIRS_PER_VERTEX * cloth.vertex_count() as u32,
+            false => 0,
+        },
         ..Default::default()
     };
     if let Some(body) = &scene.rigid {
@@ -280,6 +284,22 @@ pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
             coarse: grids.get(l + 1).copied().unwrap_or_default(),
         })
         .collect()
+}
+
+/// Bytes of one near pair in stage "separate"'s list: four vertices and
+/// the separation's bits.
+const PAIR_BYTES: usize = 20;
+
+/// Shortens stage "separate"'s pair list to what one binding holds, where
+/// `PAIRS_PER_VERTEX` per vertex would not fit: a step whose pairs overflow
+/// the list walks the cloth again for its rounds (the same result, slower),
+/// so a large cloth still runs within a device's limits.
+pub(crate) fn fit_pair_list(limits: &wgpu::Limits, params: &mut Params) {
+    let bindable = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let most = bindable / PAIR_BYTES as u64;
+    params.self_capacity = params.self_capacity.min(most.min(u32::MAX as u64) as u32);
 }
 
 /// Every buffer's size in bytes that depends on the scene, a pure function
@@ -357,7 +377,7 @@ impl Sizes {
             // With self-contact, each cell's swept box after them.
             bounds: size(tiles + self_cells, 32),
             separations: size(self_n * 2 + self_header::WORDS as u64, 4),
-            self_pairs: size(self_n * separate::PAIRS_PER_VERTEX as u64, 20),
+            self_pairs: size(p.self_capacity as u64, PAIR_BYTES),
             x_start: size(self_n, 16),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
@@ -678,6 +698,34 @@ pub(crate) fn check_limits(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 1024² cloth with self-contact fits a device whose bindings hold
+    /// 128 MiB (lavapipe's and WebGPU's default) and whose buffers may be
+    /// larger (lavapipe's): its pair list (8 per vertex would be 168 MB) is
+    /// cut to one binding, and the largest arrays are bound in parts.
+    #[test]
+    fn a_large_cloth_with_self_contact_fits_a_128_mib_binding() {
+        let mut config = crate::Config {
+            scene: crate::config::SceneKind::Hang,
+            ..Default::default()
+        };
+        config.cloth.grid = [1024, 1024];
+        config.self_contact.enabled = true;
+        let scene = Scene::new(&config).unwrap();
+        let (topology, sections) = crate::gpu::layout::topology(&scene);
+        let mut params = params_for(&scene, &sections);
+        let limits = wgpu::Limits {
+            max_buffer_size: 1 << 32,
+            ..Default::default()
+        };
+        let wanted = params.self_capacity as u64 * PAIR_BYTES as u64;
+        assert!(wanted > limits.max_storage_buffer_binding_size);
+        fit_pair_list(&limits, &mut params);
+        let sizes = Sizes::of(&scene, &params, topology.len());
+        assert!(sizes.self_pairs <= limits.max_storage_buffer_binding_size);
+        assert!(sizes.self_pairs + PAIR_BYTES as u64 > limits.max_storage_buffer_binding_size);
+        check_limits(&limits, &sizes, &mut params, true).unwrap();
+    }
 
     #[test]
     fn arrays_are_cut_at_aligned_elements_into_at_most_three_parts() {

@@ -81,14 +81,13 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 31] = [
+pub const SHARED: [(&str, u32); 30] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
     ("BATCH_GROUP", BATCH_GROUP),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),
-    ("SELF_PAIRS_PER_VERTEX", separate::PAIRS_PER_VERTEX),
     ("EDGE_PAIR", separate::EDGE_PAIR),
     ("SELF_PAIR_COUNT", self_header::PAIR_COUNT),
     ("SELF_CHANGED", self_header::CHANGED),

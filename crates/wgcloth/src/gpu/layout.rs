@@ -123,8 +123,9 @@ pub struct Params {
     pub self_gamma: f32,
     /// `self_contact.floor`, m.
     pub self_floor: f32,
-    /// Padding to the WGSL layout.
-    pub self_pad: u32,
+    /// Near pairs the list holds (stage "separate"): `PAIRS_PER_VERTEX`
+    /// per vertex, or what one binding holds (`gpu::buffers::fit_pair_list`).
+    pub self_capacity: u32,
     /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
     pub pad: [u32; 2],
 }

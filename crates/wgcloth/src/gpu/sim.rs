@@ -11,7 +11,7 @@ use bytemuck::Pod;
 use glam::Vec3;
 
 use crate::error::{Error, Result};
-use crate::gpu::buffers::{Buffers, Sizes, check_limits, params_for, vec4s};
+use crate::gpu::buffers::{Buffers, Sizes, check_limits, fit_pair_list, params_for, vec4s};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
@@ -90,6 +90,7 @@ impl GpuSim {
     ) -> Result<GpuSim> {
         let (topology, sections) = layout::topology(scene);
         let mut params = params_for(scene, &sections);
+        fit_pair_list(&device.limits(), &mut params);
         let sizes = Sizes::of(scene, &params, topology.len());
         let kernels =
             match check_limits(&device.limits(), &sizes, &mut params, kernels.splittable())? {
