@@ -16,8 +16,8 @@
 // the pᵀq partials between two segments, by the iteration count's parity.
 // The scalars also hold the dispatch sizes of every level of the next
 // iteration's indirect dispatches, zero once the solve is over, so a
-// converged solve records iterations that cost nothing; `next` and
-// `conclude` run regardless and carry the scalars.
+// converged solve records iterations that cost nothing; `next` (one
+// workgroup once the solve is over) and `conclude` carry the scalars.
 
 struct Scalars {
     delta: f32,
@@ -28,6 +28,9 @@ struct Scalars {
     breakdown: u32,
     rr: f32,
     pad: u32,
+    // `next`'s [workgroups, 1, 1]: the cloth's while the solve goes on, one
+    // (to carry the scalars) once it is over.
+    next_groups: array<u32, 3>,
     // [workgroups, 1, 1] per multigrid level (level 0: the cloth).
     groups: array<u32, 3 * MAX_LEVELS>,
 }
@@ -132,6 +135,7 @@ fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
 fn stopped(s: Scalars) -> Scalars {
     var out = s;
     out.done = 1u;
+    out.next_groups[0] = 1u;
     for (var l = 0u; l < MAX_LEVELS; l++) {
         out.groups[3u * l] = 0u;
     }
@@ -162,6 +166,7 @@ fn init_scalars(@builtin(local_invocation_index) lid: u32) {
         s.breakdown = u32(stalled(rr, delta, s.threshold));
         var nx = params.cells_x + 1u;
         var ny = params.cells_y + 1u;
+        s.next_groups = array<u32, 3>(select(1u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on), 1u, 1u);
         for (var l = 0u; l < MAX_LEVELS; l++) {
             s.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
             s.groups[3u * l + 1u] = 1u;

@@ -280,12 +280,20 @@ pub struct Scalars {
     pub rr: f32,
     /// Padding to the WGSL layout.
     pub pad: u32,
+    /// `next`'s indirect dispatch, `[workgroups, 1, 1]`: the cloth's while
+    /// the solve goes on, one workgroup (which carries the scalars) once done.
+    pub next_groups: [u32; 3],
     /// The next iteration's indirect dispatch, `[workgroups, 1, 1]` per
     /// multigrid level (level 0: the cloth); zero workgroups once done.
     pub groups: [u32; 3 * MAX_LEVELS as usize],
 }
 
 impl Scalars {
+    /// Byte offset of `next`'s indirect dispatch arguments.
+    pub fn next_groups_offset() -> u64 {
+        std::mem::offset_of!(Scalars, next_groups) as u64
+    }
+
     /// Byte offset of level `l`'s indirect dispatch arguments.
     pub fn groups_offset(l: usize) -> u64 {
         (std::mem::offset_of!(Scalars, groups) + 12 * l) as u64

@@ -1,9 +1,9 @@
 //! Stage "pcg" (wgsl/pcg.wgsl; CPU twin cpu/pcg.rs): preconditioned CG on
 //! A v' = b with pinned rows filtered, its scalars and convergence test on
 //! the GPU. An iteration is two dispatches with Jacobi, and the V-cycle's
-//! besides with multigrid; each iteration's are sized by the GPU but
-//! `next`, which returns at once after convergence, so the iterations
-//! recorded after convergence do no work.
+//! besides with multigrid; each iteration's are sized by the GPU (`next`
+//! to one workgroup, which carries the scalars, after convergence), so the
+//! iterations recorded after convergence do almost no work.
 
 use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
@@ -111,7 +111,12 @@ impl Pcg {
             self.sides[0].spmv.dispatch(pass, n, WORKGROUP);
             count += 2 + update(pass, 0);
             for it in 1..iters {
-                self.sides[(it - 1) % 2].next.dispatch(pass, n, WORKGROUP);
+                let prev = (it - 1) % 2;
+                self.sides[prev].next.dispatch_indirect(
+                    pass,
+                    &self.scalars[prev],
+                    Scalars::next_groups_offset(),
+                );
                 count += 1 + update(pass, it);
             }
             self.sides[(iters - 1) % 2].conclude.dispatch(pass, 1, 1);
