@@ -354,13 +354,14 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     ctx.finish().unwrap();
     // 10 outside the solve; PCG's init, init_scalars, spmv, conclude and
     // finish; per iteration `next` (but the first) and `advance`; the
-    // multigrid setup (one per coarse level L) and a V-cycle (2 L + 1) at
-    // the start and in every iteration.
+    // multigrid setup (one per coarse level L) and a V-cycle (4 L + 1: a
+    // residual and a restriction down, a guess and a sweep up, per level)
+    // at the start and in every iteration.
     let (iters, coarse) = (
         scene.config.solver.cg_iters,
         wgcloth::multigrid::levels(12, 12).len() as u32 - 1,
     );
-    let cycle = 2 * coarse + 1;
+    let cycle = 4 * coarse + 1;
     let pcg = 5 + (iters - 1) + iters * (1 + cycle) + coarse + cycle;
     assert_eq!(dispatches, 50 * (10 + pcg), "dispatches per step");
     assert_eq!(

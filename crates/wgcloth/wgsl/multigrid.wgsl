@@ -7,7 +7,10 @@
 // bound per dispatch; level 0 is the cloth, whose operator is A itself
 // (diagonal blocks and spring blocks), its pinned vertices filtered out of
 // the interpolation (P̃ = S P). No level stores its pre-smoothing
-// a = ω D⁻¹ r: every kernel that needs it recomputes it where it reads it.
+// a = ω D⁻¹ r (the residual kernel recomputes it where it reads it, nine
+// loads against a stored vector's three plus a dispatch); the residual
+// and the guess are stored in the work vector, since every node's is read
+// by up to nine others.
 
 // One level's grid and where its data lives.
 struct Grid {
@@ -22,7 +25,8 @@ struct Grid {
     // Right-hand side and correction, one vec4 per node each, in `vectors`.
     rhs_at: u32,
     correction_at: u32,
-    pad: u32,
+    // The work vector (residual down, guess up), one region for all levels.
+    work_at: u32,
 }
 
 struct Hop {
@@ -168,14 +172,22 @@ fn interpolate(j: u32) -> vec3<f32> {
     return acc;
 }
 
-// The fine level's guess at node j: its pre-smoothing ω D⁻¹ r, plus the
-// interpolated coarse correction on the way up.
+// The fine level's pre-smoothing ω D⁻¹ r at node j.
+fn pre(j: u32) -> vec3<f32> {
+    return sym_mul(sym_unpack(operators_at(hop.fine.smoothers_at + j)), fine_rhs(j));
+}
+
+fn work(j: u32) -> vec3<f32> {
+    return vectors[hop.fine.work_at + j].xyz;
+}
+
+// The fine level's guess at node j: its pre-smoothing on the way down, the
+// stored guess (pre-smoothing plus coarse correction) on the way up.
 fn guess(j: u32, up: bool) -> vec3<f32> {
-    var e = sym_mul(sym_unpack(operators_at(hop.fine.smoothers_at + j)), fine_rhs(j));
     if up {
-        e += interpolate(j);
+        return work(j);
     }
-    return e;
+    return pre(j);
 }
 
 // Row i of the fine level's operator times its guess.
@@ -301,8 +313,18 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// Down one level: the coarse right-hand side is the restricted residual of
-// the fine level after its pre-smoothing, Pᵀ (r − A ω D⁻¹ r).
+// The fine level's residual after its pre-smoothing, r − A ω D⁻¹ r, into
+// the work vector.
+@compute @workgroup_size(WORKGROUP)
+fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i < nodes(hop.fine) {
+        vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false), 0.0);
+    }
+}
+
+// Down one level: the coarse right-hand side is the restricted residual,
+// Pᵀ (r − A ω D⁻¹ r).
 @compute @workgroup_size(WORKGROUP)
 fn down(@builtin(global_invocation_id) id: vec3<u32>) {
     let I = id.x;
@@ -319,7 +341,7 @@ fn down(@builtin(global_invocation_id) id: vec3<u32>) {
             let i = y * g.nx + x;
             let w = fine_weight(i, cc);
             if w != 0.0 {
-                sum += w * (fine_rhs(i) - row_guess(i, false));
+                sum += w * work(i);
             }
         }
     }
@@ -365,9 +387,18 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
     }
 }
 
-// Up one level: the fine guess (pre-smoothing plus interpolated coarse
-// correction), then one more damped Jacobi sweep. On the cloth this is
-// z = P⁻¹ r, with its partial rᵀz for PCG.
+// The fine level's guess, its pre-smoothing plus the interpolated coarse
+// correction, into the work vector.
+@compute @workgroup_size(WORKGROUP)
+fn guess_up(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i < nodes(hop.fine) {
+        vectors[hop.fine.work_at + i] = vec4<f32>(pre(i) + interpolate(i), 0.0);
+    }
+}
+
+// Up one level: one more damped Jacobi sweep from the stored guess. On the
+// cloth this is z = P⁻¹ r, with its partial rᵀz for PCG.
 @compute @workgroup_size(WORKGROUP)
 fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
           @builtin(workgroup_id) wg: vec3<u32>) {
@@ -376,7 +407,7 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_in
     var rz = 0.0;
     if i < nodes(g) {
         let ri = fine_rhs(i);
-        let zi = guess(i, true) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
+        let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
         if g.level == 0u {
             zq[i] = vec4<f32>(zi, 0.0);
             rz = dot(ri, zi);

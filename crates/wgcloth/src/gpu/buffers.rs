@@ -250,6 +250,8 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
     let levels = multigrid::levels(scene.cloth.nx, scene.cloth.ny);
     let total: u32 = levels.iter().map(|l| l.nodes() as u32).sum();
     let (mut smoothers, mut stencils, mut vectors) = (0, total, 0);
+    // The work vector after every coarse level's two.
+    let work_at = 2 * (total - levels[0].nodes() as u32);
     levels
         .iter()
         .enumerate()
@@ -264,7 +266,7 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
                 stencil_at: if coarse { stencils } else { 0 },
                 rhs_at: if coarse { vectors } else { 0 },
                 correction_at: if coarse { vectors + n } else { 0 },
-                pad: 0,
+                work_at,
             };
             smoothers += n;
             if coarse {
@@ -358,7 +360,7 @@ impl Sizes {
                 let n = last.nx as u64 * last.ny as u64;
                 (
                     last.stencil_at as u64 + n * STORED_STENCIL as u64,
-                    last.correction_at as u64 + n,
+                    last.work_at as u64 + grids[0].nx as u64 * grids[0].ny as u64,
                 )
             }
             None => (1, 1),

@@ -57,11 +57,16 @@ pub enum Entry {
     PcgFinish,
     /// A coarse level's Galerkin operator and smoother (`multigrid::galerkin`).
     MgGalerkin,
-    /// Pre-smoothing and restriction to the next level (`multigrid::down`).
+    /// A level's residual after its pre-smoothing (`multigrid::residual`).
+    MgResidual,
+    /// Its restriction to the next level (`multigrid::down`).
     MgDown,
     /// The coarsest level's sweeps (`multigrid::coarse`).
     MgCoarse,
-    /// Interpolation and post-smoothing; z on the cloth (`multigrid::up`).
+    /// A level's guess: pre-smoothing plus the interpolated coarse
+    /// correction (`multigrid::guess_up`).
+    MgGuess,
+    /// Post-smoothing of the guess; z on the cloth (`multigrid::up`).
     MgUp,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
@@ -99,7 +104,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 39] = [
+    pub const ALL: [Entry; 41] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -120,8 +125,10 @@ impl Entry {
         Entry::PcgConclude,
         Entry::PcgFinish,
         Entry::MgGalerkin,
+        Entry::MgResidual,
         Entry::MgDown,
         Entry::MgCoarse,
+        Entry::MgGuess,
         Entry::MgUp,
         Entry::Integrate,
         Entry::Measure,
@@ -164,8 +171,10 @@ impl Entry {
             Entry::PcgConclude => ("pcg", "conclude"),
             Entry::PcgFinish => ("pcg", "finish"),
             Entry::MgGalerkin => ("multigrid", "galerkin"),
+            Entry::MgResidual => ("multigrid", "residual"),
             Entry::MgDown => ("multigrid", "down"),
             Entry::MgCoarse => ("multigrid", "coarse"),
+            Entry::MgGuess => ("multigrid", "guess_up"),
             Entry::MgUp => ("multigrid", "up"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),

@@ -319,8 +319,10 @@ pub struct Grid {
     pub rhs_at: u32,
     /// First of its correction's `vec4`s in the vectors buffer.
     pub correction_at: u32,
-    /// Padding to the WGSL layout.
-    pub pad: u32,
+    /// First `vec4` of the work vector in the vectors buffer: the level's
+    /// residual on the way down, its guess on the way up (one region, as
+    /// large as the cloth, shared by every level).
+    pub work_at: u32,
 }
 
 /// A pair of adjacent levels, what one multigrid dispatch works between

@@ -12,10 +12,14 @@ pub(crate) struct Multigrid {
     nodes: Vec<u32>,
     /// Per level l < L: level l + 1's operator and smoother.
     galerkin: Vec<Bound>,
+    /// Per level l < L: level l's residual after pre-smoothing.
+    residual: Vec<Bound>,
     /// Per level l < L: level l + 1's right-hand side.
     down: Vec<Bound>,
     /// The coarsest level's sweeps.
     coarse: Bound,
+    /// Per level l < L: level l's guess.
+    guess: Vec<Bound>,
     /// Per level l < L: level l's correction (z on the cloth).
     up: Vec<Bound>,
 }
@@ -46,8 +50,10 @@ impl Multigrid {
         Some(Multigrid {
             nodes: grids.iter().map(|g| g.nx * g.ny).collect(),
             galerkin: hops(Entry::MgGalerkin),
+            residual: hops(Entry::MgResidual),
             down: hops(Entry::MgDown),
             coarse: bind(Entry::MgCoarse, last),
+            guess: hops(Entry::MgGuess),
             up: hops(Entry::MgUp),
         })
     }
@@ -75,13 +81,16 @@ impl Multigrid {
                 pass.dispatch_workgroups(groups(self.nodes[level]), 1, 1);
             }
         };
-        for (l, down) in self.down.iter().enumerate() {
-            dispatch(pass, down, l + 1);
+        let levels = self.down.len();
+        for l in 0..levels {
+            dispatch(pass, &self.residual[l], l);
+            dispatch(pass, &self.down[l], l + 1);
         }
-        dispatch(pass, &self.coarse, self.down.len());
-        for (l, up) in self.up.iter().enumerate().rev() {
-            dispatch(pass, up, l);
+        dispatch(pass, &self.coarse, levels);
+        for l in (0..levels).rev() {
+            dispatch(pass, &self.guess[l], l);
+            dispatch(pass, &self.up[l], l);
         }
-        2 * self.down.len() as u32 + 1
+        4 * levels as u32 + 1
     }
 }
