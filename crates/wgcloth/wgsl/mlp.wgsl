@@ -12,9 +12,8 @@
 // large batches run in chunks so the activations fit the binding limits.
 //
 // `per_contact` is the same network with one contact per invocation, no
-// workgroup memory or barriers, and its Jacobian in reverse mode, for CPU
-// adapters (lavapipe), which run it about 3× faster than the tiled kernel
-// on small networks.
+// workgroup memory or barriers, for CPU adapters (lavapipe), which run it
+// faster than the tiled kernel.
 
 // MLP_THREADS, threads per tile edge, comes with the prelude:
 // gpu::kernels picks 16 or 8 from the adapter's limits.
@@ -28,6 +27,7 @@ struct LayerParams {
     inputs: u32, outputs: u32, weight_offset: u32, bias_offset: u32,
     rows_per_contact: u32, wrt_start: u32, first: u32, chunk_start: u32,
     chunk_contacts: u32, out_row_offset: u32, negative_slope: f32, n_layers: u32,
+    units_half: u32, pad0: u32, pad1: u32, pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> layer_params: LayerParams;
@@ -41,11 +41,17 @@ struct LayerParams {
 @group(0) @binding(3) var<storage, read_write> z_out: array<f32>;
 // The number of contacts in the batch.
 @group(0) @binding(4) var<storage, read> count: array<u32>;
-// Per layer: inputs, outputs, weight offset, bias offset (`per_contact`).
+// Per layer: inputs, outputs, and in vec4s its weight and bias offsets
+// (`per_contact`).
 @group(0) @binding(5) var<storage, read> layer_table: array<vec4<u32>>;
-// The same weights as whole vec4s (`per_contact`, whose rows are padded
-// to them): one load per four weights.
+// The same weights packed by quads of outputs (`per_contact`): one load
+// per four weights.
 @group(0) @binding(6) var<storage, read> weight_quads: array<vec4<f32>>;
+// `per_contact`'s activations: unit slot s of the chunk's contact i at
+// i * 2 units_half + s, each contact's together (lavapipe, which runs it,
+// gathers them faster than slot by slot). A layer reads slots from
+// `src` and writes the other half.
+@group(0) @binding(7) var<storage, read_write> units: array<vec4<f32>>;
 
 // Element m of a tile row is component m % 4 of vec4 m / 4: each thread
 // reads its 4 rows and its 4 outputs with one load each.
@@ -137,91 +143,120 @@ fn layer(
     }
 }
 
-// MLP_MAX_WIDTH and MLP_MAX_LAYERS (the prelude): the widest layer and
-// most layers `per_contact` holds (gpu::mlp checks).
+// One contact per invocation, its Jacobian in forward mode with the
+// tangents riding along the value: unit k of a layer is a vec4 (its value,
+// then its derivatives along inputs wrt_start .. wrt_start + 2), or two
+// vec4s for up to seven rows (`per_contact_wide`). A layer is then one pass
+// over its weights, each weight scaling a whole vec4, and the activation
+// scales a unit's vec4 by σ'(value) as a whole, the chain rule
+// T ← diag(σ'(z)) W T. Four outputs at a time: a quad of weights (the
+// layer's weights packed by output quad, then input, `mlp::pack_quads`)
+// meets each input unit once, so one load of the activations serves four
+// outputs. Reads the batch inputs (z_in) and writes the batch outputs
+// (z_out) in the tiled kernel's layout. Lavapipe, which runs it, stops an
+// invocation after 65,535 loop iterations (`gpu::mlp` checks).
 
-// One contact per invocation, in reverse mode: the value row through every
-// layer, keeping each hidden unit's sign as a bit, then for each output o
-// the row ∂y_o/∂a carried back through the layers with those signs,
-// Δ ← (Δ diag(σ'(z))) W, as `Mlp::forward_jacobian` does. That is 1 + 3
-// passes over the weights where forward mode takes 1 + T. Reads the batch
-// inputs (z_in) and writes the batch outputs (z_out) in the tiled kernel's
-// layout. Weight rows are padded to whole vec4s here, so the inner loops
-// take four inputs at a time (lavapipe also stops any invocation after
-// 65,535 loop iterations).
 @compute @workgroup_size(BATCH_GROUP)
 fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
-    let c = id.x;
-    if c >= count[0] {
+    evaluate(id.x, false);
+}
+
+@compute @workgroup_size(BATCH_GROUP)
+fn per_contact_wide(@builtin(global_invocation_id) id: vec3<u32>) {
+    evaluate(id.x, true);
+}
+
+// Where `put` sends a quad of outputs: contact c's batch outputs (the last
+// layer) or the next layer's units from slot `dst`.
+struct Out {
+    c: u32, i: u32, o: u32, last: bool, dst: u32, per_unit: u32, n_out: u32,
+}
+
+fn unit_index(slot: u32, i: u32) -> u32 {
+    return i * 2u * layer_params.units_half + slot;
+}
+
+// Contact i of the chunk. `wide` is a constant at each call, so each
+// entry point compiles to one branch-free loop.
+fn evaluate(i: u32, wide: bool) {
+    let c = layer_params.chunk_start + i;
+    if i >= layer_params.chunk_contacts || c >= count[0] {
         return;
     }
-    let rows = layer_params.rows_per_contact;
     let n_layers = layer_params.n_layers;
     let n_in = layer_table[0].x;
     let n_out = layer_table[n_layers - 1u].y;
-    // Activation k is component k % 4 of a[k / 4].
-    var a: array<vec4<f32>, MLP_MAX_WIDTH / 4u>;
-    var z: array<f32, MLP_MAX_WIDTH>;
-    var negative: array<u32, MLP_MAX_WIDTH * MLP_MAX_LAYERS / 32u>;
+    let per_unit = select(1u, 2u, wide);
     for (var k = 0u; k < n_in; k++) {
-        a[k / 4u][k % 4u] = z_in[c * n_in + k];
+        // Tangent row t seeds input wrt_start + t - 1 (wrapping below).
+        let t = k - layer_params.wrt_start + 1u;
+        let seed = vec4<f32>(vec4<u32>(0u, 1u, 2u, 3u) == vec4<u32>(t));
+        units[unit_index(k * per_unit, i)] = vec4<f32>(z_in[c * n_in + k], seed.yzw);
+        if wide {
+            units[unit_index(k * 2u + 1u, i)] = vec4<f32>(vec4<u32>(4u, 5u, 6u, 7u) == vec4<u32>(t));
+        }
     }
+    var src = 0u;
     for (var l = 0u; l < n_layers; l++) {
         let info = layer_table[l];
-        let quads = (info.x + 3u) / 4u;
-        for (var o = 0u; o < info.y; o++) {
-            var sum = weights[info.w + o];
-            let row = info.z / 4u + quads * o;
-            for (var q = 0u; q < quads; q++) {
-                sum += dot(weight_quads[row + q], a[q]);
-            }
-            z[o] = sum;
-        }
-        if l + 1u == n_layers {
-            break;
-        }
-        for (var o = 0u; o < info.y; o++) {
-            let bit = l * MLP_MAX_WIDTH + o;
-            let negative_here = z[o] < 0.0;
-            if negative_here {
-                negative[bit / 32u] |= 1u << (bit % 32u);
-            } else {
-                negative[bit / 32u] &= ~(1u << (bit % 32u));
-            }
-            a[o / 4u][o % 4u] = select(z[o], z[o] * layer_params.negative_slope, negative_here);
-        }
-    }
-    for (var o = 0u; o < n_out; o++) {
-        z_out[c * rows * n_out + o] = z[o];
-    }
-    // Reverse passes: Δ lives in z (one unit per element), the next Δ
-    // accumulates in a (four inputs per vec4).
-    for (var r = 0u; r < n_out; r++) {
-        for (var o = 0u; o < n_out; o++) {
-            z[o] = select(0.0, 1.0, o == r);
-        }
-        for (var l = n_layers; l > 0u; l--) {
-            let info = layer_table[l - 1u];
-            let quads = (info.x + 3u) / 4u;
-            for (var q = 0u; q < quads; q++) {
-                a[q] = vec4<f32>(0.0);
-            }
-            for (var o = 0u; o < info.y; o++) {
-                let bit = (l - 1u) * MLP_MAX_WIDTH + o;
-                let hidden = l < n_layers;
-                let negative_here = hidden && (negative[bit / 32u] & (1u << (bit % 32u))) != 0u;
-                let d = select(z[o], z[o] * layer_params.negative_slope, negative_here);
-                let row = info.z / 4u + quads * o;
-                for (var q = 0u; q < quads; q++) {
-                    a[q] = fma(vec4<f32>(d), weight_quads[row + q], a[q]);
+        let dst = layer_params.units_half - src;
+        let last = l + 1u == n_layers;
+        for (var o = 0u; o < info.y; o += 4u) {
+            // Four outputs' sums in named variables, not an array: an
+            // array indexed at run time lives in memory on lavapipe.
+            let bias = weight_quads[info.w + o / 4u];
+            var acc0 = vec4<f32>(bias.x, 0.0, 0.0, 0.0);
+            var acc1 = vec4<f32>(bias.y, 0.0, 0.0, 0.0);
+            var acc2 = vec4<f32>(bias.z, 0.0, 0.0, 0.0);
+            var acc3 = vec4<f32>(bias.w, 0.0, 0.0, 0.0);
+            var more0 = vec4<f32>(0.0);
+            var more1 = vec4<f32>(0.0);
+            var more2 = vec4<f32>(0.0);
+            var more3 = vec4<f32>(0.0);
+            let row = info.z + (o / 4u) * info.x;
+            for (var k = 0u; k < info.x; k++) {
+                let w = weight_quads[row + k];
+                let a = units[unit_index(src + k * per_unit, i)];
+                acc0 = fma(vec4<f32>(w.x), a, acc0);
+                acc1 = fma(vec4<f32>(w.y), a, acc1);
+                acc2 = fma(vec4<f32>(w.z), a, acc2);
+                acc3 = fma(vec4<f32>(w.w), a, acc3);
+                if wide {
+                    let b = units[unit_index(src + k * 2u + 1u, i)];
+                    more0 = fma(vec4<f32>(w.x), b, more0);
+                    more1 = fma(vec4<f32>(w.y), b, more1);
+                    more2 = fma(vec4<f32>(w.z), b, more2);
+                    more3 = fma(vec4<f32>(w.w), b, more3);
                 }
             }
-            for (var k = 0u; k < info.x; k++) {
-                z[k] = a[k / 4u][k % 4u];
+            let out = Out(c, i, o, last, dst, per_unit, n_out);
+            put(out, 0u, acc0, more0);
+            put(out, 1u, acc1, more1);
+            put(out, 2u, acc2, more2);
+            put(out, 3u, acc3, more3);
+        }
+        src = dst;
+    }
+}
+
+// Output o + j of a layer: the batch outputs' rows (value, then tangents)
+// for the last layer, else the unit activated: leaky ReLU on the value,
+// its slope on the tangents.
+fn put(u: Out, j: u32, acc: vec4<f32>, more: vec4<f32>) {
+    let o = u.o + j;
+    if u.last {
+        if o < u.n_out {
+            let rows = layer_params.rows_per_contact;
+            for (var t = 0u; t < rows; t++) {
+                let v = select(more[t % 4u], acc[t % 4u], t < 4u);
+                z_out[(u.c * rows + t) * u.n_out + o] = v;
             }
         }
-        for (var t = 1u; t < rows; t++) {
-            z_out[(c * rows + t) * n_out + r] = z[layer_params.wrt_start + t - 1u];
-        }
+        return;
+    }
+    let slope = select(1.0, layer_params.negative_slope, acc.x < 0.0);
+    units[unit_index(u.dst + o * u.per_unit, u.i)] = acc * slope;
+    if u.per_unit == 2u {
+        units[unit_index(u.dst + o * 2u + 1u, u.i)] = more * slope;
     }
 }

@@ -13,10 +13,6 @@ pub const NO_TRIANGLE: u32 = u32::MAX;
 /// Cloth grid cells per tile edge, and tiles per super-tile edge (the
 /// face–vertex broad phase).
 pub const TILE: u32 = 8;
-/// The widest layer the `per_contact` network kernel holds.
-pub const MLP_MAX_WIDTH: u32 = 256;
-/// The most layers the `per_contact` network kernel holds.
-pub const MLP_MAX_LAYERS: u32 = 16;
 
 /// Network rows per contact of the contact-frame network
 /// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
@@ -81,7 +77,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 30] = [
+pub const SHARED: [(&str, u32); 28] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -96,8 +92,6 @@ pub const SHARED: [(&str, u32); 30] = [
     ("SELF_SETTLE_ARGS", self_header::SETTLE_ARGS),
     ("SELF_RECHECK_VERTEX_ARGS", self_header::RECHECK_VERTEX_ARGS),
     ("SELF_RECHECK_EDGE_ARGS", self_header::RECHECK_EDGE_ARGS),
-    ("MLP_MAX_WIDTH", MLP_MAX_WIDTH),
-    ("MLP_MAX_LAYERS", MLP_MAX_LAYERS),
     ("MOTION_LINEAR", motion::LINEAR),
     ("MOTION_SINUSOID", motion::SINUSOID),
     ("MODEL_NAIVE", model::NAIVE),

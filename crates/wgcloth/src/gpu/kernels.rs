@@ -96,15 +96,18 @@ pub enum Entry {
     BatchPlan,
     /// One dense network layer as a tiled matrix product (`mlp::layer`).
     MlpLayer,
-    /// The whole network, one contact per invocation (`mlp::per_contact`).
+    /// The whole network, one contact per invocation, up to three Jacobian
+    /// columns (`mlp::per_contact`).
     MlpPerContact,
+    /// The same, up to seven columns (`mlp::per_contact_wide`).
+    MlpPerContactWide,
     /// Each contact's force as a segment for the renderer (`lines::force_lines`).
     ForceLines,
 }
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 41] = [
+    pub const ALL: [Entry; 42] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -145,6 +148,7 @@ impl Entry {
         Entry::BatchPlan,
         Entry::MlpLayer,
         Entry::MlpPerContact,
+        Entry::MlpPerContactWide,
         Entry::ForceLines,
     ];
 
@@ -191,6 +195,7 @@ impl Entry {
             Entry::BatchPlan => ("batch", "plan"),
             Entry::MlpLayer => ("mlp", "layer"),
             Entry::MlpPerContact => ("mlp", "per_contact"),
+            Entry::MlpPerContactWide => ("mlp", "per_contact_wide"),
             Entry::ForceLines => ("lines", "force_lines"),
         }
     }

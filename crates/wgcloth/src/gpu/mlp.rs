@@ -6,8 +6,10 @@
 //!
 //! Two kernels evaluate it: `layer`, one tiled matrix product per layer
 //! through workgroup memory, for GPUs; and `per_contact`, one contact per
-//! invocation without barriers, for CPU adapters such as lavapipe, which
-//! run it about 3× faster than `layer` on small networks.
+//! invocation without barriers, its Jacobian in forward mode with the
+//! tangents in the lanes of each unit's vec4, for CPU adapters such as
+//! lavapipe, which run it 2.8× (the thesis-size network) to 13× faster
+//! than `layer` (BENCHMARKS.md).
 
 use std::ops::Range;
 
@@ -15,7 +17,7 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::error::{Error, Result};
-use crate::gpu::constants::{BATCH_GROUP, MLP_MAX_LAYERS, MLP_MAX_WIDTH, WORKGROUP};
+use crate::gpu::constants::{BATCH_GROUP, WORKGROUP};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
@@ -49,71 +51,145 @@ pub struct LayerParams {
     pub negative_slope: f32,
     /// Layers of the network.
     pub n_layers: u32,
+    /// `per_contact`: the unit slots of a layer's inputs, where its
+    /// outputs start (the other half).
+    pub units_half: u32,
+    /// Padding to the WGSL size.
+    pub pad: [u32; 3],
 }
 
 /// Mirrors `BatchParams` in wgsl/batch.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct BatchParams {
-    /// Chunks of the tiled kernel (0 with `per_contact`).
+    /// Chunks of the batch.
     pub n_chunks: u32,
-    /// Layers of the network.
-    pub n_layers: u32,
+    /// Dispatches per chunk: the network's layers (tiled) or one
+    /// (`per_contact`).
+    pub per_chunk: u32,
     /// Most contacts per chunk.
     pub chunk_contacts: u32,
-    /// Rows per contact: 1 + the Jacobian columns.
+    /// Rows per contact: 1 + the Jacobian columns (tiled), or 1
+    /// (`per_contact`, one invocation a contact).
     pub rows_per_contact: u32,
-    /// Rows per workgroup of the `layer` kernel (its tile).
+    /// Rows per workgroup of a chunk's dispatches: the `layer` kernel's
+    /// tile, or `per_contact`'s workgroup size.
     pub rows_per_group: u32,
-    /// `per_contact`'s workgroup size.
-    pub threads_per_network_group: u32,
     /// Workgroup size of the caller's per-contact pass after the network.
     pub threads_per_contact_group: u32,
     /// Padding to the WGSL size.
-    pub pad: u32,
+    pub pad: [u32; 2],
 }
 
-/// The widest layer `per_contact` holds.
-pub const PER_CONTACT_MAX_WIDTH: usize = MLP_MAX_WIDTH as usize;
-/// The most layers `per_contact` holds.
-pub const PER_CONTACT_MAX_LAYERS: usize = MLP_MAX_LAYERS as usize;
+/// Most Jacobian columns `per_contact_wide` carries: two vec4s a unit,
+/// less the value.
+const PER_CONTACT_MAX_COLUMNS: usize = 7;
+
+/// Most contacts in one `per_contact` dispatch, whose activations it
+/// holds: a CPU adapter's threads stay busy with far fewer, and the
+/// thesis-size network's take 64 MiB.
+const PER_CONTACT_CHUNK: usize = 4096;
 
 /// Mesa's llvmpipe ends an invocation after this many loop iterations
 /// (`LP_MAX_TGSI_LOOP_ITERATIONS`), silently.
 const LAVAPIPE_LOOP_LIMIT: usize = 65_535;
 
-/// Loop iterations of one `per_contact` invocation (an upper bound): the
-/// forward pass and one reverse pass per output, each touching every
-/// weight quad once plus a few loops per unit.
-fn per_contact_iterations(net: &Mlp, rows: usize) -> usize {
-    let per_pass: usize = net
-        .layers
-        .iter()
-        .map(|l| l.outputs * (l.inputs.div_ceil(4) + 2) + l.inputs + l.inputs.div_ceil(4))
-        .sum();
-    (1 + net.outputs()) * (net.inputs() + net.outputs() + per_pass) + rows
+/// Vec4s per unit of `per_contact` for `rows` rows: 1, or 2 (`per_contact_wide`).
+fn quads_per_unit(rows: usize) -> usize {
+    rows.div_ceil(4)
 }
 
-/// Every layer's weights, row-major with rows `align`-padded (the padding
-/// zero), then its biases, padded so the next layer starts aligned; and
-/// per layer (inputs, outputs, weight offset, bias offset).
-fn pack(net: &Mlp, align: usize) -> (Vec<f32>, Vec<u32>) {
+/// Loop iterations of one `per_contact` invocation (an upper bound): the
+/// seeds, then per quad of outputs one iteration per input and four to
+/// store them, and each output's rows.
+fn per_contact_iterations(net: &Mlp, rows: usize) -> usize {
+    let layers: usize = net
+        .layers
+        .iter()
+        .map(|l| 1 + l.outputs.div_ceil(4) * (l.inputs + 5))
+        .sum();
+    net.inputs() + layers + net.outputs() * rows
+}
+
+/// `per_contact`'s unit slots for one contact: a layer's inputs, then
+/// from the half its outputs (whole quads of them), `quads_per_unit`
+/// vec4s a unit.
+fn per_contact_half(net: &Mlp, rows: usize) -> usize {
+    let widest = net
+        .layers
+        .iter()
+        .map(|l| l.inputs.max(l.outputs.next_multiple_of(4)))
+        .max()
+        .unwrap_or(0);
+    widest * quads_per_unit(rows)
+}
+
+/// Why `per_contact` cannot evaluate `net` with `rows` rows here, if it
+/// cannot.
+fn per_contact_misfit(net: &Mlp, rows: usize, bindable: u64, software: bool) -> Option<String> {
+    if rows > 1 + PER_CONTACT_MAX_COLUMNS {
+        return Some(format!(
+            "the per-contact kernel carries up to {PER_CONTACT_MAX_COLUMNS} Jacobian columns, not {}",
+            rows - 1
+        ));
+    }
+    let units = units_bytes(net, rows);
+    if units > bindable {
+        return Some(format!(
+            "the per-contact kernel's activations need {units} bytes per contact, more than this adapter binds ({bindable} bytes)"
+        ));
+    }
+    let iterations = per_contact_iterations(net, rows);
+    (software && iterations > LAVAPIPE_LOOP_LIMIT).then(|| {
+        format!(
+            "the per-contact kernel takes {iterations} loop iterations per contact for this network, more than the {LAVAPIPE_LOOP_LIMIT} a CPU adapter runs"
+        )
+    })
+}
+
+/// Bytes of `per_contact`'s activations per contact: both halves of its
+/// unit slots.
+fn units_bytes(net: &Mlp, rows: usize) -> u64 {
+    (2 * per_contact_half(net, rows) * 16) as u64
+}
+
+/// The tiled kernel's packing: every layer's weights, row-major, then its
+/// biases; and per layer (inputs, outputs, weight offset, bias offset).
+fn pack(net: &Mlp) -> (Vec<f32>, Vec<u32>) {
     let (mut weights, mut table) = (Vec::new(), Vec::new());
     for l in &net.layers {
         let offset = weights.len();
-        for row in l.weight.chunks_exact(l.inputs) {
-            weights.extend(row);
-            weights.resize(
-                weights.len() + l.inputs.next_multiple_of(align) - l.inputs,
-                0.0,
-            );
-        }
+        weights.extend(&l.weight);
         table.extend([l.inputs, l.outputs, offset, weights.len()].map(|v| v as u32));
         weights.extend(&l.bias);
-        weights.resize(weights.len().next_multiple_of(align), 0.0);
     }
-    // Whole vec4s, as `weight_quads` binds the buffer too.
-    weights.resize(weights.len().next_multiple_of(4), 0.0);
+    (weights, table)
+}
+
+/// `per_contact`'s packing: per layer, for each quad of outputs its
+/// weights input by input (one vec4 of four outputs' weights per input),
+/// then the biases by quads, outputs past the layer's zero; and per layer
+/// (inputs, outputs, weight offset, bias offset), offsets in vec4s.
+fn pack_quads(net: &Mlp) -> (Vec<f32>, Vec<u32>) {
+    let (mut weights, mut table) = (Vec::new(), Vec::new());
+    for l in &net.layers {
+        let quads = l.outputs.div_ceil(4);
+        let offset = weights.len() / 4;
+        for q in 0..quads {
+            for k in 0..l.inputs {
+                weights.extend((4 * q..4 * q + 4).map(|o| {
+                    if o < l.outputs {
+                        l.weight[o * l.inputs + k]
+                    } else {
+                        0.0
+                    }
+                }));
+            }
+        }
+        table.extend([l.inputs, l.outputs, offset, weights.len() / 4].map(|v| v as u32));
+        weights.extend(&l.bias);
+        weights.resize(weights.len() + 4 * quads - l.outputs, 0.0);
+    }
     (weights, table)
 }
 
@@ -191,7 +267,6 @@ pub struct GpuMlp {
     entries: u32,
     chunks: u32,
     multiply_adds: usize,
-    outputs: usize,
     rows_per_contact: usize,
 }
 
@@ -220,25 +295,16 @@ impl GpuMlp {
             .min(limits.max_buffer_size);
         let rows = 1 + wrt.len();
         let widest = net.layers.iter().map(|l| l.outputs).max().unwrap_or(1);
-        let fits_per_contact = widest <= PER_CONTACT_MAX_WIDTH
-            && net.layers.len() <= PER_CONTACT_MAX_LAYERS
-            && (!kernels.software() || per_contact_iterations(net, rows) <= LAVAPIPE_LOOP_LIMIT);
-        let kernel = match shape.kernel {
-            NetworkKernel::Auto if kernels.software() && fits_per_contact => {
-                NetworkKernel::PerContact
-            }
-            NetworkKernel::Auto => NetworkKernel::Tiled,
-            NetworkKernel::PerContact if !fits_per_contact => {
-                return Err(Error::Gpu(format!(
-                    "the per-contact kernel holds networks up to {PER_CONTACT_MAX_WIDTH} wide and {PER_CONTACT_MAX_LAYERS} layers deep, and on a CPU adapter {LAVAPIPE_LOOP_LIMIT} loop iterations per contact"
-                )));
-            }
-            chosen => chosen,
+        let misfit = per_contact_misfit(net, rows, bindable, kernels.software());
+        let kernel = match (shape.kernel, misfit) {
+            (NetworkKernel::Auto, None) if kernels.software() => NetworkKernel::PerContact,
+            (NetworkKernel::Auto, _) => NetworkKernel::Tiled,
+            (NetworkKernel::PerContact, Some(why)) => return Err(Error::Gpu(why)),
+            (chosen, _) => chosen,
         };
         let (weights, table) = match kernel {
-            // `per_contact` reads whole vec4s of a row.
-            NetworkKernel::PerContact => pack(net, 4),
-            _ => pack(net, 1),
+            NetworkKernel::PerContact => pack_quads(net),
+            _ => pack(net),
         };
         let weight_bytes = 4 * weights.len() as u64;
         if weight_bytes > bindable {
@@ -255,23 +321,36 @@ impl GpuMlp {
                 output_bytes(net, capacity, &wrt)
             )));
         }
-        // Contacts per chunk: the activations of the widest layer must bind,
-        // and one dispatch must cover the chunk's rows.
+        // Contacts per chunk: a chunk's activations must bind, and one
+        // dispatch must cover its rows (tiled) or its contacts.
         let tile = kernels.mlp_tile() as u64;
-        let per_contact = (rows * widest * 4) as u64;
-        let by_binding = bindable / per_contact;
-        let by_dispatch = limits.max_compute_workgroups_per_dimension as u64 * tile / rows as u64;
-        let chunk = (capacity.max(1).min(shape.max_chunk) as u64)
-            .min(by_binding)
+        let groups = limits.max_compute_workgroups_per_dimension as u64;
+        let (per_contact, by_dispatch, most) = match kernel {
+            NetworkKernel::PerContact => (
+                units_bytes(net, rows),
+                groups * BATCH_GROUP as u64,
+                PER_CONTACT_CHUNK,
+            ),
+            _ => (
+                (rows * widest * 4) as u64,
+                groups * tile / rows as u64,
+                usize::MAX,
+            ),
+        };
+        let chunk = (capacity.max(1).min(shape.max_chunk).min(most) as u64)
+            .min(bindable / per_contact)
             .min(by_dispatch) as usize;
-        if chunk == 0 && kernel == NetworkKernel::Tiled {
+        if chunk == 0 {
             return Err(Error::Gpu(format!(
                 "the network's {widest}-wide layers need {per_contact} bytes of activations per contact, more than this adapter binds ({bindable} bytes)"
             )));
         }
-        let chunks = match kernel {
-            NetworkKernel::Tiled => capacity.max(1).div_ceil(chunk),
-            _ => 0,
+        let chunks = capacity.max(1).div_ceil(chunk);
+        let n_layers = net.layers.len();
+        // Dispatches per chunk: one per layer, or one for `per_contact`.
+        let per_chunk = match kernel {
+            NetworkKernel::PerContact => 1,
+            _ => n_layers,
         };
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let weights_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -279,25 +358,34 @@ impl GpuMlp {
             contents: bytemuck::cast_slice(&weights),
             usage,
         });
+        // A chunk's two layers (tiled), or its units (`per_contact`).
         let activations = [0, 1].map(|i| {
+            let size = match kernel {
+                NetworkKernel::PerContact if i == 1 => 16,
+                _ => chunk as u64 * per_contact,
+            };
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("network activations {i}")),
-                size: (chunks.min(1) as u64 * chunk as u64 * per_contact).max(16),
+                size,
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             })
         });
-        let n_layers = net.layers.len();
-        // Tiled layers, then `per_contact`, then the caller's pass.
-        let entries = (chunks * n_layers + 2) as u32;
-        // y: output tiles of each entry's layer; the plan fills in x.
+        // Each chunk's dispatches, then the caller's pass.
+        let entries = (chunks * per_chunk + 1) as u32;
+        // y: output tiles of each entry's layer (tiled); the plan fills in x.
         let mut args = Vec::with_capacity(3 * entries as usize);
         for _ in 0..chunks {
-            for l in &net.layers {
-                args.extend([0, l.outputs.div_ceil(tile as usize) as u32, 1]);
+            match kernel {
+                NetworkKernel::PerContact => args.extend([0, 1, 1]),
+                _ => {
+                    for l in &net.layers {
+                        args.extend([0, l.outputs.div_ceil(tile as usize) as u32, 1]);
+                    }
+                }
             }
         }
-        args.extend([0, 1, 1, 0, 1, 1]);
+        args.extend([0, 1, 1]);
         let dispatch = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("network dispatches"),
             contents: bytemuck::cast_slice(&args),
@@ -312,16 +400,25 @@ impl GpuMlp {
         };
         let batch_params = uniform(
             "batch params",
-            bytemuck::bytes_of(&BatchParams {
-                n_chunks: chunks as u32,
-                n_layers: n_layers as u32,
-                chunk_contacts: chunk as u32,
-                rows_per_contact: rows as u32,
-                rows_per_group: tile as u32,
-                threads_per_network_group: BATCH_GROUP,
-                // The caller's per-contact pass after the network.
-                threads_per_contact_group: WORKGROUP,
-                pad: 0,
+            bytemuck::bytes_of(&match kernel {
+                NetworkKernel::PerContact => BatchParams {
+                    n_chunks: chunks as u32,
+                    per_chunk: 1,
+                    chunk_contacts: chunk as u32,
+                    rows_per_contact: 1,
+                    rows_per_group: BATCH_GROUP,
+                    threads_per_contact_group: WORKGROUP,
+                    pad: [0; 2],
+                },
+                _ => BatchParams {
+                    n_chunks: chunks as u32,
+                    per_chunk: n_layers as u32,
+                    chunk_contacts: chunk as u32,
+                    rows_per_contact: rows as u32,
+                    rows_per_group: tile as u32,
+                    threads_per_contact_group: WORKGROUP,
+                    pad: [0; 2],
+                },
             }),
         );
         let plan = kernels.kernel(Entry::BatchPlan).bind(
@@ -338,8 +435,9 @@ impl GpuMlp {
             usage: wgpu::BufferUsages::STORAGE,
         });
         let mut buffers = vec![weights_buffer, batch_params, layer_table];
-        let mut layers = Vec::with_capacity(chunks * n_layers + 1);
+        let mut layers = Vec::with_capacity(chunks * per_chunk);
         let entry = match kernel {
+            NetworkKernel::PerContact if quads_per_unit(rows) > 1 => Entry::MlpPerContactWide,
             NetworkKernel::PerContact => Entry::MlpPerContact,
             _ => Entry::MlpLayer,
         };
@@ -354,6 +452,7 @@ impl GpuMlp {
                     ("z_out", z_out),
                     ("count", io.count),
                     ("layer_table", &buffers[2]),
+                    ("units", &activations[0]),
                 ],
             )
         };
@@ -364,12 +463,19 @@ impl GpuMlp {
             n_layers: n_layers as u32,
             ..Default::default()
         };
-        if kernel == NetworkKernel::PerContact {
-            let params = uniform("network params", bytemuck::bytes_of(&base));
-            layers.push(group(&params, io.inputs, io.outputs, &buffers));
-            buffers.push(params);
-        }
         for c in 0..chunks {
+            if kernel == NetworkKernel::PerContact {
+                let params = LayerParams {
+                    chunk_start: (c * chunk) as u32,
+                    chunk_contacts: chunk as u32,
+                    units_half: per_contact_half(net, rows) as u32,
+                    ..base
+                };
+                let params = uniform("network params", bytemuck::bytes_of(&params));
+                layers.push(group(&params, io.inputs, io.outputs, &buffers));
+                buffers.push(params);
+                continue;
+            }
             for (l, layer) in net.layers.iter().enumerate() {
                 let last = l + 1 == n_layers;
                 let params = LayerParams {
@@ -408,7 +514,6 @@ impl GpuMlp {
             entries,
             chunks: chunks as u32,
             multiply_adds: net.multiply_adds(),
-            outputs: net.outputs(),
             rows_per_contact: rows,
         })
     }
@@ -424,26 +529,17 @@ impl GpuMlp {
         self.kernel
     }
 
-    /// Multiply-adds of one contact as the chosen kernel does them: one
-    /// pass per row in forward mode (tiled), one forward pass and one back
-    /// per output in reverse mode (per-contact).
+    /// Multiply-adds of one contact as the kernels do them: forward mode,
+    /// each weight meeting the value and every tangent row.
     pub fn multiply_adds_per_contact(&self) -> usize {
-        match self.kernel {
-            NetworkKernel::PerContact => self.multiply_adds * (1 + self.outputs),
-            _ => self.multiply_adds * self.rows_per_contact,
-        }
+        self.multiply_adds * self.rows_per_contact
     }
 
-    /// Records the batch: the dispatch sizes, then `per_contact` once or
-    /// every layer of every chunk (chunks past the batch size dispatch
-    /// nothing). Returns the number of dispatches.
+    /// Records the batch: the dispatch sizes, then each chunk's
+    /// `per_contact` or every layer of every chunk (chunks past the batch
+    /// size dispatch nothing). Returns the number of dispatches.
     pub fn record(&self, pass: &mut wgpu::ComputePass) -> u32 {
         self.plan.dispatch(pass, self.entries, BATCH_GROUP);
-        if self.kernel == NetworkKernel::PerContact {
-            self.layers[0].set(pass);
-            pass.dispatch_workgroups_indirect(&self.dispatch, 12 * (self.entries as u64 - 2));
-            return 2;
-        }
         for (e, layer) in self.layers.iter().enumerate() {
             layer.set(pass);
             pass.dispatch_workgroups_indirect(&self.dispatch, 12 * e as u64);
