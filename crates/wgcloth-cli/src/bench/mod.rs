@@ -343,7 +343,8 @@ pub struct IterationRow {
     pub bytes_per_iteration: u64,
     /// Those bytes at the measured copy bandwidth.
     pub floor_ms: f64,
-    /// (median time of 2k iterations − median time of k) / k.
+    /// The median over pairs of solves run back to back of (time of 2k
+    /// iterations − time of k) / k.
     pub measured_ms: f64,
     pub times_floor: f64,
     /// The rest of a k-iteration solve: the setup (multigrid's Galerkin
@@ -642,8 +643,8 @@ fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Traffic
         .collect()
 }
 
-/// Timed repeats of each solve in the iteration rows: their medians are
-/// subtracted, so they need more repeats than a whole step's.
+/// Timed pairs of solves in the iteration rows: their differences are
+/// noisier than a whole step's time, so they need more repeats.
 const REPEATS_PER_SOLVE: usize = 9;
 
 /// Iterations per timed solve of each preconditioner (and twice as many):
@@ -680,20 +681,36 @@ fn solver_iterations(
                     tol: 0.0,
                     preconditioner,
                 };
-                timed(REPEATS_PER_SOLVE, || {
-                    let mut x = sim.state.v.clone();
-                    let outcome = pcg::solve(&a, cloth, &b, &mut x, settings, &mut scratch);
-                    match outcome.iterations == iterations {
-                        true => Ok(()),
-                        false => Err(Error::Unsupported(format!(
-                            "bench: the {grid}² solve stopped after {} of {iterations} iterations",
-                            outcome.iterations
-                        ))),
-                    }
-                })
+                let mut x = sim.state.v.clone();
+                let start = Instant::now();
+                let outcome = pcg::solve(&a, cloth, &b, &mut x, settings, &mut scratch);
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                match outcome.iterations == iterations {
+                    true => Ok(ms),
+                    false => Err(Error::Unsupported(format!(
+                        "bench: the {grid}² solve stopped after {} of {iterations} iterations",
+                        outcome.iterations
+                    ))),
+                }
             };
-            let (once, twice) = (solve_ms(k)?, solve_ms(2 * k)?);
-            let measured_ms = (twice - once) / k as f64;
+            // k and 2k iterations back to back, in alternating order, so
+            // the machine's drift falls mostly on both of a pair: the
+            // medians of the pairs' differences. Medians of the two series
+            // apart had given a negative setup on this VM.
+            solve_ms(k)?;
+            let (mut per_iteration, mut setups) = (Vec::new(), Vec::new());
+            for repeat in 0..REPEATS_PER_SOLVE {
+                let (once, twice) = match repeat % 2 {
+                    0 => (solve_ms(k)?, solve_ms(2 * k)?),
+                    _ => {
+                        let twice = solve_ms(2 * k)?;
+                        (solve_ms(k)?, twice)
+                    }
+                };
+                per_iteration.push((twice - once) / k as f64);
+                setups.push(2.0 * once - twice);
+            }
+            let measured_ms = median(&mut per_iteration);
             let bytes = match preconditioner {
                 Preconditioner::Multigrid => traffic::CPU
                     .multigrid_iteration_bytes(&multigrid::levels(cloth.nx, cloth.ny), springs),
@@ -709,7 +726,7 @@ fn solver_iterations(
                 floor_ms,
                 measured_ms,
                 times_floor: measured_ms / floor_ms,
-                setup_ms: once - k as f64 * measured_ms,
+                setup_ms: median(&mut setups),
             });
         }
     }
