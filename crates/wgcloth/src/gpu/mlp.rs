@@ -347,10 +347,12 @@ impl GpuMlp {
         }
         let chunks = capacity.max(1).div_ceil(chunk);
         let n_layers = net.layers.len();
-        // Dispatches per chunk: one per layer, or one for `per_contact`.
-        let per_chunk = match kernel {
-            NetworkKernel::PerContact => 1,
-            _ => n_layers,
+        // Per chunk: its dispatches, and the rows of a contact each covers
+        // in workgroups of how many (tiled: every layer, every row a
+        // contact has, a tile's rows; `per_contact`: one, one invocation).
+        let (per_chunk, dispatch_rows, rows_per_group) = match kernel {
+            NetworkKernel::PerContact => (1, 1, BATCH_GROUP as u64),
+            _ => (n_layers, rows, tile),
         };
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let weights_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -400,25 +402,14 @@ impl GpuMlp {
         };
         let batch_params = uniform(
             "batch params",
-            bytemuck::bytes_of(&match kernel {
-                NetworkKernel::PerContact => BatchParams {
-                    n_chunks: chunks as u32,
-                    per_chunk: 1,
-                    chunk_contacts: chunk as u32,
-                    rows_per_contact: 1,
-                    rows_per_group: BATCH_GROUP,
-                    threads_per_contact_group: WORKGROUP,
-                    pad: [0; 2],
-                },
-                _ => BatchParams {
-                    n_chunks: chunks as u32,
-                    per_chunk: n_layers as u32,
-                    chunk_contacts: chunk as u32,
-                    rows_per_contact: rows as u32,
-                    rows_per_group: tile as u32,
-                    threads_per_contact_group: WORKGROUP,
-                    pad: [0; 2],
-                },
+            bytemuck::bytes_of(&BatchParams {
+                n_chunks: chunks as u32,
+                per_chunk: per_chunk as u32,
+                chunk_contacts: chunk as u32,
+                rows_per_contact: dispatch_rows as u32,
+                rows_per_group: rows_per_group as u32,
+                threads_per_contact_group: WORKGROUP,
+                pad: [0; 2],
             }),
         );
         let plan = kernels.kernel(Entry::BatchPlan).bind(
