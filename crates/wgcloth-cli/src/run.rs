@@ -18,7 +18,7 @@ use wgcloth::gpu::mlp::NetworkKernel;
 use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
-use wgcloth::stage::Stage;
+use wgcloth::stage::{SelfContactStages, Stage};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {
@@ -166,6 +166,13 @@ pub struct SelfContactReport {
     /// GPU: steps whose near pairs overflowed the list (their rounds walked
     /// the cloth again: slower, the same result); 0 on the CPU.
     pub overflow_steps: u64,
+    /// The most cloth–cloth contacts one step pushed apart (stage
+    /// "self_contact"; 0 with no thickness).
+    pub contacts_max: u64,
+    /// Cloth–cloth contacts left out, summed over the run: at vertices in
+    /// more than `self_contact::PAIRS_PER_VERTEX`, or (GPU) past the
+    /// contact list's capacity.
+    pub contacts_dropped: u64,
 }
 
 /// The relative residual every step's solve should reach (issue 20); the
@@ -372,7 +379,7 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
 fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report> {
     let config = sim.scene.config.clone();
     let has_body = sim.scene.rigid.is_some();
-    let self_contact = config.self_contact.enabled;
+    let self_contact = SelfContactStages::of(&config.self_contact);
     let first = sim.state.step;
     if first == 0 {
         if let Some(r) = obs.recording.as_deref_mut() {
@@ -412,7 +419,9 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         let sep = &s.separation;
         separated.pairs_max = separated.pairs_max.max(sep.pairs as u64);
         separated.held_total += sep.held as u64;
-        separated.unsettled_steps += u64::from(self_contact && !sep.settled);
+        separated.unsettled_steps += u64::from(self_contact.separate && !sep.settled);
+        separated.contacts_max = separated.contacts_max.max(s.self_contacts as u64);
+        separated.contacts_dropped += s.self_contacts_dropped as u64;
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
         if health::failed(flags, s.pcg.breakdown) {
             let (matrix, b) = sim.system();
@@ -472,7 +481,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
-        self_contact: self_contact.then_some(separated),
+        self_contact: self_contact.separate.then_some(separated),
     })
 }
 
@@ -671,6 +680,8 @@ fn run_gpu(
             held_total: last.self_held_total as u64,
             unsettled_steps: last.self_fallbacks as u64,
             overflow_steps: last.self_overflows as u64,
+            contacts_max: last.cloth_contacts_max as u64,
+            contacts_dropped: last.cloth_contacts_dropped as u64,
         }),
     })
 }
@@ -833,8 +844,8 @@ impl Report {
             .as_ref()
             .map(|c| {
                 format!(
-                    "\nself-contact {} near pairs at most in a step, {} vertex steps held back, {} steps unsettled, {} overflowed the GPU's pair list",
-                    c.pairs_max, c.held_total, c.unsettled_steps, c.overflow_steps
+                    "\nself-contact {} near pairs at most in a step, {} vertex steps held back, {} steps unsettled, {} overflowed the GPU's pair list; {} cloth–cloth contacts at most in a step, {} dropped",
+                    c.pairs_max, c.held_total, c.unsettled_steps, c.overflow_steps, c.contacts_max, c.contacts_dropped
                 )
             })
             .unwrap_or_default()

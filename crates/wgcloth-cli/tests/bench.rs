@@ -7,7 +7,7 @@
 
 use wgcloth::config::{ModelKind, Preconditioner};
 use wgcloth::nn::weights::SHIPPED;
-use wgcloth::stage::Stage;
+use wgcloth::stage::{SelfContactStages, Stage};
 use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
 use wgcloth_cli::bench::{BenchOptions, Solve, VARIANTS, bench};
 use wgcloth_cli::run::Steps;
@@ -71,9 +71,14 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
         // lavapipe has; an adapter without them reports none).
         if backend == "cpu" || !row.stage_ms.is_empty() {
             let keys: Vec<&str> = row.stage_ms.keys().map(|k| k.as_str()).collect();
+            // The default thickness turns the forces on with self-contact.
+            let stages = SelfContactStages {
+                separate: v.self_contact,
+                forces: v.self_contact,
+            };
             let mut want: Vec<&str> = Stage::ALL
                 .iter()
-                .filter(|s| s.runs(true, v.self_contact))
+                .filter(|s| s.runs(true, stages))
                 .map(|s| s.name())
                 .collect();
             want.sort();

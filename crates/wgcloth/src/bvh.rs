@@ -51,6 +51,19 @@ impl Aabb {
         (self.min + self.max) * 0.5
     }
 
+    /// Whether the two boxes overlap (touching counts).
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
+    }
+
+    /// This box grown by `r` on every side.
+    pub fn grown(&self, r: f32) -> Aabb {
+        Aabb {
+            min: self.min - r,
+            max: self.max + r,
+        }
+    }
+
     /// Whether a box of half-size `r` around `p` overlaps this one.
     pub fn near(&self, p: Vec3, r: f32) -> bool {
         (p + r).cmpge(self.min).all() && (p - r).cmple(self.max).all()

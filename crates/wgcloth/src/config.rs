@@ -317,6 +317,18 @@ pub struct ContactConfig {
     pub weights: Option<PathBuf>,
 }
 
+impl ContactConfig {
+    /// k_n, k_d, k_t and μ, as the friction models take them.
+    pub fn coefficients(&self) -> crate::cpu::contact::Coefficients {
+        crate::cpu::contact::Coefficients {
+            kn: self.kn,
+            kd: self.kd,
+            kt: self.kt,
+            mu: self.mu,
+        }
+    }
+}
+
 impl Default for ContactConfig {
     fn default() -> Self {
         ContactConfig {
@@ -347,6 +359,11 @@ pub struct SelfContactConfig {
     /// The gap no pair closes below, m (far above the spacing of f32
     /// positions, whose rounding would otherwise cross a vanishing gap).
     pub floor: f32,
+    /// The gap below which the cloth pushes against itself with the
+    /// `[contact]` coefficients' eqs. 8–9 force and friction, in the
+    /// implicit solve (cpu/self_contact.rs), m; above `floor`. 0 leaves
+    /// only the guarantee.
+    pub thickness: f32,
 }
 
 impl Default for SelfContactConfig {
@@ -355,6 +372,7 @@ impl Default for SelfContactConfig {
             enabled: false,
             gamma: 0.45,
             floor: 1e-3,
+            thickness: 5e-3,
         }
     }
 }
@@ -594,6 +612,16 @@ impl Config {
         positive("solver.max_speed", &[s.max_speed])?;
         let sc = &self.self_contact;
         positive("self_contact.floor", &[sc.floor])?;
+        non_negative("self_contact.thickness", &[sc.thickness])?;
+        if sc.thickness > 0.0 && sc.thickness <= sc.floor {
+            return Err(Error::config(
+                "self_contact.thickness",
+                format!(
+                    "must exceed self_contact.floor ({} m) or be 0 (no forces), got {}",
+                    sc.floor, sc.thickness
+                ),
+            ));
+        }
         if !(sc.gamma > 0.0 && sc.gamma < 0.5) {
             return Err(Error::config(
                 "self_contact.gamma",

@@ -77,10 +77,18 @@ pub fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
 /// (Ericson, Real-Time Collision Detection, 5.1.9); a degenerate segment is
 /// its point.
 pub fn closest_between_segments(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> (Vec3, Vec3) {
+    let (s, t) = segment_parameters(p1, q1, p2, q2);
+    (p1 + (q1 - p1) * s, p2 + (q2 - p2) * t)
+}
+
+/// The parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1)
+/// and p2 + t (q2 − p2) of two segments. Mirrored by
+/// `segment_parameters` in wgsl/common.wgsl.
+pub fn segment_parameters(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> (f32, f32) {
     let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
     let (a, e, f) = (d1.dot(d1), d2.dot(d2), d2.dot(r));
     let tiny = f32::EPSILON * (a + e).max(f32::MIN_POSITIVE);
-    let (s, t) = if a <= tiny && e <= tiny {
+    if a <= tiny && e <= tiny {
         (0.0, 0.0)
     } else if a <= tiny {
         (0.0, (f / e).clamp(0.0, 1.0))
@@ -106,8 +114,7 @@ pub fn closest_between_segments(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> (Vec3
             }
             (s, t)
         }
-    };
-    (p1 + d1 * s, p2 + d2 * t)
+    }
 }
 
 /// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations:

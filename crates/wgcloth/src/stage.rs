@@ -14,6 +14,10 @@ pub enum Stage {
     /// The spring forces and stiffness blocks (eqs. 4–5) and the backward
     /// Euler system A v' = b.
     Assemble,
+    /// The cloth's contacts with itself and their eqs. 8–9 forces and
+    /// blocks added to the system (issue 23), when `self_contact` is on
+    /// with a thickness.
+    SelfContact,
     /// Preconditioned CG (multigrid or Jacobi).
     Pcg,
     /// x' = x + h v'.
@@ -27,11 +31,12 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the order a step runs them.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Rigid,
         Stage::Collide,
         Stage::Contact,
         Stage::Assemble,
+        Stage::SelfContact,
         Stage::Pcg,
         Stage::Integrate,
         Stage::Measure,
@@ -45,6 +50,7 @@ impl Stage {
             Stage::Collide => "collide",
             Stage::Contact => "contact",
             Stage::Assemble => "assemble",
+            Stage::SelfContact => "self_contact",
             Stage::Pcg => "pcg",
             Stage::Separate => "separate",
             Stage::Integrate => "integrate",
@@ -58,12 +64,33 @@ impl Stage {
     }
 
     /// Whether a step of a scene runs this stage: the rigid-body stages
-    /// only with a body, [`Stage::Separate`] only with self-contact on.
-    pub const fn runs(self, has_body: bool, self_contact: bool) -> bool {
+    /// only with a body, [`Stage::Separate`] only with self-contact on,
+    /// [`Stage::SelfContact`] only with its forces too.
+    pub const fn runs(self, has_body: bool, self_contact: SelfContactStages) -> bool {
         match self {
             Stage::Rigid | Stage::Collide | Stage::Contact | Stage::Measure => has_body,
-            Stage::Separate => self_contact,
+            Stage::Separate => self_contact.separate,
+            Stage::SelfContact => self_contact.forces,
             Stage::Assemble | Stage::Pcg | Stage::Integrate => true,
+        }
+    }
+}
+
+/// Which self-contact stages a scene runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SelfContactStages {
+    /// [`Stage::Separate`]: `self_contact.enabled`.
+    pub separate: bool,
+    /// [`Stage::SelfContact`]: enabled with a thickness above 0.
+    pub forces: bool,
+}
+
+impl SelfContactStages {
+    /// The stages `[self_contact]` asks for.
+    pub fn of(config: &crate::config::SelfContactConfig) -> SelfContactStages {
+        SelfContactStages {
+            separate: config.enabled,
+            forces: config.enabled && config.thickness > 0.0,
         }
     }
 }

@@ -19,7 +19,8 @@ struct Params {
     vertex_triangles_at: u32, spring_triangles_at: u32, body_triangles_at: u32, bvh_order_at: u32,
     // Where parts 1 and 2 of an array bound in parts start (gpu::shaders).
     topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>,
-    self_contact: u32, self_gamma: f32, self_floor: f32, self_capacity: u32, pad: vec2<u32>,
+    self_contact: u32, self_gamma: f32, self_floor: f32, self_capacity: u32,
+    cloth_thickness: f32, cloth_capacity: u32, rest_spacing: vec2<f32>, cloth_per_vertex: u32, pad: u32,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each
@@ -50,6 +51,30 @@ struct StepState {
     self_fallbacks: u32,
     self_held_total: atomic<u32>,
     self_overflows: u32,
+    // Stage "self_contact": the most cloth–cloth contacts a step applied,
+    // and those left out, summed.
+    cloth_contacts_max: u32,
+    cloth_contacts_dropped: u32,
+}
+
+// A cloth–cloth contact and what it adds to the system (stage
+// "self_contact"; mirrors `gpu::layout::ClothPair`): the force on vertex k
+// is β_k f, v_rel = Σ β_k v_k and the gap from the surface to the
+// penetrating point Σ β_k x_k; the pair adds β_k β_l B at (k, l) and β_k
+// rhs to b.
+struct ClothPair {
+    // The vertices, EDGE_PAIR on the first of an edge–edge pair (the key
+    // pairs are ordered by).
+    key: vec4<u32>,
+    beta: vec4<f32>,
+    rhs: vec3<f32>,
+    applied: u32,
+    block: PackedSym3,
+    pad: vec2<u32>,
+}
+
+fn pair_vertex(key: vec4<u32>, k: u32) -> u32 {
+    return key[k] & ~select(0u, EDGE_PAIR, k == 0u);
 }
 
 // A symmetric 3×3 block as the kernels compute with it: a = (xx, yy, zz,
@@ -283,6 +308,13 @@ fn closest_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -
 // degenerate segment is its point (mirrors math::closest_between_segments;
 // Ericson 5.1.9). Returns them as columns 0 and 1.
 fn closest_between_segments(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec3<f32>) -> mat2x3<f32> {
+    let st = segment_parameters(p1, q1, p2, q2);
+    return mat2x3<f32>(p1 + (q1 - p1) * st.x, p2 + (q2 - p2) * st.y);
+}
+
+// The parameters (s, t) of those closest points (mirrors
+// math::segment_parameters).
+fn segment_parameters(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec3<f32>) -> vec2<f32> {
     let d1 = q1 - p1;
     let d2 = q2 - p2;
     let r = p1 - p2;
@@ -316,7 +348,7 @@ fn closest_between_segments(p1: vec3<f32>, q1: vec3<f32>, p2: vec3<f32>, q2: vec
             }
         }
     }
-    return mat2x3<f32>(p1 + d1 * s, p2 + d2 * t);
+    return vec2<f32>(s, t);
 }
 
 fn found(hit: vec4<f32>) -> bool {

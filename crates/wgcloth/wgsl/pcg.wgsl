@@ -49,6 +49,10 @@ struct Scalars {
 @group(1) @binding(10) var<storage, read> scalars_in: Scalars;
 @group(1) @binding(11) var<storage, read_write> scalars_next: Scalars;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
+// Stage "self_contact"'s lists and contacts: the cloth–cloth couplings C,
+// the blocks of A outside the springs' pattern.
+@group(1) @binding(13) var<storage, read> cloth_lists: array<u32>;
+@group(1) @binding(14) var<storage, read> cloth_pairs: array<ClothPair>;
 
 // The pᵀq segment of iteration `iteration`.
 fn pq_segment(iteration: u32) -> u32 {
@@ -228,20 +232,27 @@ fn update(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocatio
           @builtin(workgroup_id) wg: vec3<u32>) {
     let alpha = step_length(lid);
     let i = id.x;
-    var rz = 0.0;
-    var rr = 0.0;
+    var sums = vec2<f32>(0.0);
     if i < params.n_vertices && alpha != 0.0 {
-        let ri = advance_vertex(i, alpha);
-        let zi = inv_diag[i].xyz * ri;
-        zq[i] = vec4<f32>(zi, 0.0);
-        rz = dot(ri, zi);
-        rr = dot(ri, ri);
+        sums = jacobi_z(i, advance_vertex(i, alpha));
     }
-    let s_rz = workgroup_sum(lid, rz);
-    let s_rr = workgroup_sum(lid, rr);
+    store_rz_rr(lid, wg.x, sums);
+}
+
+// Jacobi's z = P⁻¹ r at vertex i, returning (rᵀz, rᵀr) there.
+fn jacobi_z(i: u32, ri: vec3<f32>) -> vec2<f32> {
+    let zi = inv_diag[i].xyz * ri;
+    zq[i] = vec4<f32>(zi, 0.0);
+    return vec2<f32>(dot(ri, zi), dot(ri, ri));
+}
+
+// The workgroup's partial rᵀz and rᵀr.
+fn store_rz_rr(lid: u32, wg: u32, sums: vec2<f32>) {
+    let s_rz = workgroup_sum(lid, sums.x);
+    let s_rr = workgroup_sum(lid, sums.y);
     if lid == 0u {
-        store_partial(RZ, wg.x, s_rz);
-        store_partial(RR, wg.x, s_rr);
+        store_partial(RZ, wg, s_rz);
+        store_partial(RR, wg, s_rr);
     }
 }
 
@@ -325,6 +336,69 @@ fn next(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     let s = workgroup_sum(lid, pq);
     if lid == 0u {
         store_partial(pq_segment(scalars_in.iterations + 1u), wg.x, s);
+    }
+}
+
+// Row i of C p (cpu::self_contact::Couplings::row): over vertex i's
+// contacts, in key order, β_k B Σ_{l ≠ k} β_l p_l.
+fn coupled(i: u32) -> vec3<f32> {
+    let n = params.n_vertices;
+    var acc = vec3<f32>(0.0);
+    for (var a = 0u; a < cloth_lists[CLOTH_HEADER + n + i]; a++) {
+        let e = cloth_lists[CLOTH_HEADER + 2u * n + params.cloth_per_vertex * i + a];
+        let pair = cloth_pairs[e / 4u];
+        let slot = e % 4u;
+        var others = vec3<f32>(0.0);
+        for (var l = 0u; l < 4u; l++) {
+            if l != slot {
+                others += pair.beta[l] * p[pair_vertex(pair.key, l)].xyz;
+            }
+        }
+        acc += pair.beta[slot] * sym_mul(sym_unpack(pair.block), others);
+    }
+    return acc;
+}
+
+// After `init`, with cloth–cloth contacts: r −= S C x (here `p` is bound
+// to x), Jacobi's z = P⁻¹ r, and the partial rᵀz and rᵀr again.
+@compute @workgroup_size(WORKGROUP)
+fn couple_init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+               @builtin(workgroup_id) wg: vec3<u32>) {
+    let i = id.x;
+    var sums = vec2<f32>(0.0);
+    if i < params.n_vertices {
+        var ri = r[i].xyz;
+        if !is_pinned(i) {
+            ri -= coupled(i);
+        }
+        r[i] = vec4<f32>(ri, 0.0);
+        sums = jacobi_z(i, ri);
+    }
+    store_rz_rr(lid, wg.x, sums);
+}
+
+// After `spmv` or `next`, with cloth–cloth contacts: q += S C p for the
+// direction just written, and its partial pᵀq again (`scalars_in` bound
+// to the scalars of that iteration).
+@compute @workgroup_size(WORKGROUP)
+fn couple(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+          @builtin(workgroup_id) wg: vec3<u32>) {
+    if scalars_in.done != 0u {
+        return;
+    }
+    let i = id.x;
+    var pq = 0.0;
+    if i < params.n_vertices {
+        var qi = q(i);
+        if !is_pinned(i) {
+            qi += coupled(i);
+            store_q(i, qi);
+        }
+        pq = dot(p[i].xyz, qi);
+    }
+    let s = workgroup_sum(lid, pq);
+    if lid == 0u {
+        store_partial(pq_segment(scalars_in.iterations), wg.x, s);
     }
 }
 

@@ -37,9 +37,9 @@
 // the header (gpu::constants::self_header's words, at 2 n; zeroed before
 // the pass).
 @group(1) @binding(10) var<storage, read_write> separations: array<atomic<u32>>;
-// Per pair five words: its four vertices (EDGE_PAIR on the first of an
-// edge–edge pair) and its separation's bits.
-@group(1) @binding(11) var<storage, read_write> pairs: array<u32>;
+// Per pair its four vertices (EDGE_PAIR on the first of an edge–edge
+// pair); its normal and separation are computed again from x_start.
+@group(1) @binding(11) var<storage, read_write> pairs: array<vec4<u32>>;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
 // The next round's indirect dispatches (`plan` writes them).
 @group(1) @binding(13) var<storage, read_write> dispatches: array<u32>;
@@ -56,22 +56,6 @@ fn step_of(i: u32) -> vec3<f32> {
     return x[i].xyz - x_start[i].xyz;
 }
 
-fn overlaps(lo: vec3<f32>, hi: vec3<f32>, b_lo: vec3<f32>, b_hi: vec3<f32>) -> bool {
-    return all(lo <= b_hi) && all(b_lo <= hi);
-}
-
-// A query: vertex `a` (edge false) or the edge (a, b), a < b, the box it
-// sweeps grown by the floor, and whether it lists its pairs (false) or
-// tests them as a round does (true).
-struct Query {
-    lo: vec3<f32>,
-    a: u32,
-    hi: vec3<f32>,
-    b: u32,
-    edge: bool,
-    test: bool,
-}
-
 // The box vertex i sweeps.
 fn swept_lo(i: u32) -> vec3<f32> {
     return min(x_start[i].xyz, x[i].xyz);
@@ -81,37 +65,144 @@ fn swept_hi(i: u32) -> vec3<f32> {
     return max(x_start[i].xyz, x[i].xyz);
 }
 
-// The most a displacement of one side of a pair differs from one of the
-// other's (cpu::separate::NearPair::apart): the vertex and the triangle,
-// or the two edges.
-fn apart(d: array<vec3<f32>, 4>, edge: bool) -> f32 {
+// A slab two primitives lie on either side of at the step's start
+// (cpu::separate::Slab): unit normal from the second to the first (zero
+// where there is none) and width.
+struct Slab {
+    normal: vec3<f32>,
+    width: f32,
+}
+
+// The slab normal to `towards` holding first-side point a and second-side
+// point b on its faces (Slab::between).
+fn slab_between(towards: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> Slab {
+    // As glam's normalize_or_zero: none where 1 / |towards| is not finite.
+    let inv = 1.0 / length(towards);
+    var normal = vec3<f32>(0.0);
+    if inv > 0.0 && inv <= 0x1.fffffep+127f {
+        normal = towards * inv;
+    }
+    let width = dot(normal, a - b);
+    if width < 0.0 {
+        return Slab(-normal, -width);
+    }
+    return Slab(normal, width);
+}
+
+// A pair as it stands at the step's start (cpu::separate::NearPair::at):
+// its separation, the slab along its nearest points' line and the one
+// normal to the triangle or to both edges.
+struct Gap {
+    nearest: Slab,
+    plane: Slab,
+    separation: f32,
+}
+
+fn gap_at_start(p: vec4<u32>, edge: bool) -> Gap {
+    let a = x_start[p.x].xyz;
+    let b = x_start[p.y].xyz;
+    let c = x_start[p.z].xyz;
+    let d = x_start[p.w].xyz;
+    var near_a = a;
+    var near_b: vec3<f32>;
+    var plane: Slab;
+    if edge {
+        let m = closest_between_segments(a, b, c, d);
+        near_a = m[0];
+        near_b = m[1];
+        plane = slab_between(cross(b - a, d - c), a, c);
+    } else {
+        near_b = closest_on_triangle(a, b, c, d);
+        plane = slab_between(cross(c - b, d - b), a, b);
+    }
+    let gap = near_a - near_b;
+    return Gap(slab_between(gap, near_a, near_b), plane, length(gap));
+}
+
+fn touching(g: Gap) -> bool {
+    return all(g.nearest.normal == vec3<f32>(0.0));
+}
+
+// 2 gamma (width − floor).
+fn allowance(width: f32) -> f32 {
+    return 2.0 * params.self_gamma * max(width - params.self_floor, 0.0);
+}
+
+// The most n·(d_b − d_a) over a vertex a of the first side and b of the
+// second; with n zero, the most |d_a − d_b|.
+fn approach(d: array<vec3<f32>, 4>, edge: bool, n: vec3<f32>) -> f32 {
     let split = select(1u, 2u, edge);
+    let none = all(n == vec3<f32>(0.0));
     var most = 0.0;
     for (var a = 0u; a < split; a++) {
         for (var b = split; b < 4u; b++) {
-            most = max(most, length(d[a] - d[b]));
+            most = max(most, select(dot(n, d[b] - d[a]), length(d[a] - d[b]), none));
         }
     }
     return most;
 }
 
-// 2 gamma (s − floor).
-fn allowance(s: f32) -> f32 {
-    return 2.0 * params.self_gamma * max(s - params.self_floor, 0.0);
+// Whether displacements d keep the pair above the floor
+// (NearPair::passes): across either slab, or touching, by the widest
+// difference.
+fn passes(d: array<vec3<f32>, 4>, edge: bool, g: Gap) -> bool {
+    if touching(g) {
+        return approach(d, edge, vec3<f32>(0.0)) <= allowance(g.separation);
+    }
+    let slabs = array<Slab, 2>(g.nearest, g.plane);
+    for (var k = 0u; k < 2u; k++) {
+        let s = slabs[k];
+        if usable(s, k) && approach(d, edge, s.normal) <= allowance(s.width) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// Slab k of a pair that is not touching may be used (NearPair::usable):
+// the nearest points' always, the planes' where wider than the floor.
+fn usable(s: Slab, k: u32) -> bool {
+    return k == 0u || (any(s.normal != vec3<f32>(0.0)) && s.width > params.self_floor);
 }
 
 // Whether the pair could fail however its vertices are held
-// (NearPair::could_fail): the longest full step or the widest difference.
-fn could_fail(p: vec4<u32>, edge: bool, s: f32) -> bool {
+// (NearPair::could_fail): across a slab, max(0, n·d_b) + max(0, −n·d_a)
+// at their largest; touching, the longest full step or the widest
+// difference.
+fn could_fail(p: vec4<u32>, edge: bool, g: Gap) -> bool {
     let d = array<vec3<f32>, 4>(step_of(p.x), step_of(p.y), step_of(p.z), step_of(p.w));
-    let longest = max(max(length(d[0]), length(d[1])), max(length(d[2]), length(d[3])));
-    return max(longest, apart(d, edge)) > allowance(s);
+    if touching(g) {
+        let longest = max(max(length(d[0]), length(d[1])), max(length(d[2]), length(d[3])));
+        return longest > 0.0 || !passes(d, edge, g);
+    }
+    let split = select(1u, 2u, edge);
+    let slabs = array<Slab, 2>(g.nearest, g.plane);
+    for (var k = 0u; k < 2u; k++) {
+        let n = slabs[k].normal;
+        if !usable(slabs[k], k) {
+            continue;
+        }
+        var towards = 0.0;
+        var away = 0.0;
+        for (var v = 0u; v < 4u; v++) {
+            let along = dot(n, d[v]);
+            if v < split {
+                away = max(away, -along);
+            } else {
+                towards = max(towards, along);
+            }
+        }
+        if towards + away <= allowance(slabs[k].width) {
+            return false;
+        }
+    }
+    return true;
 }
 
 // Whether the pair fails with the steps the last round left.
-fn fails(p: vec4<u32>, edge: bool, s: f32) -> bool {
+fn fails(p: vec4<u32>, edge: bool, g: Gap) -> bool {
     let d = array<vec3<f32>, 4>(moved(p.x), moved(p.y), moved(p.z), moved(p.w));
-    return apart(d, edge) > allowance(s);
+    return !passes(d, edge, g);
 }
 
 fn hold_pair(p: vec4<u32>) {
@@ -121,28 +212,25 @@ fn hold_pair(p: vec4<u32>) {
     atomicOr(&separations[params.n_vertices + p.w], 2u);
 }
 
-fn note(q: Query, vertices: vec4<u32>, s: f32) {
-    if !could_fail(vertices, q.edge, s) {
+fn note(q: Query, vertices: vec4<u32>) {
+    let g = gap_at_start(vertices, q.edge);
+    if !could_fail(vertices, q.edge, g) {
         return;
     }
     if q.test {
-        if fails(vertices, q.edge, s) {
+        if fails(vertices, q.edge, g) {
             hold_pair(vertices);
         }
         return;
     }
-    let bits = bitcast<u32>(s);
+    let bits = bitcast<u32>(g.separation);
     atomicMin(&separations[vertices.x], bits);
     atomicMin(&separations[vertices.y], bits);
     atomicMin(&separations[vertices.z], bits);
     atomicMin(&separations[vertices.w], bits);
     let k = atomicAdd(&separations[header(SELF_PAIR_COUNT)], 1u);
     if k < capacity() {
-        pairs[5u * k] = vertices.x | select(0u, EDGE_PAIR, q.edge);
-        pairs[5u * k + 1u] = vertices.y;
-        pairs[5u * k + 2u] = vertices.z;
-        pairs[5u * k + 3u] = vertices.w;
-        pairs[5u * k + 4u] = bits;
+        pairs[k] = vec4<u32>(vertices.x | select(0u, EDGE_PAIR, q.edge), vertices.yzw);
     }
 }
 
@@ -157,92 +245,20 @@ fn vertex_against(q: Query, t: u32) {
     if !overlaps(q.lo, q.hi, lo, hi) {
         return;
     }
-    let p = x_start[q.a].xyz;
-    let c = closest_on_triangle(p, x_start[tri.x].xyz, x_start[tri.y].xyz, x_start[tri.z].xyz);
-    note(q, vec4<u32>(q.a, tri), length(p - c));
+    note(q, vec4<u32>(q.a, tri));
 }
 
-// The edge against edge (u, w) when it is above it (each pair from its
-// lower edge, as on the CPU).
+// The edge against edge (u, w).
 fn edge_against(q: Query, u: u32, w: u32) {
-    let f = vec2<u32>(min(u, w), max(u, w));
-    let above = f.x > q.a || (f.x == q.a && f.y > q.b);
-    let apart = f.x != q.a && f.x != q.b && f.y != q.a && f.y != q.b;
-    if !(above && apart) {
+    let f = met_edge(q, u, w);
+    if f.x == NO_TRIANGLE {
         return;
     }
     let lo = min(swept_lo(f.x), swept_lo(f.y));
     let hi = max(swept_hi(f.x), swept_hi(f.y));
     if overlaps(q.lo, q.hi, lo, hi) {
-        let m = closest_between_segments(x_start[q.a].xyz, x_start[q.b].xyz, x_start[f.x].xyz,
-                                         x_start[f.y].xyz);
-        note(q, vec4<u32>(q.a, q.b, f), length(m[0] - m[1]));
+        note(q, vec4<u32>(q.a, q.b, f));
     }
-}
-
-// The query against grid cell (cx, cy): a vertex against its two
-// triangles; an edge against the edges the cell owns, so that each is met
-// once: its bottom, its left and its diagonal (alternating as
-// scene::cloth lays them), and its right and top on the grid's last column
-// and row. An edge near the query lies in every cell that holds it, and
-// those cells' boxes hold its box, so its owner is walked.
-fn against(q: Query, cx: u32, cy: u32) {
-    let c = cy * params.cells_x + cx;
-    if !q.edge {
-        vertex_against(q, 2u * c);
-        vertex_against(q, 2u * c + 1u);
-        return;
-    }
-    let nx = params.cells_x + 1u;
-    let a = cy * nx + cx;
-    let b = a + 1u;
-    let up = a + nx;
-    let d = up + 1u;
-    let diagonal = select(vec2<u32>(a, d), vec2<u32>(b, up), (cx + cy) % 2u == 0u);
-    // Bottom, left, diagonal, then right and top where the grid ends (one
-    // call site, so the segment test is compiled once).
-    let owned = array<vec2<u32>, 5>(vec2<u32>(a, b), vec2<u32>(a, up), diagonal, vec2<u32>(b, d), vec2<u32>(up, d));
-    let last = 3u + select(0u, 1u, cx + 1u == params.cells_x);
-    for (var k = 0u; k < 5u; k++) {
-        if k < last || (k == 4u && cy + 1u == params.cells_y) {
-            edge_against(q, owned[k].x, owned[k].y);
-        }
-    }
-}
-
-// Every grid cell whose swept box the query's overlaps.
-fn walk(q: Query) {
-    let tiles = params.tiles_x * params.tiles_y;
-    for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
-        let sb = bounds[tiles + s];
-        if !overlaps(q.lo, q.hi, sb.lo.xyz, sb.hi.xyz) {
-            continue;
-        }
-        let sx = s % params.supertiles_x;
-        let sy = s / params.supertiles_x;
-        for (var ty = sy * TILE; ty < min(sy * TILE + TILE, params.tiles_y); ty++) {
-            for (var tx = sx * TILE; tx < min(sx * TILE + TILE, params.tiles_x); tx++) {
-                let tb = bounds[ty * params.tiles_x + tx];
-                if !overlaps(q.lo, q.hi, tb.lo.xyz, tb.hi.xyz) {
-                    continue;
-                }
-                for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
-                    for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
-                        let c = cy * params.cells_x + cx;
-                        let cb = bounds[cell_at(c)];
-                        if overlaps(q.lo, q.hi, cb.lo.xyz, cb.hi.xyz) {
-                            against(q, cx, cy);
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
-// Where cell c's swept box is in `bounds`.
-fn cell_at(c: u32) -> u32 {
-    return params.tiles_x * params.tiles_y + params.supertiles_x * params.supertiles_y + c;
 }
 
 // Nothing near any vertex yet (+∞), none held, `plan` reading its first
@@ -290,16 +306,14 @@ fn walk_vertex(i: u32, test: bool) {
 
 // Spring s, if along a triangle, against the edges near its path.
 fn walk_edge(s: u32, test: bool) {
-    if s >= params.n_springs || spring_triangles(s).x == NO_TRIANGLE {
+    let e = walked_edge(s);
+    if e.x == NO_TRIANGLE {
         return;
     }
-    let ends = spring_ends(s);
-    let a = min(ends.x, ends.y);
-    let b = max(ends.x, ends.y);
     let f = params.self_floor;
-    let lo = min(swept_lo(a), swept_lo(b)) - f;
-    let hi = max(swept_hi(a), swept_hi(b)) + f;
-    walk(Query(lo, a, hi, b, true, test));
+    let lo = min(swept_lo(e.x), swept_lo(e.y)) - f;
+    let hi = max(swept_hi(e.x), swept_hi(e.y)) + f;
+    walk(Query(lo, e.x, hi, e.y, true, test));
 }
 
 @compute @workgroup_size(WORKGROUP)
@@ -353,10 +367,11 @@ fn round(@builtin(global_invocation_id) id: vec3<u32>) {
     if k >= min(atomicLoad(&separations[header(SELF_PAIR_COUNT)]), capacity()) {
         return;
     }
-    let first = pairs[5u * k];
+    let first = pairs[k].x;
     let edge = (first & EDGE_PAIR) != 0u;
-    let p = vec4<u32>(first & ~EDGE_PAIR, pairs[5u * k + 1u], pairs[5u * k + 2u], pairs[5u * k + 3u]);
-    if fails(p, edge, bitcast<f32>(pairs[5u * k + 4u])) {
+    let p = vec4<u32>(first & ~EDGE_PAIR, pairs[k].yzw);
+    // The normal again from where the step started, as the walk found it.
+    if fails(p, edge, gap_at_start(p, edge)) {
         hold_pair(p);
     }
 }

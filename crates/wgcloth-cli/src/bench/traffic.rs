@@ -152,6 +152,10 @@ impl Layout {
     ///   length and two adjacency entries read, its off-diagonal block
     ///   written, and where a layout stores spring terms (the CPU's) each
     ///   written once and read twice;
+    /// - self_contact: the positions read, two counts written per vertex,
+    ///   its diagonal block and b read and written, each triangle's and
+    ///   spring's vertex indices read (the contacts found and the walks
+    ///   not counted);
     /// - separate: the step's start and end positions read, a least
     ///   separation and a flag word written per vertex, each triangle's and
     ///   spring's vertex indices read (the walks over the tiles and the
@@ -169,6 +173,7 @@ impl Layout {
                 n * (3 * v + self.diag_block + 4)
                     + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
+            Stage::SelfContact => n * (3 * v + 8 + 2 * self.diag_block) + t * 12 + s * 8,
             Stage::Pcg => return None,
             Stage::Separate => n * (2 * v + 8) + t * 12 + s * 8,
             Stage::Integrate => n * (3 * v + self.flag),

@@ -428,12 +428,7 @@ pub fn friction_net(net: &Mlp, kind: NetKind, c: Vec3, v: Vec3, k: &Coefficients
 impl Model {
     /// The model of a run; `network` is the scene's (network models only).
     pub fn new(kind: ModelKind, c: &ContactConfig, network: Option<&Arc<Network>>) -> Model {
-        let coefficients = Coefficients {
-            kn: c.kn,
-            kd: c.kd,
-            kt: c.kt,
-            mu: c.mu,
-        };
+        let coefficients = c.coefficients();
         let loaded = || {
             network
                 .expect("Scene::new loads the network of a network model")

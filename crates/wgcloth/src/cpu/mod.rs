@@ -10,6 +10,7 @@ pub mod measure;
 pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
+pub mod self_contact;
 pub mod separate;
 pub mod springs;
 
@@ -45,6 +46,11 @@ pub struct StepStats {
     pub max_penetration: f32,
     /// What self-contact held back (`self_contact` on).
     pub separation: separate::Separation,
+    /// Cloth–cloth contacts responded to (`self_contact` with a thickness).
+    pub self_contacts: usize,
+    /// Cloth–cloth contacts dropped at vertices in more than
+    /// `self_contact::PAIRS_PER_VERTEX`.
+    pub self_contacts_dropped: usize,
     /// Seconds spent in each of [`Stage::ALL`].
     pub stage_seconds: [f64; Stage::ALL.len()],
 }
@@ -99,6 +105,11 @@ pub struct CpuSim {
     edges: Vec<[u32; 2]>,
     /// Positions at the start of the step (self-contact only).
     x_start: Vec<Vec3>,
+    /// The cloth in its flat rest grid (self-contact forces only).
+    rest_grid: Vec<Vec3>,
+    /// The last step's cloth–cloth contacts and what each added.
+    self_pairs: Vec<self_contact::Pair>,
+    self_terms: Vec<self_contact::PairTerm>,
 }
 
 impl CpuSim {
@@ -135,6 +146,13 @@ impl CpuSim {
                 Vec::new()
             },
             x_start: Vec::new(),
+            rest_grid: if cfg.self_contact.enabled && cfg.self_contact.thickness > 0.0 {
+                self_contact::rest_grid(cloth)
+            } else {
+                Vec::new()
+            },
+            self_pairs: Vec::new(),
+            self_terms: Vec::new(),
             params,
             state,
             scene,
@@ -149,6 +167,12 @@ impl CpuSim {
     /// The responses of the last step's contacts, in the same order.
     pub fn responses(&self) -> &[Response] {
         &self.responses
+    }
+
+    /// The last step's cloth–cloth contacts and what each added to the
+    /// system, in the same order.
+    pub fn self_contacts(&self) -> (&[self_contact::Pair], &[self_contact::PairTerm]) {
+        (&self.self_pairs, &self.self_terms)
     }
 
     /// The system the last step solved.
@@ -239,6 +263,42 @@ impl CpuSim {
                     &mut self.matrix,
                     &mut self.rhs,
                 );
+            }
+            Stage::SelfContact => {
+                let keep = &self.scene.config.self_contact;
+                self.self_pairs.clear();
+                self.self_terms.clear();
+                if keep.enabled && keep.thickness > 0.0 {
+                    if body.is_none() {
+                        // Collide refits it when there is a body.
+                        collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
+                    }
+                    let sheet = self_contact::Sheet {
+                        triangles: &cloth.triangles,
+                        edges: &self.edges,
+                        rest: &self.rest_grid,
+                        thickness: keep.thickness,
+                    };
+                    let (pairs, dropped) =
+                        sheet.find(x, &self.cloth_bvh, self_contact::PAIRS_PER_VERTEX);
+                    let band = self_contact::Band {
+                        coefficients: self.scene.config.contact.coefficients(),
+                        thickness: keep.thickness,
+                        h,
+                    };
+                    self.self_terms = self_contact::respond(&pairs, x, v, &band);
+                    self.self_pairs = pairs;
+                    self_contact::add_to_system(
+                        &self.self_pairs,
+                        &self.self_terms,
+                        &mut self.matrix.diag,
+                        &mut self.rhs,
+                    );
+                    stats.self_contacts = self.self_pairs.len();
+                    stats.self_contacts_dropped = dropped;
+                }
+                self.matrix.couplings =
+                    self_contact::Couplings::new(x.len(), &self.self_pairs, &self.self_terms);
             }
             Stage::Pcg => {
                 // v holds the initial guess (last velocity; pinned entries are 0).

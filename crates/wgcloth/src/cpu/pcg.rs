@@ -10,19 +10,24 @@ use rayon::prelude::*;
 pub use crate::config::Preconditioner;
 use crate::cpu::GRAIN;
 use crate::cpu::multigrid::Multigrid;
+use crate::cpu::self_contact::Couplings;
 use crate::multigrid::Level;
 use crate::scene::Cloth;
 use crate::scene::cloth::Adjacency;
 
 /// A = M − hD − h²K in the cloth's sparsity: one diagonal block per vertex
 /// and one symmetric off-diagonal block per spring, A_ij = A_ji = `off[s]`
-/// (every other coupling — the face contacts — lies on a spring's pair).
+/// (the face contacts' couplings lie on a spring's pair), and the
+/// cloth–cloth contacts' couplings, which do not.
 #[derive(Clone, Debug, Default)]
 pub struct BlockMatrix {
     /// A_ii, one block per vertex.
     pub diag: Vec<Mat3>,
     /// A_ij = A_ji, one block per spring (i, j), in spring order.
     pub off: Vec<Mat3>,
+    /// The cloth–cloth contacts' off-diagonal blocks (none without
+    /// self-contact forces); the preconditioners see only their diagonal.
+    pub couplings: Couplings,
 }
 
 impl BlockMatrix {
@@ -32,6 +37,7 @@ impl BlockMatrix {
         BlockMatrix {
             diag: vec![Mat3::ZERO; vertices],
             off: vec![Mat3::ZERO; springs],
+            couplings: Couplings::default(),
         }
     }
 
@@ -41,7 +47,7 @@ impl BlockMatrix {
         for k in adj.range(i) {
             acc += self.off[adj.spring[k] as usize] * x[adj.other[k] as usize];
         }
-        acc
+        acc + self.couplings.row(i, x)
     }
 
     /// y = A x.

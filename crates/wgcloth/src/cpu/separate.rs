@@ -54,6 +54,41 @@ pub const PAIRS_PER_VERTEX: u32 = 8;
 /// index, which never reaches it (a cloth has at most 2^26 vertices).
 pub const EDGE_PAIR: u32 = 1 << 31;
 
+/// A slab two primitives lie on either side of at the step's start: every
+/// point of the first is at least `width` further along `normal` than
+/// every point of the second.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Slab {
+    /// Unit normal, from the second primitive's side to the first's; zero
+    /// where there is none (the primitives touch, or are degenerate).
+    pub normal: Vec3,
+    /// Its width, m.
+    pub width: f32,
+}
+
+impl Slab {
+    /// The slab normal to `towards` (from the second primitive to the
+    /// first) that holds a first-side point `a` and a second-side point `b`
+    /// on its faces: the primitives lie in planes normal to it, or `a`
+    /// and `b` are their nearest points.
+    fn between(towards: Vec3, a: Vec3, b: Vec3) -> Slab {
+        let normal = towards.normalize_or_zero();
+        let width = normal.dot(a - b);
+        match width < 0.0 {
+            true => Slab {
+                normal: -normal,
+                width: -width,
+            },
+            false => Slab { normal, width },
+        }
+    }
+
+    /// How far the sides may come nearer across it: 2 gamma (width − floor).
+    pub fn allowance(&self, keep: &SelfContactConfig) -> f32 {
+        2.0 * keep.gamma * (self.width - keep.floor).max(0.0)
+    }
+}
+
 /// One vertex–triangle or edge–edge pair whose swept boxes come near.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NearPair {
@@ -64,41 +99,97 @@ pub struct NearPair {
     pub edges: bool,
     /// Distance between the two primitives at the step's start, m.
     pub separation: f32,
+    /// The slabs between them at the start: along the line between their
+    /// nearest points (as wide as the separation), and normal to the
+    /// triangle or to both edges (the planes they lie in; zero normal
+    /// where degenerate).
+    pub slabs: [Slab; 2],
 }
 
 impl NearPair {
+    /// The pair of `vertices` as it stands at positions `start`.
+    pub fn at(vertices: [u32; 4], edges: bool, start: &[Vec3]) -> NearPair {
+        let at = |k: u32| start[k as usize];
+        let [a, b, c, d] = vertices.map(at);
+        let (nearest, plane) = match edges {
+            false => {
+                let q = closest_on_triangle(a, b, c, d);
+                ((a, q), Slab::between((c - b).cross(d - b), a, b))
+            }
+            true => (
+                closest_between_segments(a, b, c, d),
+                Slab::between((b - a).cross(d - c), a, c),
+            ),
+        };
+        let separation = (nearest.0 - nearest.1).length();
+        NearPair {
+            vertices,
+            edges,
+            separation,
+            slabs: [
+                Slab::between(nearest.0 - nearest.1, nearest.0, nearest.1),
+                plane,
+            ],
+        }
+    }
+
     /// The vertices of each primitive.
     pub fn sides(&self) -> (&[u32], &[u32]) {
         self.vertices.split_at(if self.edges { 2 } else { 1 })
     }
 
-    /// The most a displacement of one side differs from one of the
-    /// other's.
-    pub fn apart(&self, moved: impl Fn(u32) -> Vec3) -> f32 {
+    /// Whether the primitives touch at the start: no slab between them.
+    fn touching(&self) -> bool {
+        self.slabs[0].normal == Vec3::ZERO
+    }
+
+    /// The slabs a test may use: the nearest points' (as wide as the
+    /// separation), and the planes' where wider than the floor (a plane
+    /// slab as thin as two coplanar edges' says nothing of how near they
+    /// come within it).
+    fn usable(&self, keep: &SelfContactConfig) -> impl Iterator<Item = &Slab> {
+        let [nearest, plane] = &self.slabs;
+        let plane = (plane.normal != Vec3::ZERO && plane.width > keep.floor).then_some(plane);
+        std::iter::once(nearest).chain(plane)
+    }
+
+    /// Whether displacements `moved` keep the pair above the floor. Each
+    /// point of a primitive moves by a convex sum of its vertices'
+    /// displacements, so across a slab of width w the gap stays above
+    /// w − the most n·(d_b − d_a) over a vertex a of the first side and b
+    /// of the second: the pair passes when that is at most the slab's
+    /// allowance for either slab (a slide along a slab brings nothing
+    /// nearer). Touching, it passes when no displacement of one side
+    /// differs from one of the other's by more than 2 gamma (s − floor).
+    pub fn passes(&self, moved: impl Fn(u32) -> Vec3, keep: &SelfContactConfig) -> bool {
         let (p, q) = self.sides();
-        p.iter()
-            .flat_map(|&a| q.iter().map(move |&b| (a, b)))
-            .map(|(a, b)| (moved(a) - moved(b)).length())
-            .fold(0.0, f32::max)
+        let most = |f: &dyn Fn(u32, u32) -> f32| {
+            (p.iter().flat_map(|&a| q.iter().map(move |&b| (a, b))))
+                .fold(0.0, |m, (a, b)| f32::max(m, f(a, b)))
+        };
+        if self.touching() {
+            let widest = most(&|a, b| (moved(a) - moved(b)).length());
+            return widest <= 2.0 * keep.gamma * (self.separation - keep.floor).max(0.0);
+        }
+        self.usable(keep)
+            .any(|s| most(&|a, b| s.normal.dot(moved(b) - moved(a))) <= s.allowance(keep))
     }
 
-    /// How far apart the sides may move: 2 gamma (s − floor).
-    pub fn allowance(&self, keep: &SelfContactConfig) -> f32 {
-        2.0 * keep.gamma * (self.separation - keep.floor).max(0.0)
-    }
-
-    /// Whether the pair could fail the relative test however its vertices
-    /// are held: a held step is the full one scaled by a factor in [0, 1],
-    /// and |α a − β b| over α, β in [0, 1] is largest at a corner, so the
-    /// worst is the longest step or the widest difference of full steps.
+    /// Whether the pair could fail however its vertices are held: a held
+    /// step is the full one scaled by a factor in [0, 1]. Across a slab,
+    /// β n·d_b − α n·d_a is largest at max(0, n·d_b) + max(0, −n·d_a);
+    /// touching, |α a − β b| is largest at a corner, the longest step or
+    /// the widest difference of full steps.
     pub fn could_fail(&self, d: &[Vec3], keep: &SelfContactConfig) -> bool {
         let step = |v: u32| d[v as usize];
-        let longest = self
-            .vertices
-            .iter()
-            .map(|&v| step(v).length())
-            .fold(0.0, f32::max);
-        longest.max(self.apart(step)) > self.allowance(keep)
+        if self.touching() {
+            let longest = (self.vertices.iter()).fold(0.0f32, |m, &v| m.max(step(v).length()));
+            return longest > 0.0 || !self.passes(step, keep);
+        }
+        let (p, q) = self.sides();
+        let most = |side: &[u32], n: Vec3| side.iter().fold(0.0f32, |m, &v| m.max(n.dot(step(v))));
+        self.usable(keep)
+            .all(|s| most(q, s.normal) + most(p, -s.normal) > s.allowance(keep))
     }
 }
 
@@ -112,10 +203,6 @@ pub fn swept(start: &[Vec3], end: &[Vec3], vertices: &[u32]) -> Aabb {
 /// Each triangle's swept box, what the BVH is refitted to.
 pub fn swept_boxes(start: &[Vec3], end: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Aabb> {
     triangles.iter().map(|t| swept(start, end, t)).collect()
-}
-
-fn overlap(a: &Aabb, b: &Aabb) -> bool {
-    a.min.cmple(b.max).all() && b.min.cmple(a.max).all()
 }
 
 /// The near pairs: those sharing no vertex whose swept boxes, the first
@@ -133,14 +220,7 @@ pub fn near_pairs(
 ) -> (Vec<NearPair>, Vec<f32>) {
     let floor = keep.floor;
     let d: Vec<Vec3> = end.iter().zip(start).map(|(e, s)| *e - *s).collect();
-    let at = |i: u32| start[i as usize];
-    let grown = |vertices: &[u32]| {
-        let b = swept(start, end, vertices);
-        Aabb {
-            min: b.min - floor,
-            max: b.max + floor,
-        }
-    };
+    let grown = |vertices: &[u32]| swept(start, end, vertices).grown(floor);
     let mut pairs: Vec<NearPair> = (0..start.len() as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
@@ -149,13 +229,8 @@ pub fn near_pairs(
             let mut found = Vec::new();
             bvh.query_box(query, |t| {
                 let tri = triangles[t as usize];
-                if !tri.contains(&v) && overlap(&query, &swept(start, end, &tri)) {
-                    let c = closest_on_triangle(at(v), at(tri[0]), at(tri[1]), at(tri[2]));
-                    found.push(NearPair {
-                        vertices: [v, tri[0], tri[1], tri[2]],
-                        edges: false,
-                        separation: (at(v) - c).length(),
-                    });
+                if !tri.contains(&v) && query.overlaps(&swept(start, end, &tri)) {
+                    found.push(NearPair::at([v, tri[0], tri[1], tri[2]], false, start));
                 }
             });
             found
@@ -175,14 +250,8 @@ pub fn near_pairs(
                         let f = [f[0].min(f[1]), f[0].max(f[1])];
                         // Each pair from its lower edge.
                         let apart = !e.iter().any(|v| f.contains(v));
-                        if f > e && apart && overlap(&query, &swept(start, end, &f)) {
-                            let (c, d) =
-                                closest_between_segments(at(e[0]), at(e[1]), at(f[0]), at(f[1]));
-                            found.push(NearPair {
-                                vertices: [e[0], e[1], f[0], f[1]],
-                                edges: true,
-                                separation: (c - d).length(),
-                            });
+                        if f > e && apart && query.overlaps(&swept(start, end, &f)) {
+                            found.push(NearPair::at([e[0], e[1], f[0], f[1]], true, start));
                         }
                     }
                 });
@@ -247,7 +316,7 @@ pub fn hold(
         };
         let failing: Vec<&NearPair> = pairs
             .iter()
-            .filter(|pair| pair.apart(moved) > pair.allowance(keep))
+            .filter(|pair| !pair.passes(moved, keep))
             .collect();
         let mut changed = false;
         for pair in failing {
@@ -380,34 +449,22 @@ mod tests {
         let d: Vec<Vec3> = end.iter().zip(start).map(|(e, s)| *e - *s).collect();
         let mut least = vec![f32::INFINITY; start.len()];
         let mut pairs = Vec::new();
-        let grown = |v: &[u32]| {
-            let b = swept(start, end, v);
-            Aabb {
-                min: b.min - floor,
-                max: b.max + floor,
-            }
-        };
-        let mut note = |vertices: [u32; 4], edges: bool, separation: f32| {
-            let pair = NearPair {
-                vertices,
-                edges,
-                separation,
-            };
+        let grown = |v: &[u32]| swept(start, end, v).grown(floor);
+        let mut note = |vertices: [u32; 4], edges: bool| {
+            let pair = NearPair::at(vertices, edges, start);
             if !pair.could_fail(&d, keep) {
                 return;
             }
-            let s = separation;
+            let s = pair.separation;
             pairs.push((vertices, edges));
             for v in vertices {
                 least[v as usize] = least[v as usize].min(s);
             }
         };
-        let at = |k: u32| start[k as usize];
         for v in 0..start.len() as u32 {
             for tri in t.iter().filter(|tri| !tri.contains(&v)) {
-                if overlap(&grown(&[v]), &swept(start, end, tri)) {
-                    let c = closest_on_triangle(at(v), at(tri[0]), at(tri[1]), at(tri[2]));
-                    note([v, tri[0], tri[1], tri[2]], false, (at(v) - c).length());
+                if grown(&[v]).overlaps(&swept(start, end, tri)) {
+                    note([v, tri[0], tri[1], tri[2]], false);
                 }
             }
         }
@@ -416,9 +473,8 @@ mod tests {
                 .iter()
                 .filter(|f| !e.iter().any(|v| f.contains(v)))
             {
-                if overlap(&grown(e), &swept(start, end, f)) {
-                    let (c, d) = closest_between_segments(at(e[0]), at(e[1]), at(f[0]), at(f[1]));
-                    note([e[0], e[1], f[0], f[1]], true, (c - d).length());
+                if grown(e).overlaps(&swept(start, end, f)) {
+                    note([e[0], e[1], f[0], f[1]], true);
                 }
             }
         }
@@ -441,6 +497,7 @@ mod tests {
         enabled: true,
         gamma: 0.45,
         floor: 1e-3,
+        thickness: 5e-3,
     };
 
     #[test]
@@ -454,7 +511,7 @@ mod tests {
         }
         let end: Vec<Vec3> = start
             .iter()
-            .map(|&p| p + 0.002 * jitter(&mut seed))
+            .map(|&p| p + 0.01 * jitter(&mut seed))
             .collect();
         let (pairs, least) = near(&start, &end, &t, &edges, &KEEP);
         let mut found: Vec<([u32; 4], bool)> =
@@ -488,6 +545,7 @@ mod tests {
             enabled: true,
             gamma: 0.45,
             floor: 1e-4,
+            thickness: 0.0,
         };
         let run = |held: bool| {
             let mut x = x0.clone();

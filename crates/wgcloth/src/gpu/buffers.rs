@@ -7,16 +7,18 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use crate::config::{ModelKind, Preconditioner};
-use crate::cpu::separate;
+use crate::cpu::{self_contact, separate};
 use crate::error::{Error, Result};
-use crate::gpu::constants::{TILE, WORKGROUP, model, motion, self_header};
+use crate::gpu::constants::{TILE, WORKGROUP, cloth_header, model, motion, self_header};
 use crate::gpu::layout::{
-    BvhNode, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections, StepState, Sym3,
+    BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections,
+    StepState, Sym3,
 };
 use crate::gpu::shaders::PARTS;
 use crate::multigrid::{self, STORED_STENCIL};
 use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
+use crate::stage::SelfContactStages;
 
 /// Workgroups covering `n` invocations.
 pub(crate) fn groups(n: u32) -> u32 {
@@ -84,8 +86,13 @@ pub(crate) struct Buffers {
     pub(crate) separations: wgpu::Buffer,
     /// Stage "separate": its rounds' indirect dispatches.
     pub(crate) self_dispatches: wgpu::Buffer,
-    /// Stage "separate": the near pairs, five words each.
+    /// Stage "separate": the near pairs, four words each.
     pub(crate) self_pairs: wgpu::Buffer,
+    /// Stage "self_contact": its header, each vertex's contact count and
+    /// list (`gpu::constants::cloth_header`).
+    pub(crate) cloth_lists: wgpu::Buffer,
+    /// Stage "self_contact": the cloth–cloth contacts.
+    pub(crate) cloth_pairs: wgpu::Buffer,
     /// Where the step started (self-contact only).
     pub(crate) x_start: wgpu::Buffer,
     /// The network batch's size, then its contact slots.
@@ -215,8 +222,14 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
             true => separate::PAIRS_PER_VERTEX * cloth.vertex_count() as u32,
             false => 0,
         },
+        rest_spacing: self_contact::grid_spacing(cloth).to_array(),
         ..Default::default()
     };
+    if SelfContactStages::of(&cfg.self_contact).forces {
+        p.cloth_thickness = cfg.self_contact.thickness;
+        p.cloth_capacity = 4 * cloth.vertex_count() as u32;
+        p.cloth_per_vertex = self_contact::PAIRS_PER_VERTEX;
+    }
     if let Some(body) = &scene.rigid {
         p.has_rigid = 1;
         p.n_rigid_vertices = body.mesh.vertices.len() as u32;
@@ -288,9 +301,8 @@ pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
         .collect()
 }
 
-/// Bytes of one near pair in stage "separate"'s list: four vertices and
-/// the separation's bits.
-const PAIR_BYTES: usize = 20;
+/// Bytes of one near pair in stage "separate"'s list: four vertices.
+const PAIR_BYTES: usize = 16;
 
 /// Shortens stage "separate"'s pair list to what one binding holds, where
 /// `PAIRS_PER_VERTEX` per vertex would not fit: a step whose pairs overflow
@@ -302,6 +314,15 @@ pub(crate) fn fit_pair_list(limits: &wgpu::Limits, params: &mut Params) {
         .min(limits.max_buffer_size);
     let most = bindable / PAIR_BYTES as u64;
     params.self_capacity = params.self_capacity.min(most.min(u32::MAX as u64) as u32);
+    // Stage "self_contact": four contacts per vertex and PAIRS_PER_VERTEX
+    // entries in each vertex's list, or what one binding holds.
+    if params.cloth_thickness > 0.0 {
+        let n = params.n_vertices as u64;
+        let most = bindable / size_of::<ClothPair>() as u64;
+        params.cloth_capacity = params.cloth_capacity.min(most.min(u32::MAX as u64) as u32);
+        let words = bindable / 4 - cloth_header::WORDS as u64 - cloth_header::COUNTS as u64 * n;
+        params.cloth_per_vertex = params.cloth_per_vertex.min((words / n) as u32);
+    }
 }
 
 /// Every buffer's size in bytes that depends on the scene, a pure function
@@ -324,6 +345,8 @@ pub(crate) struct Sizes {
     pub(crate) bounds: u64,
     pub(crate) separations: u64,
     pub(crate) self_pairs: u64,
+    pub(crate) cloth_lists: u64,
+    pub(crate) cloth_pairs: u64,
     pub(crate) x_start: u64,
     pub(crate) net_batch: u64,
     pub(crate) net_inputs: u64,
@@ -380,6 +403,14 @@ impl Sizes {
             bounds: size(tiles + self_cells, 32),
             separations: size(self_n * 2 + self_header::WORDS as u64, 4),
             self_pairs: size(p.self_capacity as u64, PAIR_BYTES),
+            cloth_lists: match p.cloth_thickness > 0.0 {
+                true => {
+                    let per_vertex = (cloth_header::COUNTS + p.cloth_per_vertex) as u64;
+                    size(cloth_header::WORDS as u64 + n * per_vertex, 4)
+                }
+                false => 0,
+            },
+            cloth_pairs: size(p.cloth_capacity as u64, size_of::<ClothPair>()),
             x_start: size(self_n, 16),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
@@ -389,7 +420,7 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn whole(&self) -> [(&'static str, u64); 16] {
+    pub(crate) fn whole(&self) -> [(&'static str, u64); 18] {
         [
             ("per-vertex vectors", self.per_vertex),
             ("PCG z and q", 2 * self.per_vertex),
@@ -402,6 +433,8 @@ impl Sizes {
             ("tile bounds", self.bounds),
             ("least separations", self.separations),
             ("self-contact pairs", self.self_pairs),
+            ("cloth-cloth contact lists", self.cloth_lists),
+            ("cloth-cloth contacts", self.cloth_pairs),
             ("step start", self.x_start),
             ("network batch", self.net_batch),
             ("network inputs", self.net_inputs),
@@ -588,6 +621,8 @@ impl Buffers {
                 mapped_at_creation: false,
             })),
             self_pairs: zeroed("self-contact pairs", sizes.self_pairs),
+            cloth_lists: zeroed("cloth-cloth contact lists", sizes.cloth_lists),
+            cloth_pairs: zeroed("cloth-cloth contacts", sizes.cloth_pairs),
             x_start: zeroed("step start", sizes.x_start),
             net_batch: zeroed("network batch", sizes.net_batch),
             net_inputs: zeroed("network inputs", sizes.net_inputs),
@@ -701,17 +736,18 @@ pub(crate) fn check_limits(
 mod tests {
     use super::*;
 
-    /// A 1024² cloth with self-contact fits a device whose bindings hold
-    /// 128 MiB (lavapipe's and WebGPU's default) and whose buffers may be
-    /// larger (lavapipe's): its pair list (8 per vertex would be 168 MB) is
-    /// cut to one binding, and the largest arrays are bound in parts.
+    /// A 1100 × 1024 cloth with self-contact fits a device whose bindings
+    /// hold 128 MiB (lavapipe's and WebGPU's default) and whose buffers may
+    /// be larger (lavapipe's): its pair list (8 per vertex would be 144 MB)
+    /// is cut to one binding, its cloth–cloth contact lists shortened, and
+    /// the largest arrays are bound in parts.
     #[test]
     fn a_large_cloth_with_self_contact_fits_a_128_mib_binding() {
         let mut config = crate::Config {
             scene: crate::config::SceneKind::Hang,
             ..Default::default()
         };
-        config.cloth.grid = [1024, 1024];
+        config.cloth.grid = [1100, 1024];
         config.self_contact.enabled = true;
         let scene = Scene::new(&config).unwrap();
         let (topology, sections) = crate::gpu::layout::topology(&scene);
@@ -726,6 +762,12 @@ mod tests {
         let sizes = Sizes::of(&scene, &params, topology.len());
         assert!(sizes.self_pairs <= limits.max_storage_buffer_binding_size);
         assert!(sizes.self_pairs + PAIR_BYTES as u64 > limits.max_storage_buffer_binding_size);
+        assert!(sizes.cloth_lists <= limits.max_storage_buffer_binding_size);
+        assert!(sizes.cloth_pairs <= limits.max_storage_buffer_binding_size);
+        assert!(
+            params.cloth_per_vertex > 16
+                && params.cloth_per_vertex < self_contact::PAIRS_PER_VERTEX
+        );
         check_limits(&limits, &sizes, &mut params, true).unwrap();
     }
 

@@ -49,6 +49,21 @@ pub mod self_header {
     pub const DISPATCH_WORDS: u32 = 12;
 }
 
+/// Stage "self_contact"'s list buffer (wgsl/self_contact.wgsl): this
+/// header, then per vertex its count of contacts found, its count listed,
+/// and its list of `Params::cloth_per_vertex` entries (4 · contact + the
+/// vertex's slot in it).
+pub mod cloth_header {
+    /// Contacts found (kept up to `Params::cloth_capacity`).
+    pub const COUNT: u32 = 0;
+    /// Contacts left out this step.
+    pub const DROPPED: u32 = 1;
+    /// The header's length.
+    pub const WORDS: u32 = 4;
+    /// Words per vertex after it besides its list: its two counts.
+    pub const COUNTS: u32 = 2;
+}
+
 /// `Params::motion_kind`: how the rigid body moves (wgsl/rigid.wgsl).
 pub mod motion {
     /// The body stays where it is placed.
@@ -77,7 +92,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 28] = [
+pub const SHARED: [(&str, u32); 31] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -92,6 +107,9 @@ pub const SHARED: [(&str, u32); 28] = [
     ("SELF_SETTLE_ARGS", self_header::SETTLE_ARGS),
     ("SELF_RECHECK_VERTEX_ARGS", self_header::RECHECK_VERTEX_ARGS),
     ("SELF_RECHECK_EDGE_ARGS", self_header::RECHECK_EDGE_ARGS),
+    ("CLOTH_COUNT", cloth_header::COUNT),
+    ("CLOTH_DROPPED", cloth_header::DROPPED),
+    ("CLOTH_HEADER", cloth_header::WORDS),
     ("MOTION_LINEAR", motion::LINEAR),
     ("MOTION_SINUSOID", motion::SINUSOID),
     ("MODEL_NAIVE", model::NAIVE),

@@ -53,6 +53,11 @@ pub enum Entry {
     PcgNext,
     /// Ends the last iteration: its scalars alone (`pcg::conclude`).
     PcgConclude,
+    /// r −= S C x for the cloth–cloth couplings C, z = P⁻¹ r, partial rᵀz
+    /// and rᵀr (`pcg::couple_init`).
+    PcgCoupleInit,
+    /// q += S C p and partial pᵀq (`pcg::couple`).
+    PcgCouple,
     /// Folds the solve's outcome into the run statistics (`pcg::finish`).
     PcgFinish,
     /// A coarse level's Galerkin operator and smoother (`multigrid::galerkin`).
@@ -92,6 +97,16 @@ pub enum Entry {
     SeparatePlan,
     /// Each held vertex's step held back (`separate::finish`).
     SeparateFinish,
+    /// Each grid cell's box at the step's start (`self_contact::cells`).
+    SelfContactCells,
+    /// Each vertex's cloth–cloth contacts with triangles (`self_contact::vertices`).
+    SelfContactVertices,
+    /// Each cloth edge's contacts with edges (`self_contact::edges`).
+    SelfContactEdges,
+    /// Each contact's force and blocks, linked to its vertices (`self_contact::link`).
+    SelfContactLink,
+    /// Each vertex's contacts sorted and added to A and b (`self_contact::gather`).
+    SelfContactGather,
     /// Sizes a network batch's indirect dispatches (`batch::plan`).
     BatchPlan,
     /// One dense network layer as a tiled matrix product (`mlp::layer`).
@@ -107,7 +122,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 42] = [
+    pub const ALL: [Entry; 49] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -126,6 +141,8 @@ impl Entry {
         Entry::PcgAdvance,
         Entry::PcgNext,
         Entry::PcgConclude,
+        Entry::PcgCoupleInit,
+        Entry::PcgCouple,
         Entry::PcgFinish,
         Entry::MgGalerkin,
         Entry::MgResidual,
@@ -145,6 +162,11 @@ impl Entry {
         Entry::SeparateSettle,
         Entry::SeparatePlan,
         Entry::SeparateFinish,
+        Entry::SelfContactCells,
+        Entry::SelfContactVertices,
+        Entry::SelfContactEdges,
+        Entry::SelfContactLink,
+        Entry::SelfContactGather,
         Entry::BatchPlan,
         Entry::MlpLayer,
         Entry::MlpPerContact,
@@ -173,6 +195,8 @@ impl Entry {
             Entry::PcgAdvance => ("pcg", "advance"),
             Entry::PcgNext => ("pcg", "next"),
             Entry::PcgConclude => ("pcg", "conclude"),
+            Entry::PcgCoupleInit => ("pcg", "couple_init"),
+            Entry::PcgCouple => ("pcg", "couple"),
             Entry::PcgFinish => ("pcg", "finish"),
             Entry::MgGalerkin => ("multigrid", "galerkin"),
             Entry::MgResidual => ("multigrid", "residual"),
@@ -192,6 +216,11 @@ impl Entry {
             Entry::SeparateSettle => ("separate", "settle"),
             Entry::SeparatePlan => ("separate", "plan"),
             Entry::SeparateFinish => ("separate", "finish"),
+            Entry::SelfContactCells => ("self_contact", "cells"),
+            Entry::SelfContactVertices => ("self_contact", "vertices"),
+            Entry::SelfContactEdges => ("self_contact", "edges"),
+            Entry::SelfContactLink => ("self_contact", "link"),
+            Entry::SelfContactGather => ("self_contact", "gather"),
             Entry::BatchPlan => ("batch", "plan"),
             Entry::MlpLayer => ("mlp", "layer"),
             Entry::MlpPerContact => ("mlp", "per_contact"),

@@ -126,8 +126,21 @@ pub struct Params {
     /// Near pairs the list holds (stage "separate"): `PAIRS_PER_VERTEX`
     /// per vertex, or what one binding holds (`gpu::buffers::fit_pair_list`).
     pub self_capacity: u32,
+    /// `self_contact.thickness` when self-contact is on, else 0: stage
+    /// "self_contact" runs when above 0.
+    pub cloth_thickness: f32,
+    /// Cloth–cloth contacts the list holds (stage "self_contact"): four
+    /// per vertex (a cloth folded flat onto itself has about that many), or
+    /// what one binding holds.
+    pub cloth_capacity: u32,
+    /// The flat rest grid's spacing along a row and down a column, m
+    /// (`cpu::self_contact::grid_spacing`).
+    pub rest_spacing: [f32; 2],
+    /// Entries of each vertex's contact list (stage "self_contact"):
+    /// `cpu::self_contact::PAIRS_PER_VERTEX`, or what one binding holds.
+    pub cloth_per_vertex: u32,
     /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
-    pub pad: [u32; 2],
+    pub pad: u32,
 }
 
 /// Clock and run statistics kept on the GPU.
@@ -170,6 +183,34 @@ pub struct StepState {
     /// Self-contact: steps whose near pairs overflowed the list (their
     /// rounds walked the cloth again instead: slower, the same result).
     pub self_overflows: u32,
+    /// Self-contact: the most cloth–cloth contacts one step applied (stage
+    /// "self_contact").
+    pub cloth_contacts_max: u32,
+    /// Self-contact: cloth–cloth contacts left out, summed over every
+    /// step (past the list's capacity, or at a vertex in more than
+    /// `cpu::self_contact::PAIRS_PER_VERTEX`).
+    pub cloth_contacts_dropped: u32,
+}
+
+/// A cloth–cloth contact and what it adds to the system (mirrors
+/// `ClothPair` in wgsl/common.wgsl and `cpu::self_contact::{Pair,
+/// PairTerm}`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ClothPair {
+    /// `cpu::self_contact::Pair::key`: the vertices, `EDGE_PAIR` on the
+    /// first of an edge–edge pair.
+    pub key: [u32; 4],
+    /// β per vertex.
+    pub beta: [f32; 4],
+    /// h (f − D_c v_rel).
+    pub rhs: [f32; 3],
+    /// 1 when applied; 0 when dropped at a crowded vertex.
+    pub applied: u32,
+    /// B = −(h D_c + h² K_c).
+    pub block: Sym3,
+    /// Pads the struct to a multiple of 16 bytes.
+    pub pad: [u32; 2],
 }
 
 /// A symmetric 3×3 block as buffers hold it (mirrors `PackedSym3` in
@@ -457,6 +498,7 @@ mod tests {
             ("multigrid", "Hop", size_of::<Hop>()),
             ("assemble", "RigidFrame", size_of::<RigidFrame>()),
             ("assemble", "BvhNode", size_of::<BvhNode>()),
+            ("assemble", "ClothPair", size_of::<ClothPair>()),
         ] {
             assert_eq!(wgsl_size(stage, name), size, "{name}");
         }

@@ -8,12 +8,13 @@ use std::collections::BTreeMap;
 use crate::gpu::constants;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 12] = [
+pub const STAGES: [(&str, &str); 13] = [
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
     ("assemble", include_str!("../../wgsl/assemble.wgsl")),
     ("pcg", include_str!("../../wgsl/pcg.wgsl")),
+    ("self_contact", include_str!("../../wgsl/self_contact.wgsl")),
     ("separate", include_str!("../../wgsl/separate.wgsl")),
     ("multigrid", include_str!("../../wgsl/multigrid.wgsl")),
     ("integrate", include_str!("../../wgsl/integrate.wgsl")),
@@ -29,7 +30,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 5] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 7] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -39,6 +40,7 @@ pub const INCLUDES: [(&str, &str, &[&str]); 5] = [
             "assemble",
             "pcg",
             "multigrid",
+            "self_contact",
             "separate",
             "integrate",
             "measure",
@@ -52,7 +54,17 @@ pub const INCLUDES: [(&str, &str, &[&str]); 5] = [
     (
         "tiles",
         include_str!("../../wgsl/tiles.wgsl"),
-        &["collide", "separate"],
+        &["collide", "self_contact", "separate"],
+    ),
+    (
+        "walk",
+        include_str!("../../wgsl/walk.wgsl"),
+        &["self_contact", "separate"],
+    ),
+    (
+        "response",
+        include_str!("../../wgsl/response.wgsl"),
+        &["contact", "self_contact"],
     ),
     (
         "springs",

@@ -19,7 +19,7 @@ use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::stages::Stages;
 use crate::scene::Scene;
-use crate::stage::Stage;
+use crate::stage::{SelfContactStages, Stage};
 
 /// A contact slot and its response, as read back.
 pub type ContactSlot = (Contact, Response);
@@ -303,11 +303,19 @@ impl GpuSim {
         })
     }
 
+    /// Which self-contact stages the scene runs.
+    fn self_contact_stages(&self) -> SelfContactStages {
+        SelfContactStages {
+            separate: self.params.self_contact != 0,
+            forces: self.params.cloth_thickness > 0.0,
+        }
+    }
+
     /// The passes a step records: the rigid-body ones only with a body.
     fn active_passes(&self) -> impl Iterator<Item = Stage> + '_ {
-        Stage::ALL.into_iter().filter(move |stage| {
-            stage.runs(self.params.has_rigid != 0, self.params.self_contact != 0)
-        })
+        Stage::ALL
+            .into_iter()
+            .filter(move |stage| stage.runs(self.params.has_rigid != 0, self.self_contact_stages()))
     }
 
     /// Records one backward Euler step into `encoder`; nothing is read
@@ -329,13 +337,14 @@ impl GpuSim {
     /// nothing without a body. Returns the number of dispatches recorded.
     pub fn record_stage(&self, encoder: &mut wgpu::CommandEncoder, stage: Stage) -> u32 {
         let p = &self.params;
-        if !stage.runs(p.has_rigid != 0, p.self_contact != 0) {
+        if !stage.runs(p.has_rigid != 0, self.self_contact_stages()) {
             return 0;
         }
         let s = &self.stages;
         match stage {
             Stage::Collide => s.collide.clear(encoder, p),
             Stage::Separate => s.separate.clear(encoder, p),
+            Stage::SelfContact => s.self_contact.clear(encoder, p),
             _ => {}
         }
         let mut pass = self.pass(encoder, stage);
@@ -348,6 +357,7 @@ impl GpuSim {
             Stage::Pcg => s
                 .pcg
                 .encode(&mut pass, p, self.cg_budget.load(Ordering::Relaxed)),
+            Stage::SelfContact => s.self_contact.encode(&mut pass, p),
             Stage::Separate => s.separate.encode(&mut pass, p),
             Stage::Integrate => s.integrate.encode(&mut pass, p),
             Stage::Measure => s.measure.encode(&mut pass, p),
@@ -424,6 +434,21 @@ impl GpuSim {
             least.collect(),
             words[2 * n + self_header::PAIR_COUNT as usize],
         ))
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// The last step's cloth–cloth contacts that were applied (stage
+    /// "self_contact"; the twin of `cpu::self_contact::Sheet::find`),
+    /// sorted by key as the CPU keeps them.
+    pub fn read_cloth_contacts(&self) -> Result<Vec<layout::ClothPair>> {
+        use crate::gpu::constants::cloth_header;
+        let header: Vec<u32> = self.read(&self.buffers.cloth_lists)?;
+        let found = header[cloth_header::COUNT as usize].min(self.params.cloth_capacity);
+        let mut pairs: Vec<layout::ClothPair> = self.read(&self.buffers.cloth_pairs)?;
+        pairs.truncate(found as usize);
+        pairs.retain(|p| p.applied != 0);
+        pairs.sort_by_key(|p| p.key);
+        Ok(pairs)
     }
 
     #[cfg(not(target_arch = "wasm32"))]

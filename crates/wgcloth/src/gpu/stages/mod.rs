@@ -13,6 +13,7 @@ pub mod measure;
 pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
+pub mod self_contact;
 pub mod separate;
 
 use crate::gpu::buffers::Buffers;
@@ -28,6 +29,7 @@ pub(crate) struct Stages {
     pub(crate) collide: collide::Collide,
     pub(crate) contact: contact::Contact,
     pub(crate) assemble: assemble::Assemble,
+    pub(crate) self_contact: self_contact::SelfContact,
     pub(crate) pcg: pcg::Pcg,
     pub(crate) separate: separate::Separate,
     pub(crate) integrate: integrate::Integrate,
@@ -54,6 +56,7 @@ impl Stages {
             collide: collide::Collide::new(kernels, device, b),
             contact: contact::Contact::new(kernels, device, b, network),
             assemble: assemble::Assemble::new(kernels, device, b),
+            self_contact: self_contact::SelfContact::new(kernels, device, b),
             pcg: pcg::Pcg::new(kernels, device, b, scene),
             separate: separate::Separate::new(kernels, device, b),
             integrate: integrate::Integrate::new(kernels, device, b),

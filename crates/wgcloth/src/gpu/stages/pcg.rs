@@ -24,6 +24,11 @@ struct Side {
     next: Bound,
     conclude: Bound,
     finish: Bound,
+    /// With cloth–cloth contacts: the couplings' part of r = S (b − A x)
+    /// after `init` (its `p` bound to x), and of q = S A p after `spmv` or
+    /// `next` (this side's direction and scalars, which they just wrote).
+    couple_init: Bound,
+    couple: Bound,
 }
 
 pub(crate) struct Pcg {
@@ -50,12 +55,16 @@ impl Pcg {
                 ("scalars_in", &b.scalars[k]),
                 ("scalars_next", &b.scalars[1 - k]),
                 ("state", &b.state),
+                ("cloth_lists", &b.cloth_lists),
+                ("cloth_pairs", &b.cloth_pairs),
             ];
             let bind = |entry| {
                 kernels
                     .kernel(entry)
                     .bind_parts(device, &buffers, &[&b.topology, &b.matrix])
             };
+            let mut with_x = buffers;
+            with_x[4] = ("p", &b.v);
             Side {
                 init: bind(Entry::PcgInit),
                 init_scalars: bind(Entry::PcgInitScalars),
@@ -65,6 +74,12 @@ impl Pcg {
                 next: bind(Entry::PcgNext),
                 conclude: bind(Entry::PcgConclude),
                 finish: bind(Entry::PcgFinish),
+                couple_init: kernels.kernel(Entry::PcgCoupleInit).bind_parts(
+                    device,
+                    &with_x,
+                    &[&b.topology, &b.matrix],
+                ),
+                couple: bind(Entry::PcgCouple),
             }
         };
         Pcg {
@@ -85,7 +100,12 @@ impl Pcg {
         if let Some(mg) = &self.multigrid {
             count += mg.encode_setup(pass);
         }
+        let coupled = p.cloth_thickness > 0.0;
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
+        if coupled {
+            self.sides[0].couple_init.dispatch(pass, n, WORKGROUP);
+            count += 1;
+        }
         if let Some(mg) = &self.multigrid {
             count += mg.encode_cycle(pass, None);
         }
@@ -109,14 +129,23 @@ impl Pcg {
         };
         if iters > 0 {
             self.sides[0].spmv.dispatch(pass, n, WORKGROUP);
+            if coupled {
+                self.sides[0].couple.dispatch(pass, n, WORKGROUP);
+                count += 1;
+            }
             count += 2 + update(pass, 0);
             for it in 1..iters {
                 let prev = (it - 1) % 2;
-                self.sides[prev].next.dispatch_indirect(
-                    pass,
-                    &self.scalars[prev],
-                    Scalars::next_groups_offset(),
-                );
+                let args = (&self.scalars[prev], Scalars::next_groups_offset());
+                self.sides[prev]
+                    .next
+                    .dispatch_indirect(pass, args.0, args.1);
+                if coupled {
+                    self.sides[1 - prev]
+                        .couple
+                        .dispatch_indirect(pass, args.0, args.1);
+                    count += 1;
+                }
                 count += 1 + update(pass, it);
             }
             self.sides[(iters - 1) % 2].conclude.dispatch(pass, 1, 1);

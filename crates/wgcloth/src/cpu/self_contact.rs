@@ -1,0 +1,556 @@
+//! Stage "self_contact": the cloth pushing against itself (issue 23), as
+//! forces in the implicit solve. Twin of wgsl/self_contact.wgsl.
+//!
+//! At the step's start, each vertex–triangle pair whose vertex projects
+//! inside the triangle, and each edge–edge pair whose closest points lie
+//! inside both edges, closer than the thickness ε and sharing no vertex, is
+//! a contact: the first side (the vertex, or the first edge's point) is the
+//! penetrating point, the other the surface, n points from the surface to
+//! it and d̃ = distance − ε < 0. As for a face–vertex contact with the body
+//! (DESIGN "collision detection" (b)), the four vertices carry weights β
+//! with the force on vertex k β_k f, ∂d̃/∂x_k = β_k nᵀ and
+//! v_rel = Σ β_k v_k: (1, −w0, −w1, −w2) with w the barycentrics, or
+//! (1 − s, s, −(1 − t), −t) at edge parameters s, t. The force is eqs. 8–9
+//! with the `[contact]` coefficients (the analytic model whichever model the
+//! body uses: the networks learnt cloth against a rigid body), made safe for
+//! PCG by `contact::response`. A pair adds β_k β_l B at (k, l) with
+//! B = −(h D_c + h² K_c), positive semidefinite, so A stays SPD: the
+//! diagonal blocks go into A's diagonal (the preconditioners see them), the
+//! others into [`Couplings`], which the SpMV applies by gathering over each
+//! vertex's pairs.
+//!
+//! Pairs that are close in the flat cloth are not contacts: a pair counts
+//! only when its two sides lie at least 2ε apart in the cloth's rest grid,
+//! so a fine grid's neighbouring rows do not push each other apart in the
+//! plane. A vertex takes part in at most [`PAIRS_PER_VERTEX`] pairs (the
+//! GPU's list); the pairs of a vertex in more are dropped and counted.
+//! (Edge–edge pairs are most of them: two layers resting within ε have
+//! about four for each vertex–triangle pair.)
+
+use glam::{Mat3, Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::bvh::{Aabb, Bvh};
+use crate::cpu::GRAIN;
+use crate::cpu::collide::{Tolerances, point_triangle};
+use crate::cpu::contact::{Coefficients, friction, response};
+use crate::cpu::separate::EDGE_PAIR;
+use crate::math::{closest_between_segments, closest_on_triangle, segment_parameters};
+use crate::scene::Cloth;
+
+/// The most pairs a vertex takes part in (the GPU's list per vertex, or
+/// fewer where one binding would not hold the lists: `Params::cloth_per_vertex`).
+/// Two layers resting within ε of each other put a vertex in about 16,
+/// four fifths of them edge–edge.
+pub const PAIRS_PER_VERTEX: u32 = 32;
+
+/// A cloth–cloth contact at the step's start.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pair {
+    /// The vertex then the triangle's three, or one edge's two then the
+    /// other's.
+    pub vertices: [u32; 4],
+    /// Edge–edge (else vertex–triangle).
+    pub edges: bool,
+    /// β_k of each of `vertices`: the penetrating point minus the nearest
+    /// point of the surface is Σ β_k x_k ([`Pair::gap`]).
+    pub beta: [f32; 4],
+}
+
+impl Pair {
+    /// The order pairs are kept in on both paths: vertex–triangle first,
+    /// then by vertex (the GPU's key, `EDGE_PAIR` on the first).
+    pub fn key(&self) -> [u32; 4] {
+        let [a, b, c, d] = self.vertices;
+        [a | if self.edges { EDGE_PAIR } else { 0 }, b, c, d]
+    }
+
+    /// Σ β_k y_k: at velocities, v_rel; at positions, the gap from the
+    /// surface to the penetrating point, |gap| its distance and gap/|gap|
+    /// its normal n.
+    pub fn gap(&self, y: &[Vec3]) -> Vec3 {
+        (0..4).fold(Vec3::ZERO, |acc, k| {
+            acc + self.beta[k] * y[self.vertices[k] as usize]
+        })
+    }
+
+    /// The contact normal n and d̃ = distance − ε at positions `x` (d̃ at
+    /// most 0, so rounding at the band's edge never pulls; no normal and
+    /// d̃ = 0, so no force, where the gap rounds to nothing).
+    pub fn normal_depth(&self, x: &[Vec3], thickness: f32) -> (Vec3, f32) {
+        let gap = self.gap(x);
+        let distance = gap.length();
+        match distance > 0.0 {
+            true => (gap / distance, (distance - thickness).min(0.0)),
+            false => (Vec3::ZERO, 0.0),
+        }
+    }
+}
+
+/// The flat grid the cloth is cut from: vertex i at (column dx, row dy, 0).
+/// The rest distance of a pair is measured here, on both paths.
+pub fn rest_grid(cloth: &Cloth) -> Vec<Vec3> {
+    let spacing = grid_spacing(cloth);
+    (0..cloth.vertex_count() as u32)
+        .map(|i| rest_point(i, cloth.nx, spacing))
+        .collect()
+}
+
+/// The grid's spacing along a row and down a column, m.
+pub fn grid_spacing(cloth: &Cloth) -> Vec2 {
+    let at = |i: u32| cloth.rest_positions[i as usize];
+    Vec2::new((at(1) - at(0)).length(), (at(cloth.nx) - at(0)).length())
+}
+
+/// Vertex i of a grid `nx` wide in the flat rest grid.
+pub fn rest_point(i: u32, nx: u32, spacing: Vec2) -> Vec3 {
+    Vec3::new(
+        (i % nx) as f32 * spacing.x,
+        (i / nx) as f32 * spacing.y,
+        0.0,
+    )
+}
+
+/// The barycentrics of `p`'s projection on triangle `tri` when it falls
+/// inside and `p` lies within `thickness` of the triangle's plane, off it.
+pub fn vertex_triangle(p: Vec3, tri: [Vec3; 3], thickness: f32) -> Option<Vec3> {
+    let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
+    if n == Vec3::ZERO {
+        return None;
+    }
+    let both_sides = Tolerances {
+        thickness,
+        max_depth: thickness,
+    };
+    let (d, w) = point_triangle(p, tri, n, both_sides)?;
+    (d != 0.0).then_some(w)
+}
+
+/// The parameters (s, t) of the closest points of edges `e` and `f` when
+/// both lie inside their edges, less than `thickness` and more than 0
+/// apart.
+pub fn edge_edge(e: [Vec3; 2], f: [Vec3; 2], thickness: f32) -> Option<(f32, f32)> {
+    let (s, t) = segment_parameters(e[0], e[1], f[0], f[1]);
+    let inside = |u: f32| u > 0.0 && u < 1.0;
+    if !(inside(s) && inside(t)) {
+        return None;
+    }
+    let gap = (e[0] + (e[1] - e[0]) * s) - (f[0] + (f[1] - f[0]) * t);
+    let distance = gap.length();
+    (distance > 0.0 && distance < thickness).then_some((s, t))
+}
+
+/// The cloth a step finds contacts on.
+pub struct Sheet<'a> {
+    /// The cloth's triangles.
+    pub triangles: &'a [[u32; 3]],
+    /// Their edges (`separate::triangle_edges`).
+    pub edges: &'a [[u32; 2]],
+    /// Each vertex in the flat rest grid ([`rest_grid`]).
+    pub rest: &'a [Vec3],
+    /// ε, m.
+    pub thickness: f32,
+}
+
+impl Sheet<'_> {
+    /// Whether the two sides of a pair lie at least 2ε apart at rest.
+    fn apart_at_rest(&self, vertices: [u32; 4], edges: bool) -> bool {
+        let r = |i: u32| self.rest[i as usize];
+        let [a, b, c, d] = vertices;
+        let gap = match edges {
+            false => r(a) - closest_on_triangle(r(a), r(b), r(c), r(d)),
+            true => {
+                let (p, q) = closest_between_segments(r(a), r(b), r(c), r(d));
+                p - q
+            }
+        };
+        gap.length() >= 2.0 * self.thickness
+    }
+
+    /// The vertex–triangle contact of vertex `v` and triangle `t`.
+    pub fn vertex_pair(&self, x: &[Vec3], v: u32, t: u32) -> Option<Pair> {
+        let tri = self.triangles[t as usize];
+        if tri.contains(&v) {
+            return None;
+        }
+        let at = |i: u32| x[i as usize];
+        let w = vertex_triangle(at(v), tri.map(at), self.thickness)?;
+        let vertices = [v, tri[0], tri[1], tri[2]];
+        self.apart_at_rest(vertices, false).then_some(Pair {
+            vertices,
+            edges: false,
+            beta: [1.0, -w.x, -w.y, -w.z],
+        })
+    }
+
+    /// The edge–edge contact of edges `e` and `f` (each `[low, high]`).
+    pub fn edge_pair(&self, x: &[Vec3], e: [u32; 2], f: [u32; 2]) -> Option<Pair> {
+        if e.iter().any(|v| f.contains(v)) {
+            return None;
+        }
+        let at = |i: u32| x[i as usize];
+        let (s, t) = edge_edge(e.map(at), f.map(at), self.thickness)?;
+        let vertices = [e[0], e[1], f[0], f[1]];
+        self.apart_at_rest(vertices, true).then_some(Pair {
+            vertices,
+            edges: true,
+            beta: [1.0 - s, s, t - 1.0, -t],
+        })
+    }
+
+    /// Every contact at positions `x`, each once, sorted by
+    /// [`Pair::key`]; `bvh` holds the triangles' boxes at `x`. Returns them
+    /// with the number dropped at vertices in more than `per_vertex`
+    /// ([`PAIRS_PER_VERTEX`]).
+    pub fn find(&self, x: &[Vec3], bvh: &Bvh, per_vertex: u32) -> (Vec<Pair>, usize) {
+        // The boxes of primitives at x; a pair is tested only where the
+        // first's, grown by ε, overlaps the second's (as the GPU does).
+        let boxed =
+            |vertices: &[u32]| (vertices.iter()).fold(Aabb::EMPTY, |b, &i| b.grow(x[i as usize]));
+        let mut pairs: Vec<Pair> = (0..x.len() as u32)
+            .into_par_iter()
+            .with_min_len(GRAIN)
+            .flat_map_iter(|v| {
+                let (mut found, reach) = (Vec::new(), boxed(&[v]).grown(self.thickness));
+                bvh.query_box(reach, |t| {
+                    if reach.overlaps(&boxed(&self.triangles[t as usize])) {
+                        found.extend(self.vertex_pair(x, v, t));
+                    }
+                });
+                found
+            })
+            .collect();
+        pairs.par_extend(
+            self.edges
+                .par_iter()
+                .with_min_len(GRAIN)
+                .flat_map_iter(|&e| {
+                    let (mut found, reach) = (Vec::new(), boxed(&e).grown(self.thickness));
+                    bvh.query_box(reach, |t| {
+                        let tri = self.triangles[t as usize];
+                        for f in [[tri[0], tri[1]], [tri[1], tri[2]], [tri[2], tri[0]]] {
+                            let f = [f[0].min(f[1]), f[0].max(f[1])];
+                            // Each pair from its lower edge.
+                            if f > e && reach.overlaps(&boxed(&f)) {
+                                found.extend(self.edge_pair(x, e, f));
+                            }
+                        }
+                    });
+                    found
+                }),
+        );
+        // An edge–edge pair is met from both triangles along its upper edge.
+        pairs.par_sort_unstable_by_key(Pair::key);
+        pairs.dedup_by_key(|p| p.key());
+        let mut count = vec![0u32; x.len()];
+        for p in &pairs {
+            for &v in &p.vertices {
+                count[v as usize] += 1;
+            }
+        }
+        let before = pairs.len();
+        pairs.retain(|p| p.vertices.iter().all(|&v| count[v as usize] <= per_vertex));
+        let dropped = before - pairs.len();
+        (pairs, dropped)
+    }
+}
+
+/// What one pair adds to the system: B = −(h D_c + h² K_c) and
+/// h (f − D_c v_rel), each vertex k taking β_k of the second and
+/// β_k β_l B at (k, l).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PairTerm {
+    /// B, symmetric positive semidefinite.
+    pub block: Mat3,
+    /// h (f − D_c v_rel).
+    pub rhs: Vec3,
+    /// f, the force on the penetrating side.
+    pub force: Vec3,
+}
+
+/// How a step's pairs are evaluated: eqs. 8–9 with `coefficients` over a
+/// band of `thickness`, at time step `h`.
+#[derive(Clone, Copy, Debug)]
+pub struct Band {
+    /// k_n, k_d, k_t, μ (the `[contact]` ones).
+    pub coefficients: Coefficients,
+    /// ε, m.
+    pub thickness: f32,
+    /// h, s.
+    pub h: f32,
+}
+
+/// The eqs. 8–9 force of each pair at positions `x` and velocities `v`
+/// and its terms of the system, made safe for PCG by `contact::response`.
+pub fn respond(pairs: &[Pair], x: &[Vec3], v: &[Vec3], band: &Band) -> Vec<PairTerm> {
+    let (k, h) = (&band.coefficients, band.h);
+    pairs
+        .par_iter()
+        .with_min_len(GRAIN)
+        .map(|p| {
+            let v_rel = p.gap(v);
+            let (n, depth) = p.normal_depth(x, band.thickness);
+            let r = response(&friction(n * depth, v_rel, k), n, v_rel);
+            PairTerm {
+                block: -(h * r.damping + h * h * r.stiffness),
+                rhs: h * (r.force - r.damping * v_rel),
+                force: r.force,
+            }
+        })
+        .collect()
+}
+
+/// The off-diagonal blocks of the pairs, β_k β_l B at (k, l ≠ k), which
+/// fall outside the springs' pattern: applied by gathering over each
+/// vertex's pairs, in key order (as the GPU's sorted lists).
+#[derive(Clone, Debug, Default)]
+pub struct Couplings {
+    pairs: Vec<Pair>,
+    blocks: Vec<Mat3>,
+    /// Per vertex, where its entries start (n + 1; empty with no pairs).
+    starts: Vec<u32>,
+    /// 4 · pair + slot of the vertex in the pair.
+    entries: Vec<u32>,
+}
+
+impl Couplings {
+    /// The couplings of `pairs` with their terms, on a cloth of `n`
+    /// vertices.
+    pub fn new(n: usize, pairs: &[Pair], terms: &[PairTerm]) -> Couplings {
+        if pairs.is_empty() {
+            return Couplings::default();
+        }
+        let mut starts = vec![0u32; n + 1];
+        for p in pairs {
+            for &v in &p.vertices {
+                starts[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            starts[i + 1] += starts[i];
+        }
+        let mut fill = starts.clone();
+        let mut entries = vec![0u32; starts[n] as usize];
+        for (index, p) in pairs.iter().enumerate() {
+            for (slot, &v) in p.vertices.iter().enumerate() {
+                entries[fill[v as usize] as usize] = 4 * index as u32 + slot as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        Couplings {
+            pairs: pairs.to_vec(),
+            blocks: terms.iter().map(|t| t.block).collect(),
+            starts,
+            entries,
+        }
+    }
+
+    /// Row i of the couplings times `x`: Σ over vertex i's pairs of
+    /// β_k B Σ_{l ≠ k} β_l x_l.
+    pub fn row(&self, i: usize, x: &[Vec3]) -> Vec3 {
+        if self.starts.is_empty() {
+            return Vec3::ZERO;
+        }
+        let entries = &self.entries[self.starts[i] as usize..self.starts[i + 1] as usize];
+        entries.iter().fold(Vec3::ZERO, |acc, &e| {
+            let (index, slot) = ((e / 4) as usize, (e % 4) as usize);
+            let p = &self.pairs[index];
+            let others = (0..4)
+                .filter(|&l| l != slot)
+                .fold(Vec3::ZERO, |s, l| s + p.beta[l] * x[p.vertices[l] as usize]);
+            acc + p.beta[slot] * (self.blocks[index] * others)
+        })
+    }
+}
+
+/// Adds each pair's diagonal blocks β_k² B to A's diagonal and β_k times
+/// its right-hand side to b.
+pub fn add_to_system(pairs: &[Pair], terms: &[PairTerm], diag: &mut [Mat3], b: &mut [Vec3]) {
+    for (p, t) in pairs.iter().zip(terms) {
+        for (&v, &beta) in p.vertices.iter().zip(&p.beta) {
+            diag[v as usize] += beta * beta * t.block;
+            b[v as usize] += beta * t.rhs;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::triangle_boxes;
+    use crate::cpu::separate::triangle_edges;
+
+    const THICKNESS: f32 = 5e-3;
+    const K: Coefficients = Coefficients {
+        kn: 1000.0,
+        kd: 1.0,
+        kt: 100.0,
+        mu: 0.5,
+    };
+    const BAND: Band = Band {
+        coefficients: K,
+        thickness: THICKNESS,
+        h: 0.01,
+    };
+
+    /// A 3×3-vertex sheet and, `gap` above it, a second one turned by
+    /// `turn` radians about z and shifted, so that vertices of each lie
+    /// over the other's faces and edges cross; rest points far apart.
+    fn two_layers(gap: f32, turn: f32) -> (Vec<Vec3>, Vec<[u32; 3]>, Vec<Vec3>) {
+        let (mut x, mut t, mut rest) = (Vec::new(), Vec::new(), Vec::new());
+        let rotation = Mat3::from_rotation_z(turn);
+        for layer in 0..2u32 {
+            for i in 0..9u32 {
+                let p = Vec3::new((i % 3) as f32 * 0.1, (i / 3) as f32 * 0.1, 0.0);
+                x.push(match layer {
+                    0 => p,
+                    _ => rotation * p + Vec3::new(0.03, 0.02, gap),
+                });
+                rest.push(p + Vec3::new(layer as f32 * 10.0, 0.0, 0.0));
+            }
+            for r in 0..2 {
+                for c in 0..2 {
+                    let v = 9 * layer + 3 * r + c;
+                    t.push([v, v + 1, v + 3]);
+                    t.push([v + 1, v + 4, v + 3]);
+                }
+            }
+        }
+        (x, t, rest)
+    }
+
+    fn find(x: &[Vec3], t: &[[u32; 3]], rest: &[Vec3]) -> Vec<Pair> {
+        let edges = triangle_edges(t);
+        let sheet = Sheet {
+            triangles: t,
+            edges: &edges,
+            rest,
+            thickness: THICKNESS,
+        };
+        let (pairs, dropped) = sheet.find(x, &Bvh::build(&triangle_boxes(x, t)), PAIRS_PER_VERTEX);
+        assert_eq!(dropped, 0);
+        pairs
+    }
+
+    /// The contacts are those of testing every pair, both kinds present.
+    #[test]
+    fn found_pairs_are_those_of_testing_every_pair() {
+        let (x, t, rest) = two_layers(3e-3, 0.4);
+        let edges = triangle_edges(&t);
+        let sheet = Sheet {
+            triangles: &t,
+            edges: &edges,
+            rest: &rest,
+            thickness: THICKNESS,
+        };
+        let (sheet, x) = (&sheet, &x);
+        let mut every: Vec<Pair> = (0..x.len() as u32)
+            .flat_map(|v| (0..t.len() as u32).filter_map(move |f| sheet.vertex_pair(x, v, f)))
+            .collect();
+        for (i, &e) in edges.iter().enumerate() {
+            every.extend(
+                edges[i + 1..]
+                    .iter()
+                    .filter_map(|&f| sheet.edge_pair(x, e, f)),
+            );
+        }
+        every.sort_by_key(Pair::key);
+        let found = find(x, &t, &rest);
+        assert_eq!(found, every);
+        assert!(found.iter().any(|p| p.edges) && found.iter().any(|p| !p.edges));
+        // Nothing within one layer: those pairs are close at rest.
+        let layer = |v: u32| v / 9;
+        assert!(
+            found
+                .iter()
+                .all(|p| layer(p.vertices[0]) != layer(p.vertices[3]))
+        );
+    }
+
+    /// ∂d̃/∂x_l = β_l nᵀ: moving vertex l by δ along n changes the distance
+    /// by β_l δ, so the penalty's normal stiffness at (k, l) is the finite
+    /// difference of vertex k's normal force, −k_n β_k β_l.
+    #[test]
+    fn pair_stiffness_is_the_finite_difference_of_the_normal_force() {
+        let (x, t, rest) = two_layers(2.5e-3, 0.4);
+        let still = vec![Vec3::ZERO; x.len()];
+        // No damping, so the block at rest is −h² K_c alone.
+        let band = Band {
+            coefficients: Coefficients { kd: 0.0, ..K },
+            ..BAND
+        };
+        let pairs = find(&x, &t, &rest);
+        assert!(pairs.len() > 4);
+        let delta = 1e-5;
+        for p in &pairs {
+            let (normal, _) = p.normal_depth(&x, THICKNESS);
+            for l in 0..4 {
+                let force_along = |sign: f32| {
+                    let mut moved = x.clone();
+                    moved[p.vertices[l] as usize] += sign * delta * normal;
+                    let again = find(&moved, &t, &rest);
+                    let q = again
+                        .iter()
+                        .find(|q| q.key() == p.key())
+                        .expect("pair kept");
+                    respond(&[*q], &moved, &still, &band)[0].force.dot(normal)
+                };
+                let slope = (force_along(1.0) - force_along(-1.0)) / (2.0 * delta);
+                let term = respond(&[*p], &x, &still, &band)[0];
+                // B = −h² K_c at rest; nᵀ K_c n = −k_n.
+                let k_nn = -normal.dot(term.block * normal) / (0.01 * 0.01);
+                for k in 0..4 {
+                    let expected = p.beta[k] * slope;
+                    let assembled = p.beta[k] * p.beta[l] * k_nn;
+                    assert!(
+                        (assembled - expected).abs() <= 2e-2 * K.kn,
+                        "{p:?} k {k} l {l}: {assembled} vs finite difference {expected}"
+                    );
+                }
+                assert!((slope - p.beta[l] * -K.kn).abs() <= 2e-2 * K.kn, "{slope}");
+            }
+        }
+    }
+
+    /// The couplings and the diagonal blocks make the pairs' quadratic
+    /// form Σ (Σ_k β_k x_k)ᵀ B (Σ_l β_l x_l) ≥ 0, exactly the full 4×4
+    /// blocks' action.
+    #[test]
+    fn couplings_apply_the_full_pair_blocks() {
+        let (x, t, rest) = two_layers(2e-3, 0.4);
+        let mut v = vec![Vec3::ZERO; x.len()];
+        for (i, vi) in v.iter_mut().enumerate() {
+            *vi = Vec3::new(0.3, -0.1, 0.05) * (i as f32 * 0.37).sin();
+        }
+        let pairs = find(&x, &t, &rest);
+        let terms = respond(&pairs, &x, &v, &BAND);
+        let n = x.len();
+        let couplings = Couplings::new(n, &pairs, &terms);
+        let mut diag = vec![Mat3::ZERO; n];
+        add_to_system(&pairs, &terms, &mut diag, &mut vec![Vec3::ZERO; n]);
+        let probe: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new((i as f32).cos(), (2.0 * i as f32).sin(), 0.5))
+            .collect();
+        for i in 0..n {
+            let applied = diag[i] * probe[i] + couplings.row(i, &probe);
+            let full = pairs.iter().zip(&terms).fold(Vec3::ZERO, |acc, (p, t)| {
+                let sum = (0..4).fold(Vec3::ZERO, |s, l| {
+                    s + p.beta[l] * probe[p.vertices[l] as usize]
+                });
+                let mine = (0..4)
+                    .filter(|&k| p.vertices[k] as usize == i)
+                    .map(|k| p.beta[k])
+                    .sum::<f32>();
+                acc + mine * (t.block * sum)
+            });
+            assert!(
+                (applied - full).length() <= 1e-5 * (1.0 + full.length()),
+                "{i}"
+            );
+        }
+        let form: f32 = (0..n)
+            .map(|i| probe[i].dot(diag[i] * probe[i] + couplings.row(i, &probe)))
+            .sum();
+        assert!(form > 0.0);
+    }
+}

@@ -1,0 +1,135 @@
+// The friction model of thesis eqs. 8–9 with its Jacobians, and the chain
+// rule into the implicit system made safe for PCG: shared by stage
+// "contact" (the cloth against the body) and stage "self_contact" (the
+// cloth against itself). CPU twin: cpu::contact::{friction, response}.
+// Prepended to those stages (gpu::shaders::INCLUDES).
+
+// A force with its Jacobians ∂f/∂c and ∂f/∂v_rel.
+struct ForceJacobian {
+    force: vec3<f32>,
+    d_c: mat3x3<f32>,
+    d_v: mat3x3<f32>,
+}
+
+const IDENTITY: mat3x3<f32> = mat3x3<f32>(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+const ZERO3: mat3x3<f32> = mat3x3<f32>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+
+// a bᵀ
+fn outer(a: vec3<f32>, b: vec3<f32>) -> mat3x3<f32> {
+    return mat3x3<f32>(a * b.x, a * b.y, a * b.z);
+}
+
+// Friction model (thesis eqs. 8–9), unscaled g; see cpu::contact::friction.
+fn friction(c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
+    let none = ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    let r = length(c);
+    if r == 0.0 {
+        return none;
+    }
+    let c_hat = c / r;
+    let n = -c_hat;
+    let p = IDENTITY - outer(c_hat, c_hat);
+    let approach = dot(v, c_hat);
+    let f_c = params.kn * r + params.kd * approach;
+    if f_c <= 0.0 {
+        return none;
+    }
+    let dfc_dc = params.kn * c_hat + params.kd * (p * v) / r;
+    let dfc_dv = params.kd * c_hat;
+    var force = f_c * n;
+    var d_c = -1.0 * outer(c_hat, dfc_dc) - (f_c / r) * p;
+    var d_v = -1.0 * outer(c_hat, dfc_dv);
+    let t_dot = p * v;
+    let dt_dc = (-1.0 / r) * (approach * p + outer(c_hat, p * v));
+    let speed = length(t_dot);
+    if params.kt * speed <= params.mu * f_c {
+        force -= params.kt * t_dot;
+        d_c -= params.kt * dt_dc;
+        d_v -= params.kt * p;
+    } else {
+        let t_hat = t_dot / speed;
+        let turn = (IDENTITY - outer(t_hat, t_hat)) * (1.0 / speed);
+        force -= params.mu * f_c * t_hat;
+        d_c -= params.mu * (outer(t_hat, dfc_dc) + f_c * turn * dt_dc);
+        d_v -= params.mu * (outer(t_hat, dfc_dv) + f_c * turn * p);
+    }
+    return ForceJacobian(force, d_c, d_v);
+}
+
+fn symmetric_part(m: mat3x3<f32>) -> mat3x3<f32> {
+    return 0.5 * (m + transpose(m));
+}
+
+// Nearest symmetric NSD matrix: cyclic Jacobi eigen-decomposition, positive
+// eigenvalues clamped to zero (mirrors math::project_nsd).
+fn project_nsd(m: mat3x3<f32>) -> Sym3 {
+    var a = symmetric_part(m);
+    var q = IDENTITY;
+    for (var sweep = 0u; sweep < 8u; sweep++) {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if off <= 1e-14 * diag || off == 0.0 {
+            break;
+        }
+        for (var pair = 0u; pair < 3u; pair++) {
+            let pi = select(select(1u, 0u, pair < 2u), 0u, pair == 0u);
+            let qi = select(2u, 1u, pair == 0u);
+            let apq = a[pi][qi];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[qi][qi] - a[pi][pi]) / (2.0 * apq);
+            let t = sign(theta) / (abs(theta) + sqrt(theta * theta + 1.0));
+            let tt = select(t, 1.0, theta == 0.0);
+            let cs = 1.0 / sqrt(tt * tt + 1.0);
+            let sn = tt * cs;
+            // A ← Jᵀ A J; Q ← Q J.
+            for (var k = 0u; k < 3u; k++) {
+                let akp = a[k][pi];
+                let akq = a[k][qi];
+                a[k][pi] = cs * akp - sn * akq;
+                a[k][qi] = sn * akp + cs * akq;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let apk = a[pi][k];
+                let aqk = a[qi][k];
+                a[pi][k] = cs * apk - sn * aqk;
+                a[qi][k] = sn * apk + cs * aqk;
+            }
+            for (var k = 0u; k < 3u; k++) {
+                let vp = q[pi][k];
+                let vq = q[qi][k];
+                q[pi][k] = cs * vp - sn * vq;
+                q[qi][k] = sn * vp + cs * vq;
+            }
+        }
+    }
+    // Column j of q is eigenvector j.
+    var out = ZERO3;
+    for (var j = 0u; j < 3u; j++) {
+        out += min(a[j][j], 0.0) * outer(q[j], q[j]);
+    }
+    return Sym3(vec4<f32>(out[0][0], out[1][1], out[2][2], 0.5 * (out[0][1] + out[1][0])),
+                vec4<f32>(0.5 * (out[0][2] + out[2][0]), 0.5 * (out[1][2] + out[2][1]), 0.0, 0.0));
+}
+
+// The chain rule into the system with the three safety moves of
+// cpu::contact::response: n–t cross terms dropped, the secant floor on
+// sliding friction's damping, and the NSD projection.
+fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>) -> Response {
+    let nn = outer(n, n);
+    let tangent_plane = IDENTITY - nn;
+    let normal_stiffness = min(dot(n, fj.d_c * n), 0.0);
+    var damping = dot(n, fj.d_v * n) * nn + tangent_plane * symmetric_part(fj.d_v) * tangent_plane;
+    let t_dot = tangent_plane * v_rel;
+    let speed = length(t_dot);
+    if speed > 0.0 {
+        let t_hat = t_dot / speed;
+        let secant = -dot(fj.force, t_hat) / speed;
+        let deficit = secant + dot(t_hat, damping * t_hat);
+        if deficit > 0.0 {
+            damping -= deficit * outer(t_hat, t_hat);
+        }
+    }
+    return Response(fj.force, normal_stiffness, sym_pack(project_nsd(damping)), vec2<f32>(0.0));
+}

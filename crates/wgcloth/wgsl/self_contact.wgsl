@@ -1,0 +1,264 @@
+// Stage "self_contact": the cloth pushing against itself (issue 23), as
+// forces in the implicit solve. CPU twin: src/cpu/self_contact.rs, which
+// finds the same contacts and adds the same terms in the same order.
+//
+// 1. `cells` (then separate's `tiles` and collide's `supertiles`): each
+//    grid cell's box at the step's start and the tile hierarchy over them.
+// 2. `vertices`, `edges`: each vertex against the triangles, each triangle
+//    edge against the edges, of the cells its box grown by the thickness
+//    overlaps (walk.wgsl); a vertex projecting inside a triangle, or two
+//    edges whose closest points lie inside both, closer than the
+//    thickness, sharing no vertex and 2 thickness apart in the flat rest
+//    grid, is a contact: appended to the list (up to
+//    params.cloth_capacity), each of its vertices' counts raised.
+// 3. `link`, per contact: dropped (counted) if one of its vertices is in
+//    more than params.cloth_per_vertex contacts; else its eqs. 8–9 force
+//    and blocks (response.wgsl, as the body's contacts), and it joins each
+//    vertex's list.
+// 4. `gather`, per vertex: its list sorted by the contacts' keys (so the
+//    sums do not depend on thread timing), the diagonal blocks β² B added
+//    to A and β rhs to b. The off-diagonal blocks are applied in the solve
+//    (pcg.wgsl `couple`).
+
+@group(1) @binding(2) var<storage, read> x: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> v: array<vec4<f32>>;
+// The header (gpu::constants::cloth_header), per vertex its contacts
+// found, per vertex its contacts listed, per vertex its list.
+@group(1) @binding(14) var<storage, read_write> cloth_lists: array<atomic<u32>>;
+@group(1) @binding(15) var<storage, read_write> cloth_pairs: array<ClothPair>;
+@group(1) @binding(16) var<storage, read_write> matrix: array<PackedSym3>;
+@group(1) @binding(17) var<storage, read_write> b: array<vec4<f32>>;
+@group(1) @binding(12) var<storage, read_write> state: StepState;
+
+fn found_at(i: u32) -> u32 {
+    return CLOTH_HEADER + i;
+}
+
+fn listed_at(i: u32) -> u32 {
+    return CLOTH_HEADER + params.n_vertices + i;
+}
+
+fn entry_at(i: u32, k: u32) -> u32 {
+    return CLOTH_HEADER + 2u * params.n_vertices + params.cloth_per_vertex * i + k;
+}
+
+// Vertex i in the flat rest grid (cpu::self_contact::rest_point).
+fn rest_point(i: u32) -> vec3<f32> {
+    let nx = params.cells_x + 1u;
+    return vec3<f32>(f32(i % nx) * params.rest_spacing.x, f32(i / nx) * params.rest_spacing.y, 0.0);
+}
+
+// Whether the two sides lie 2 thickness apart at rest (Sheet::apart_at_rest).
+fn apart_at_rest(p: vec4<u32>, edge: bool) -> bool {
+    let a = rest_point(p.x);
+    let b = rest_point(p.y);
+    let c = rest_point(p.z);
+    let d = rest_point(p.w);
+    var gap: vec3<f32>;
+    if edge {
+        let m = closest_between_segments(a, b, c, d);
+        gap = m[0] - m[1];
+    } else {
+        gap = a - closest_on_triangle(a, b, c, d);
+    }
+    return length(gap) >= 2.0 * params.cloth_thickness;
+}
+
+// A contact joins the list; its vertices count it.
+fn note(key: vec4<u32>, beta: vec4<f32>) {
+    let k = atomicAdd(&cloth_lists[CLOTH_COUNT], 1u);
+    if k >= params.cloth_capacity {
+        return;
+    }
+    let none = PackedSym3(vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
+    cloth_pairs[k] = ClothPair(key, beta, vec3<f32>(0.0), 1u, none, vec2<u32>(0u));
+    for (var s = 0u; s < 4u; s++) {
+        atomicAdd(&cloth_lists[found_at(pair_vertex(key, s))], 1u);
+    }
+}
+
+// The vertex against cloth triangle t (Sheet::vertex_pair).
+fn vertex_against(q: Query, t: u32) {
+    let tri = vec3<u32>(cloth_index(3u * t), cloth_index(3u * t + 1u), cloth_index(3u * t + 2u));
+    if any(tri == vec3<u32>(q.a)) {
+        return;
+    }
+    let a = x[tri.x].xyz;
+    let b = x[tri.y].xyz;
+    let c = x[tri.z].xyz;
+    if !overlaps(q.lo, q.hi, min(min(a, b), c), max(max(a, b), c)) {
+        return;
+    }
+    let cr = cross(b - a, c - a);
+    let len = length(cr);
+    if len == 0.0 {
+        return;
+    }
+    let eps = params.cloth_thickness;
+    let hit = point_triangle(x[q.a].xyz, a, b, c, cr * (1.0 / len), eps, eps);
+    let key = vec4<u32>(q.a, tri);
+    if found(hit) && hit.x != 0.0 && apart_at_rest(key, false) {
+        note(key, vec4<f32>(1.0, -hit.yzw));
+    }
+}
+
+// The edge against edge (u, w) (Sheet::edge_pair).
+fn edge_against(q: Query, u: u32, w: u32) {
+    let f = met_edge(q, u, w);
+    if f.x == NO_TRIANGLE {
+        return;
+    }
+    let e0 = x[q.a].xyz;
+    let e1 = x[q.b].xyz;
+    let f0 = x[f.x].xyz;
+    let f1 = x[f.y].xyz;
+    if !overlaps(q.lo, q.hi, min(f0, f1), max(f0, f1)) {
+        return;
+    }
+    let st = segment_parameters(e0, e1, f0, f1);
+    if !(st.x > 0.0 && st.x < 1.0 && st.y > 0.0 && st.y < 1.0) {
+        return;
+    }
+    let gap = (e0 + (e1 - e0) * st.x) - (f0 + (f1 - f0) * st.y);
+    let distance = length(gap);
+    let key = vec4<u32>(q.a, q.b, f);
+    if distance > 0.0 && distance < params.cloth_thickness && apart_at_rest(key, true) {
+        note(vec4<u32>(q.a | EDGE_PAIR, q.b, f), vec4<f32>(1.0 - st.x, st.x, st.y - 1.0, -st.y));
+    }
+}
+
+// Each grid cell's box at the step's start, where the walks look.
+@compute @workgroup_size(WORKGROUP)
+fn cells(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.cells_x * params.cells_y {
+        return;
+    }
+    let nx = params.cells_x + 1u;
+    let k = (i / params.cells_x) * nx + i % params.cells_x;
+    let lo = min(min(x[k].xyz, x[k + 1u].xyz), min(x[k + nx].xyz, x[k + nx + 1u].xyz));
+    let hi = max(max(x[k].xyz, x[k + 1u].xyz), max(x[k + nx].xyz, x[k + nx + 1u].xyz));
+    bounds[cell_at(i)] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn vertices(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.n_vertices {
+        return;
+    }
+    let eps = params.cloth_thickness;
+    walk(Query(x[i].xyz - eps, i, x[i].xyz + eps, i, false, false));
+}
+
+// Spring s, if along a triangle, against the edges near it.
+@compute @workgroup_size(WORKGROUP)
+fn edges(@builtin(global_invocation_id) id: vec3<u32>) {
+    let e = walked_edge(id.x);
+    if e.x == NO_TRIANGLE {
+        return;
+    }
+    let eps = params.cloth_thickness;
+    walk(Query(min(x[e.x].xyz, x[e.y].xyz) - eps, e.x, max(x[e.x].xyz, x[e.y].xyz) + eps, e.y, true, false));
+}
+
+// Contact k: dropped at a crowded vertex, else its force and blocks
+// (cpu::self_contact::respond) and a place in each vertex's list.
+@compute @workgroup_size(WORKGROUP)
+fn link(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = id.x;
+    if k >= min(atomicLoad(&cloth_lists[CLOTH_COUNT]), params.cloth_capacity) {
+        return;
+    }
+    let pair = cloth_pairs[k];
+    var v_rel = vec3<f32>(0.0);
+    var gap = vec3<f32>(0.0);
+    var crowded = false;
+    for (var s = 0u; s < 4u; s++) {
+        let i = pair_vertex(pair.key, s);
+        crowded = crowded || atomicLoad(&cloth_lists[found_at(i)]) > params.cloth_per_vertex;
+        v_rel += pair.beta[s] * v[i].xyz;
+        gap += pair.beta[s] * x[i].xyz;
+    }
+    if crowded {
+        cloth_pairs[k].applied = 0u;
+        atomicAdd(&cloth_lists[CLOTH_DROPPED], 1u);
+        return;
+    }
+    // Pair::normal_depth: d̃ at most 0, so the band's edge never pulls; no
+    // force where the gap rounds to nothing.
+    let distance = length(gap);
+    var n = vec3<f32>(0.0);
+    var depth = 0.0;
+    if distance > 0.0 {
+        n = gap / distance;
+        depth = min(distance - params.cloth_thickness, 0.0);
+    }
+    let r = response(friction(n * depth, v_rel), n, v_rel);
+    cloth_pairs[k].block = sym_pack(contact_block(r, n));
+    cloth_pairs[k].rhs = params.dt * (r.force - sym_mul(sym_unpack(r.damping), v_rel));
+    for (var s = 0u; s < 4u; s++) {
+        let i = pair_vertex(pair.key, s);
+        let at = atomicAdd(&cloth_lists[listed_at(i)], 1u);
+        atomicStore(&cloth_lists[entry_at(i, at)], 4u * k + s);
+    }
+}
+
+fn key_below(a: vec4<u32>, b: vec4<u32>) -> bool {
+    for (var k = 0u; k < 4u; k++) {
+        if a[k] != b[k] {
+            return a[k] < b[k];
+        }
+    }
+    return false;
+}
+
+fn entry_key(e: u32) -> vec4<u32> {
+    return cloth_pairs[e / 4u].key;
+}
+
+// Vertex i's list sorted by key; β² B into its diagonal block, β rhs
+// into b (cpu::self_contact::add_to_system); the run's statistics.
+@compute @workgroup_size(WORKGROUP)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i == 0u {
+        let count = atomicLoad(&cloth_lists[CLOTH_COUNT]);
+        let kept = min(count, params.cloth_capacity);
+        let crowded = atomicLoad(&cloth_lists[CLOTH_DROPPED]);
+        state.cloth_contacts_max = max(state.cloth_contacts_max, kept - crowded);
+        state.cloth_contacts_dropped += crowded + count - kept;
+    }
+    if i >= params.n_vertices {
+        return;
+    }
+    let listed = atomicLoad(&cloth_lists[listed_at(i)]);
+    if listed == 0u {
+        return;
+    }
+    for (var a = 1u; a < listed; a++) {
+        let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
+        let key = entry_key(e);
+        var j = a;
+        while j > 0u {
+            let before = atomicLoad(&cloth_lists[entry_at(i, j - 1u)]);
+            if !key_below(key, entry_key(before)) {
+                break;
+            }
+            atomicStore(&cloth_lists[entry_at(i, j)], before);
+            j--;
+        }
+        atomicStore(&cloth_lists[entry_at(i, j)], e);
+    }
+    var diag = sym_unpack(matrix_at(i));
+    var rhs = b[i].xyz;
+    for (var a = 0u; a < listed; a++) {
+        let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
+        let pair = cloth_pairs[e / 4u];
+        let beta = pair.beta[e % 4u];
+        diag = sym_add(diag, sym_scale(sym_unpack(pair.block), beta * beta));
+        rhs += beta * pair.rhs;
+    }
+    matrix_set(i, sym_pack(diag));
+    b[i] = vec4<f32>(rhs, 0.0);
+}
