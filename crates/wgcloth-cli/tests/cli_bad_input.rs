@@ -814,6 +814,10 @@ const BAD_FIELDS: &[(&str, &str)] = &[
     ("[cloth]\npins = \"middle\"", "cloth.pins"),
     ("[rigid.motion]\nkind = \"orbit\"", "rigid.motion.kind"),
     ("[cloth]\ngrid = [-1, 4]", "cloth.grid"),
+    ("[self_contact]\ngamma = 0.5", "self_contact.gamma"),
+    ("[self_contact]\nfloor = 0.0", "self_contact.floor"),
+    ("[self_contact]\nthickness = 1e-4", "self_contact.thickness"),
+    ("[self_contact]\nmass_ratio = 0.0", "self_contact.mass_ratio"),
 ];
 
 #[test]

@@ -364,6 +364,12 @@ pub struct SelfContactConfig {
     /// implicit solve (cpu/self_contact.rs), m; above `floor`. 0 leaves
     /// only the guarantee.
     pub thickness: f32,
+    /// The most a vertex's cloth–cloth contacts add to its diagonal block
+    /// of A, in multiples of its mass: each contact's h² k_n, h k_d and
+    /// h k_t are held to this times m over the most contacts at any of its
+    /// vertices. Higher holds a resting layer harder (it creeps at up to
+    /// μ g h / mass_ratio) and takes PCG more iterations.
+    pub mass_ratio: f32,
 }
 
 impl Default for SelfContactConfig {
@@ -373,6 +379,7 @@ impl Default for SelfContactConfig {
             gamma: 0.45,
             floor: 1e-3,
             thickness: 5e-3,
+            mass_ratio: 100.0,
         }
     }
 }
@@ -613,6 +620,7 @@ impl Config {
         let sc = &self.self_contact;
         positive("self_contact.floor", &[sc.floor])?;
         non_negative("self_contact.thickness", &[sc.thickness])?;
+        positive("self_contact.mass_ratio", &[sc.mass_ratio])?;
         if sc.thickness > 0.0 && sc.thickness <= sc.floor {
             return Err(Error::config(
                 "self_contact.thickness",

@@ -31,7 +31,7 @@ fn evaluate(c: vec3<f32>, v_rel: vec3<f32>) -> ForceJacobian {
     if params.model == MODEL_NAIVE {
         return naive(c);
     }
-    let g = friction(c, v_rel);
+    let g = friction(c, v_rel, Coefficients(params.kn, params.kd, params.kt, params.mu));
     let s = params.force_scale;
     return ForceJacobian(s * g.force, s * g.d_c, s * g.d_v);
 }

@@ -19,8 +19,16 @@ fn outer(a: vec3<f32>, b: vec3<f32>) -> mat3x3<f32> {
     return mat3x3<f32>(a * b.x, a * b.y, a * b.z);
 }
 
+// k_n, k_d, k_t, μ (cpu::contact::Coefficients).
+struct Coefficients {
+    kn: f32,
+    kd: f32,
+    kt: f32,
+    mu: f32,
+}
+
 // Friction model (thesis eqs. 8–9), unscaled g; see cpu::contact::friction.
-fn friction(c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
+fn friction(c: vec3<f32>, v: vec3<f32>, k: Coefficients) -> ForceJacobian {
     let none = ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
     let r = length(c);
     if r == 0.0 {
@@ -30,28 +38,28 @@ fn friction(c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
     let n = -c_hat;
     let p = IDENTITY - outer(c_hat, c_hat);
     let approach = dot(v, c_hat);
-    let f_c = params.kn * r + params.kd * approach;
+    let f_c = k.kn * r + k.kd * approach;
     if f_c <= 0.0 {
         return none;
     }
-    let dfc_dc = params.kn * c_hat + params.kd * (p * v) / r;
-    let dfc_dv = params.kd * c_hat;
+    let dfc_dc = k.kn * c_hat + k.kd * (p * v) / r;
+    let dfc_dv = k.kd * c_hat;
     var force = f_c * n;
     var d_c = -1.0 * outer(c_hat, dfc_dc) - (f_c / r) * p;
     var d_v = -1.0 * outer(c_hat, dfc_dv);
     let t_dot = p * v;
     let dt_dc = (-1.0 / r) * (approach * p + outer(c_hat, p * v));
     let speed = length(t_dot);
-    if params.kt * speed <= params.mu * f_c {
-        force -= params.kt * t_dot;
-        d_c -= params.kt * dt_dc;
-        d_v -= params.kt * p;
+    if k.kt * speed <= k.mu * f_c {
+        force -= k.kt * t_dot;
+        d_c -= k.kt * dt_dc;
+        d_v -= k.kt * p;
     } else {
         let t_hat = t_dot / speed;
         let turn = (IDENTITY - outer(t_hat, t_hat)) * (1.0 / speed);
-        force -= params.mu * f_c * t_hat;
-        d_c -= params.mu * (outer(t_hat, dfc_dc) + f_c * turn * dt_dc);
-        d_v -= params.mu * (outer(t_hat, dfc_dv) + f_c * turn * p);
+        force -= k.mu * f_c * t_hat;
+        d_c -= k.mu * (outer(t_hat, dfc_dc) + f_c * turn * dt_dc);
+        d_v -= k.mu * (outer(t_hat, dfc_dv) + f_c * turn * p);
     }
     return ForceJacobian(force, d_c, d_v);
 }

@@ -162,6 +162,14 @@ fn edges(@builtin(global_invocation_id) id: vec3<u32>) {
     walk(Query(min(x[e.x].xyz, x[e.y].xyz) - eps, e.x, max(x[e.x].xyz, x[e.y].xyz) + eps, e.y, true, false));
 }
 
+// The coefficients of a contact whose most crowded vertex is in `most`
+// (Band::coefficients): h² k_n, h k_d, h k_t at most limit / most.
+fn coefficients(most: u32) -> Coefficients {
+    let h = params.dt;
+    let share = params.cloth_limit / f32(most);
+    return Coefficients(min(params.kn, share / (h * h)), min(params.kd, share / h), min(params.kt, share / h), params.mu);
+}
+
 // Contact k: dropped at a crowded vertex, else its force and blocks
 // (cpu::self_contact::respond) and a place in each vertex's list.
 @compute @workgroup_size(WORKGROUP)
@@ -173,14 +181,14 @@ fn link(@builtin(global_invocation_id) id: vec3<u32>) {
     let pair = cloth_pairs[k];
     var v_rel = vec3<f32>(0.0);
     var gap = vec3<f32>(0.0);
-    var crowded = false;
+    var most = 1u;
     for (var s = 0u; s < 4u; s++) {
         let i = pair_vertex(pair.key, s);
-        crowded = crowded || atomicLoad(&cloth_lists[found_at(i)]) > params.cloth_per_vertex;
+        most = max(most, atomicLoad(&cloth_lists[found_at(i)]));
         v_rel += pair.beta[s] * v[i].xyz;
         gap += pair.beta[s] * x[i].xyz;
     }
-    if crowded {
+    if most > params.cloth_per_vertex {
         cloth_pairs[k].applied = 0u;
         atomicAdd(&cloth_lists[CLOTH_DROPPED], 1u);
         return;
@@ -194,7 +202,7 @@ fn link(@builtin(global_invocation_id) id: vec3<u32>) {
         n = gap / distance;
         depth = min(distance - params.cloth_thickness, 0.0);
     }
-    let r = response(friction(n * depth, v_rel), n, v_rel);
+    let r = response(friction(n * depth, v_rel, coefficients(most)), n, v_rel);
     cloth_pairs[k].block = sym_pack(contact_block(r, n));
     cloth_pairs[k].rhs = params.dt * (r.force - sym_mul(sym_unpack(r.damping), v_rel));
     for (var s = 0u; s < 4u; s++) {

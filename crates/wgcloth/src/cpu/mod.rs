@@ -279,15 +279,16 @@ impl CpuSim {
                         rest: &self.rest_grid,
                         thickness: keep.thickness,
                     };
-                    let (pairs, dropped) =
-                        sheet.find(x, &self.cloth_bvh, self_contact::PAIRS_PER_VERTEX);
+                    let found = sheet.find(x, &self.cloth_bvh, self_contact::PAIRS_PER_VERTEX);
                     let band = self_contact::Band {
                         coefficients: self.scene.config.contact.coefficients(),
                         thickness: keep.thickness,
                         h,
+                        limit: keep.mass_ratio * cloth.vertex_mass,
                     };
-                    self.self_terms = self_contact::respond(&pairs, x, v, &band);
-                    self.self_pairs = pairs;
+                    self.self_terms =
+                        self_contact::respond(&found.pairs, &found.counts, x, v, &band);
+                    self.self_pairs = found.pairs;
                     self_contact::add_to_system(
                         &self.self_pairs,
                         &self.self_terms,
@@ -295,7 +296,7 @@ impl CpuSim {
                         &mut self.rhs,
                     );
                     stats.self_contacts = self.self_pairs.len();
-                    stats.self_contacts_dropped = dropped;
+                    stats.self_contacts_dropped = found.dropped;
                 }
                 self.matrix.couplings =
                     self_contact::Couplings::new(x.len(), &self.self_pairs, &self.self_terms);

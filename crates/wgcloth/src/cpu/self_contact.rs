@@ -13,7 +13,8 @@
 //! (1 − s, s, −(1 − t), −t) at edge parameters s, t. The force is eqs. 8–9
 //! with the `[contact]` coefficients (the analytic model whichever model the
 //! body uses: the networks learnt cloth against a rigid body), made safe for
-//! PCG by `contact::response`. A pair adds β_k β_l B at (k, l) with
+//! PCG by `contact::response`, each pair's coefficients held to the
+//! cloth's mass ([`Band::coefficients`]). A pair adds β_k β_l B at (k, l) with
 //! B = −(h D_c + h² K_c), positive semidefinite, so A stays SPD: the
 //! diagonal blocks go into A's diagonal (the preconditioners see them), the
 //! others into [`Couplings`], which the SpMV applies by gathering over each
@@ -42,7 +43,7 @@ use crate::scene::Cloth;
 /// fewer where one binding would not hold the lists: `Params::cloth_per_vertex`).
 /// Two layers resting within ε of each other put a vertex in about 16,
 /// four fifths of them edge–edge.
-pub const PAIRS_PER_VERTEX: u32 = 32;
+pub const PAIRS_PER_VERTEX: u32 = 64;
 
 /// A cloth–cloth contact at the step's start.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -199,10 +200,9 @@ impl Sheet<'_> {
     }
 
     /// Every contact at positions `x`, each once, sorted by
-    /// [`Pair::key`]; `bvh` holds the triangles' boxes at `x`. Returns them
-    /// with the number dropped at vertices in more than `per_vertex`
-    /// ([`PAIRS_PER_VERTEX`]).
-    pub fn find(&self, x: &[Vec3], bvh: &Bvh, per_vertex: u32) -> (Vec<Pair>, usize) {
+    /// [`Pair::key`], but those at vertices in more than `per_vertex`
+    /// ([`PAIRS_PER_VERTEX`]); `bvh` holds the triangles' boxes at `x`.
+    pub fn find(&self, x: &[Vec3], bvh: &Bvh, per_vertex: u32) -> Found {
         // The boxes of primitives at x; a pair is tested only where the
         // first's, grown by ε, overlaps the second's (as the GPU does).
         let boxed =
@@ -250,9 +250,23 @@ impl Sheet<'_> {
         }
         let before = pairs.len();
         pairs.retain(|p| p.vertices.iter().all(|&v| count[v as usize] <= per_vertex));
-        let dropped = before - pairs.len();
-        (pairs, dropped)
+        Found {
+            dropped: before - pairs.len(),
+            pairs,
+            counts: count,
+        }
     }
+}
+
+/// The contacts a step finds ([`Sheet::find`]).
+#[derive(Clone, Debug, Default)]
+pub struct Found {
+    /// The contacts kept, sorted by [`Pair::key`].
+    pub pairs: Vec<Pair>,
+    /// How many were dropped at crowded vertices.
+    pub dropped: usize,
+    /// Per vertex, the contacts found at it (those dropped too).
+    pub counts: Vec<u32>,
 }
 
 /// What one pair adds to the system: B = −(h D_c + h² K_c) and
@@ -269,7 +283,8 @@ pub struct PairTerm {
 }
 
 /// How a step's pairs are evaluated: eqs. 8–9 with `coefficients` over a
-/// band of `thickness`, at time step `h`.
+/// band of `thickness`, at time step `h`, each vertex's pairs together
+/// adding at most about `limit` to its diagonal.
 #[derive(Clone, Copy, Debug)]
 pub struct Band {
     /// k_n, k_d, k_t, μ (the `[contact]` ones).
@@ -278,19 +293,50 @@ pub struct Band {
     pub thickness: f32,
     /// h, s.
     pub h: f32,
+    /// `self_contact.mass_ratio` times the vertex mass, kg.
+    pub limit: f32,
+}
+
+impl Band {
+    /// The coefficients of a pair whose most crowded vertex is in `most`
+    /// pairs: h² k_n, h k_d and h k_t each at most `limit / most`, so the
+    /// blocks a vertex's pairs add to A stay within a few times its mass
+    /// and PCG converges at any grid (the `[contact]` coefficients are
+    /// per contact, and a fine grid's vertex weighs a thousandth of
+    /// h k_t). Coulomb's bound μ f_c holds whatever k_t; a lower k_t lets
+    /// a resting layer creep at up to μ f_c / k_t.
+    pub fn coefficients(&self, most: u32) -> Coefficients {
+        let (k, h) = (&self.coefficients, self.h);
+        let share = self.limit / most.max(1) as f32;
+        Coefficients {
+            kn: k.kn.min(share / (h * h)),
+            kd: k.kd.min(share / h),
+            kt: k.kt.min(share / h),
+            mu: k.mu,
+        }
+    }
 }
 
 /// The eqs. 8–9 force of each pair at positions `x` and velocities `v`
-/// and its terms of the system, made safe for PCG by `contact::response`.
-pub fn respond(pairs: &[Pair], x: &[Vec3], v: &[Vec3], band: &Band) -> Vec<PairTerm> {
-    let (k, h) = (&band.coefficients, band.h);
+/// and its terms of the system, made safe for PCG by `contact::response`;
+/// `counts` are the pairs found at each vertex ([`Found::counts`]).
+pub fn respond(
+    pairs: &[Pair],
+    counts: &[u32],
+    x: &[Vec3],
+    v: &[Vec3],
+    band: &Band,
+) -> Vec<PairTerm> {
+    let h = band.h;
     pairs
         .par_iter()
         .with_min_len(GRAIN)
         .map(|p| {
             let v_rel = p.gap(v);
             let (n, depth) = p.normal_depth(x, band.thickness);
-            let r = response(&friction(n * depth, v_rel, k), n, v_rel);
+            let most = p.vertices.iter().map(|&i| counts[i as usize]).max();
+            let k = band.coefficients(most.unwrap_or(1));
+            let r = response(&friction(n * depth, v_rel, &k), n, v_rel);
             PairTerm {
                 block: -(h * r.damping + h * h * r.stiffness),
                 rhs: h * (r.force - r.damping * v_rel),
@@ -391,6 +437,7 @@ mod tests {
         coefficients: K,
         thickness: THICKNESS,
         h: 0.01,
+        limit: f32::INFINITY,
     };
 
     /// A 3×3-vertex sheet and, `gap` above it, a second one turned by
@@ -419,7 +466,7 @@ mod tests {
         (x, t, rest)
     }
 
-    fn find(x: &[Vec3], t: &[[u32; 3]], rest: &[Vec3]) -> Vec<Pair> {
+    fn find_all(x: &[Vec3], t: &[[u32; 3]], rest: &[Vec3]) -> Found {
         let edges = triangle_edges(t);
         let sheet = Sheet {
             triangles: t,
@@ -427,9 +474,18 @@ mod tests {
             rest,
             thickness: THICKNESS,
         };
-        let (pairs, dropped) = sheet.find(x, &Bvh::build(&triangle_boxes(x, t)), PAIRS_PER_VERTEX);
-        assert_eq!(dropped, 0);
-        pairs
+        let found = sheet.find(x, &Bvh::build(&triangle_boxes(x, t)), PAIRS_PER_VERTEX);
+        assert_eq!(found.dropped, 0);
+        found
+    }
+
+    fn find(x: &[Vec3], t: &[[u32; 3]], rest: &[Vec3]) -> Vec<Pair> {
+        find_all(x, t, rest).pairs
+    }
+
+    /// Counts of one pair at each vertex: the coefficients as configured.
+    fn alone(x: &[Vec3]) -> Vec<u32> {
+        vec![1; x.len()]
     }
 
     /// The contacts are those of testing every pair, both kinds present.
@@ -493,10 +549,12 @@ mod tests {
                         .iter()
                         .find(|q| q.key() == p.key())
                         .expect("pair kept");
-                    respond(&[*q], &moved, &still, &band)[0].force.dot(normal)
+                    respond(&[*q], &alone(&moved), &moved, &still, &band)[0]
+                        .force
+                        .dot(normal)
                 };
                 let slope = (force_along(1.0) - force_along(-1.0)) / (2.0 * delta);
-                let term = respond(&[*p], &x, &still, &band)[0];
+                let term = respond(&[*p], &alone(&x), &x, &still, &band)[0];
                 // B = −h² K_c at rest; nᵀ K_c n = −k_n.
                 let k_nn = -normal.dot(term.block * normal) / (0.01 * 0.01);
                 for k in 0..4 {
@@ -523,7 +581,7 @@ mod tests {
             *vi = Vec3::new(0.3, -0.1, 0.05) * (i as f32 * 0.37).sin();
         }
         let pairs = find(&x, &t, &rest);
-        let terms = respond(&pairs, &x, &v, &BAND);
+        let terms = respond(&pairs, &alone(&x), &x, &v, &BAND);
         let n = x.len();
         let couplings = Couplings::new(n, &pairs, &terms);
         let mut diag = vec![Mat3::ZERO; n];
@@ -552,5 +610,47 @@ mod tests {
             .map(|i| probe[i].dot(diag[i] * probe[i] + couplings.row(i, &probe)))
             .sum();
         assert!(form > 0.0);
+    }
+
+    /// With a limit, the blocks a vertex's pairs add to A stay within
+    /// twice it (h k_d + h² k_n along the normal, h k_t across), wherever
+    /// the vertex is crowded; the friction still keeps to Coulomb's cone.
+    #[test]
+    fn a_vertex_s_pairs_add_at_most_twice_the_limit_and_keep_to_coulomb() {
+        let (x, t, rest) = two_layers(1.5e-3, 0.4);
+        let mut v = vec![Vec3::ZERO; x.len()];
+        for (i, vi) in v.iter_mut().enumerate() {
+            *vi = Vec3::new(0.02, -0.01, 0.0) * (i as f32 * 0.37).sin();
+        }
+        let found = find_all(&x, &t, &rest);
+        let limit = 1e-4;
+        let band = Band { limit, ..BAND };
+        let terms = respond(&found.pairs, &found.counts, &x, &v, &band);
+        let raw = respond(&found.pairs, &found.counts, &x, &v, &BAND);
+        // The largest eigenvalue of a symmetric positive semidefinite block.
+        let largest = |b: Mat3| {
+            let y = (0..64).fold(Vec3::new(0.6, 0.7, 0.4), |y, _| (b * y).normalize_or_zero());
+            y.dot(b * y)
+        };
+        let mut added = vec![0.0f32; x.len()];
+        for ((p, term), unlimited) in found.pairs.iter().zip(&terms).zip(&raw) {
+            for (&i, beta) in p.vertices.iter().zip(p.beta) {
+                added[i as usize] += beta * beta * largest(term.block);
+            }
+            // Unlimited, the blocks are a hundred times the limit.
+            assert!(largest(unlimited.block) > 100.0 * limit);
+            let (n, _) = p.normal_depth(&x, THICKNESS);
+            let normal = term.force.dot(n);
+            let across = (term.force - normal * n).length();
+            assert!(
+                normal >= 0.0 && across <= K.mu * normal * (1.0 + 1e-5),
+                "{p:?}"
+            );
+        }
+        let most = added.iter().fold(0.0f32, |a, &b| a.max(b));
+        assert!(
+            most > 0.5 * limit && most <= 2.0 * limit * (1.0 + 1e-5),
+            "{most}"
+        );
     }
 }

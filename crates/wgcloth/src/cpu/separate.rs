@@ -498,6 +498,7 @@ mod tests {
         gamma: 0.45,
         floor: 1e-3,
         thickness: 5e-3,
+        mass_ratio: 100.0,
     };
 
     #[test]
@@ -546,6 +547,7 @@ mod tests {
             gamma: 0.45,
             floor: 1e-4,
             thickness: 0.0,
+            mass_ratio: 100.0,
         };
         let run = |held: bool| {
             let mut x = x0.clone();

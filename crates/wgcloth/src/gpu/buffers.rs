@@ -229,6 +229,7 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         p.cloth_thickness = cfg.self_contact.thickness;
         p.cloth_capacity = 4 * cloth.vertex_count() as u32;
         p.cloth_per_vertex = self_contact::PAIRS_PER_VERTEX;
+        p.cloth_limit = cfg.self_contact.mass_ratio * cloth.vertex_mass;
     }
     if let Some(body) = &scene.rigid {
         p.has_rigid = 1;

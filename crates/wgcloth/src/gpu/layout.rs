@@ -139,8 +139,9 @@ pub struct Params {
     /// Entries of each vertex's contact list (stage "self_contact"):
     /// `cpu::self_contact::PAIRS_PER_VERTEX`, or what one binding holds.
     pub cloth_per_vertex: u32,
-    /// Pads the struct to a multiple of 16 bytes, as a uniform needs.
-    pub pad: u32,
+    /// `self_contact.mass_ratio` times the vertex mass, kg
+    /// (`cpu::self_contact::Band::limit`).
+    pub cloth_limit: f32,
 }
 
 /// Clock and run statistics kept on the GPU.
