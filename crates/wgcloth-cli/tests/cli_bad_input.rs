@@ -817,7 +817,10 @@ const BAD_FIELDS: &[(&str, &str)] = &[
     ("[self_contact]\ngamma = 0.5", "self_contact.gamma"),
     ("[self_contact]\nfloor = 0.0", "self_contact.floor"),
     ("[self_contact]\nthickness = 1e-4", "self_contact.thickness"),
-    ("[self_contact]\nmass_ratio = 0.0", "self_contact.mass_ratio"),
+    (
+        "[self_contact]\nmass_ratio = 0.0",
+        "self_contact.mass_ratio",
+    ),
 ];
 
 #[test]

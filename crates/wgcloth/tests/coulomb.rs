@@ -280,9 +280,9 @@ fn a_flap_of_cloth_holds_on_the_cloth_below_the_friction_angle_and_slides_at_cou
             match slides {
                 false => assert!(drift.abs() < 3e-3, "{path}: slid {drift} m below the angle"),
                 // It slides, never faster than Coulomb's rate, but slower:
-                // the lagged friction (DESIGN "The physics") slows a slide
-                // by h μ g cos θ / |v| of its rate (20 % at 0.2 m/s), and
-                // the fold's edges drag through the table's.
+                // the friction is μ times the start-of-step normal force,
+                // which swings above the solved one as the flap crosses the
+                // table's edges (DESIGN "The cloth against itself").
                 true => assert!(
                     measured > 0.3 * expected && measured < 1.05 * expected,
                     "{path}: {measured} m/s² vs Coulomb {expected}"
