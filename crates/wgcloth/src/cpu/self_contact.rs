@@ -483,6 +483,11 @@ mod tests {
         find_all(x, t, rest).pairs
     }
 
+    /// Velocities along `along`, of a different size at each vertex.
+    fn swirl(n: usize, along: Vec3) -> Vec<Vec3> {
+        (0..n).map(|i| along * (i as f32 * 0.37).sin()).collect()
+    }
+
     /// Counts of one pair at each vertex: the coefficients as configured.
     fn alone(x: &[Vec3]) -> Vec<u32> {
         vec![1; x.len()]
@@ -576,10 +581,7 @@ mod tests {
     #[test]
     fn couplings_apply_the_full_pair_blocks() {
         let (x, t, rest) = two_layers(2e-3, 0.4);
-        let mut v = vec![Vec3::ZERO; x.len()];
-        for (i, vi) in v.iter_mut().enumerate() {
-            *vi = Vec3::new(0.3, -0.1, 0.05) * (i as f32 * 0.37).sin();
-        }
+        let v = swirl(x.len(), Vec3::new(0.3, -0.1, 0.05));
         let pairs = find(&x, &t, &rest);
         let terms = respond(&pairs, &alone(&x), &x, &v, &BAND);
         let n = x.len();
@@ -618,10 +620,7 @@ mod tests {
     #[test]
     fn a_vertex_s_pairs_add_at_most_twice_the_limit_and_keep_to_coulomb() {
         let (x, t, rest) = two_layers(1.5e-3, 0.4);
-        let mut v = vec![Vec3::ZERO; x.len()];
-        for (i, vi) in v.iter_mut().enumerate() {
-            *vi = Vec3::new(0.02, -0.01, 0.0) * (i as f32 * 0.37).sin();
-        }
+        let v = swirl(x.len(), Vec3::new(0.02, -0.01, 0.0));
         let found = find_all(&x, &t, &rest);
         let limit = 1e-4;
         let band = Band { limit, ..BAND };
