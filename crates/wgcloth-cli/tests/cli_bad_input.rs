@@ -492,6 +492,7 @@ fn tiny_run_writes_report_json() {
         "grid",
         "steps",
         "ms_per_step",
+        "ms_per_step_mean",
         "max_penetration",
         "finite",
         "cg_iterations_mean",
