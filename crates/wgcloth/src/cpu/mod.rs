@@ -190,11 +190,13 @@ impl CpuSim {
     /// where it will be.
     pub fn step(&mut self) -> StepStats {
         let mut stats = StepStats::default();
-        for stage in Stage::ALL {
-            let start = Instant::now();
-            self.run_stage(stage, &mut stats);
-            stats.stage_seconds[stage.index()] = start.elapsed().as_secs_f64();
-        }
+        rayon::scope(|_| {
+            for stage in Stage::ALL {
+                let start = Instant::now();
+                self.run_stage(stage, &mut stats);
+                stats.stage_seconds[stage.index()] = start.elapsed().as_secs_f64();
+            }
+        });
         stats.contacts = self.contacts.len();
         self.state.time += self.params.dt as f64;
         self.state.step += 1;

@@ -132,6 +132,20 @@ pub fn solve(
     settings: SolveSettings,
     s: &mut PcgScratch,
 ) -> PcgOutcome {
+    // On a worker thread, a pass shorter than its grain (a small coarse
+    // level's) runs in place; from another thread each one would be sent to
+    // the pool and waited for.
+    rayon::scope(|_| solve_on_worker(a, cloth, b, x, settings, s))
+}
+
+fn solve_on_worker(
+    a: &BlockMatrix,
+    cloth: &Cloth,
+    b: &[Vec3],
+    x: &mut [Vec3],
+    settings: SolveSettings,
+    s: &mut PcgScratch,
+) -> PcgOutcome {
     let (adj, pinned) = (&cloth.adjacency, &cloth.pinned[..]);
     let n = b.len();
     for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
