@@ -135,108 +135,99 @@ pub fn solve(
     // On a worker thread, a pass shorter than its grain (a small coarse
     // level's) runs in place; from another thread each one would be sent to
     // the pool and waited for.
-    rayon::scope(|_| solve_on_worker(a, cloth, b, x, settings, s))
-}
-
-fn solve_on_worker(
-    a: &BlockMatrix,
-    cloth: &Cloth,
-    b: &[Vec3],
-    x: &mut [Vec3],
-    settings: SolveSettings,
-    s: &mut PcgScratch,
-) -> PcgOutcome {
-    let (adj, pinned) = (&cloth.adjacency, &cloth.pinned[..]);
-    let n = b.len();
-    for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
-        v.resize(n, Vec3::ZERO);
-    }
-    match settings.preconditioner {
-        Preconditioner::Multigrid => {
-            // A hierarchy built for another cloth is rebuilt.
-            let fits = |mg: &Multigrid| mg.levels()[0] == Level::of(cloth);
-            if !s.multigrid.as_ref().is_some_and(fits) {
-                s.multigrid = Some(Multigrid::new(cloth));
-            }
-            if let Some(mg) = &mut s.multigrid {
-                mg.setup(a, cloth);
-            }
+    rayon::scope(|_| {
+        let (adj, pinned) = (&cloth.adjacency, &cloth.pinned[..]);
+        let n = b.len();
+        for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
+            v.resize(n, Vec3::ZERO);
         }
-        // The diagonal; zero on pinned rows, which is the filter S.
-        Preconditioner::Jacobi => s
-            .inv_diag
-            .par_iter_mut()
-            .with_min_len(GRAIN)
-            .enumerate()
-            .for_each(|(i, m)| {
-                let d = a.diag[i];
-                *m = if pinned[i] {
-                    Vec3::ZERO
-                } else {
-                    Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
-                };
-            }),
-    }
-    let bb = b
-        .par_iter()
-        .with_min_len(GRAIN)
-        .enumerate()
-        .filter(|&(i, _)| !pinned[i])
-        .map(|(_, bi)| bi.length_squared() as f64)
-        .sum::<f64>();
-    // r = S (b − A x), z = P⁻¹ r, p = z.
-    a.multiply(adj, x, &mut s.q);
-    let mut rr =
-        s.r.par_iter_mut()
-            .with_min_len(GRAIN)
-            .enumerate()
-            .map(|(i, r)| {
-                *r = if pinned[i] { Vec3::ZERO } else { b[i] - s.q[i] };
-                r.length_squared() as f64
-            })
-            .sum::<f64>();
-    let mut delta = precondition(a, cloth, settings.preconditioner, s);
-    s.p.copy_from_slice(&s.z);
-
-    let mut out = PcgOutcome::default();
-    let threshold = (settings.tol as f64).powi(2) * bb;
-    while out.iterations < settings.max_iters && rr > threshold && delta > 0.0 {
-        let pq = a.multiply_filtered_dot(adj, pinned, &s.p, &mut s.q);
-        if !(pq > 0.0 && pq.is_finite()) {
-            out.breakdown = true;
-            break;
+        match settings.preconditioner {
+            Preconditioner::Multigrid => {
+                // A hierarchy built for another cloth is rebuilt.
+                let fits = |mg: &Multigrid| mg.levels()[0] == Level::of(cloth);
+                if !s.multigrid.as_ref().is_some_and(fits) {
+                    s.multigrid = Some(Multigrid::new(cloth));
+                }
+                if let Some(mg) = &mut s.multigrid {
+                    mg.setup(a, cloth);
+                }
+            }
+            // The diagonal; zero on pinned rows, which is the filter S.
+            Preconditioner::Jacobi => s
+                .inv_diag
+                .par_iter_mut()
+                .with_min_len(GRAIN)
+                .enumerate()
+                .for_each(|(i, m)| {
+                    let d = a.diag[i];
+                    *m = if pinned[i] {
+                        Vec3::ZERO
+                    } else {
+                        Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
+                    };
+                }),
         }
-        let alpha = (delta / pq) as f32;
-        rr = x
-            .par_iter_mut()
+        let bb = b
+            .par_iter()
             .with_min_len(GRAIN)
-            .zip(s.r.par_iter_mut())
             .enumerate()
-            .map(|(i, (x, r))| {
-                *x += alpha * s.p[i];
-                *r -= alpha * s.q[i];
-                r.length_squared() as f64
-            })
+            .filter(|&(i, _)| !pinned[i])
+            .map(|(_, bi)| bi.length_squared() as f64)
             .sum::<f64>();
-        let delta_new = precondition(a, cloth, settings.preconditioner, s);
-        let beta = (delta_new / delta) as f32;
-        s.p.par_iter_mut()
-            .with_min_len(GRAIN)
-            .zip(&s.z)
-            .for_each(|(p, z)| *p = *z + beta * *p);
-        delta = delta_new;
-        out.iterations += 1;
-    }
-    // A preconditioner that is not positive definite (rᵀz ≤ 0 with the
-    // residual above the goal) ends the solve as a breakdown, never as
-    // convergence.
-    out.breakdown |= !(delta.is_finite() && rr.is_finite()) || (rr > threshold && delta <= 0.0);
-    out.relative_residual = if bb > 0.0 {
-        (rr.max(0.0) / bb).sqrt() as f32
-    } else {
-        0.0
-    };
-    out
+        // r = S (b − A x), z = P⁻¹ r, p = z.
+        a.multiply(adj, x, &mut s.q);
+        let mut rr =
+            s.r.par_iter_mut()
+                .with_min_len(GRAIN)
+                .enumerate()
+                .map(|(i, r)| {
+                    *r = if pinned[i] { Vec3::ZERO } else { b[i] - s.q[i] };
+                    r.length_squared() as f64
+                })
+                .sum::<f64>();
+        let mut delta = precondition(a, cloth, settings.preconditioner, s);
+        s.p.copy_from_slice(&s.z);
+
+        let mut out = PcgOutcome::default();
+        let threshold = (settings.tol as f64).powi(2) * bb;
+        while out.iterations < settings.max_iters && rr > threshold && delta > 0.0 {
+            let pq = a.multiply_filtered_dot(adj, pinned, &s.p, &mut s.q);
+            if !(pq > 0.0 && pq.is_finite()) {
+                out.breakdown = true;
+                break;
+            }
+            let alpha = (delta / pq) as f32;
+            rr = x
+                .par_iter_mut()
+                .with_min_len(GRAIN)
+                .zip(s.r.par_iter_mut())
+                .enumerate()
+                .map(|(i, (x, r))| {
+                    *x += alpha * s.p[i];
+                    *r -= alpha * s.q[i];
+                    r.length_squared() as f64
+                })
+                .sum::<f64>();
+            let delta_new = precondition(a, cloth, settings.preconditioner, s);
+            let beta = (delta_new / delta) as f32;
+            s.p.par_iter_mut()
+                .with_min_len(GRAIN)
+                .zip(&s.z)
+                .for_each(|(p, z)| *p = *z + beta * *p);
+            delta = delta_new;
+            out.iterations += 1;
+        }
+        // A preconditioner that is not positive definite (rᵀz ≤ 0 with the
+        // residual above the goal) ends the solve as a breakdown, never as
+        // convergence.
+        out.breakdown |= !(delta.is_finite() && rr.is_finite()) || (rr > threshold && delta <= 0.0);
+        out.relative_residual = if bb > 0.0 {
+            (rr.max(0.0) / bb).sqrt() as f32
+        } else {
+            0.0
+        };
+        out
+    })
 }
 
 /// z = P⁻¹ r, returning rᵀz.
