@@ -1,18 +1,26 @@
 #!/usr/bin/env bash
 # The benchmark on a hardware GPU through its Vulkan driver (e.g. NVIDIA):
 #   scripts/bench-gpu.sh [OUT_DIR] [BINARY]
-# runs `wgcloth bench` (32² to 256², and 512² and 1024² since the adapter
-# is not a CPU) on the first adapter whose name matches $GPU_NAME (default
-# "nvidia"), writing bench.json, bench.png and bench.txt into OUT_DIR
-# (default target/bench-gpu). BINARY is a wgcloth built elsewhere (a machine
-# with a GPU but no Rust toolchain); without it the script builds one.
-# It refuses to run on a software adapter: that is what `wgcloth bench` on
-# lavapipe measures.
+# On the first adapter whose name matches $GPU_NAME (default "nvidia"):
+#  1. the default run (thesis scene, friction-net, every step solved to
+#     1e-3 with multigrid, 200 steps: the sphere's whole pass) at each grid
+#     of $GOAL_GRIDS (default 1024), report run_N.json: the issue's goal is
+#     60 steps a second at 1024² (each run cut at $RUN_TIMEOUT seconds,
+#     default 600);
+#  2. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
+#     networks' throughput and the sphere period, into bench.json,
+#     bench.png and bench.txt.
+# Everything printed also goes to OUT_DIR/log.txt (default target/bench-gpu),
+# a line a row, so a run cut short still says how far it got.
+# BINARY is a wgcloth built elsewhere (a machine with a GPU but no Rust
+# toolchain); without it the script builds one. It refuses a software
+# adapter: that is what `wgcloth bench` on lavapipe measures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-target/bench-gpu}
 bin=${2:-}
 name=${GPU_NAME:-nvidia}
+goal_grids=${GOAL_GRIDS:-1024}
 
 if [ -z "$bin" ]; then
   cargo build --release -p wgcloth-cli
@@ -31,6 +39,7 @@ export WGPU_BACKEND=${WGPU_BACKEND:-vulkan}
 export WGPU_ADAPTER_NAME=$name
 
 mkdir -p "$out"
+exec > >(tee -a "$out/log.txt") 2>&1
 # A run of one step first: it names the adapter, or says why none matches.
 "$bin" run --backend gpu --grid 8 --steps 1 --report "$out/probe.json" >/dev/null
 adapter=$(sed -n 's/.*"adapter": *"\([^"]*\)".*/\1/p' "$out/probe.json")
@@ -38,4 +47,13 @@ case "$adapter" in
   *Cpu*) echo "error: '$adapter' is a software adapter; set GPU_NAME to a hardware one"; exit 2 ;;
 esac
 echo "adapter: $adapter"
-"$bin" bench --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"
+for n in $goal_grids; do
+  echo "== default run, ${n}²"
+  # A run that fails or outlasts $RUN_TIMEOUT seconds leaves the bench to run.
+  if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
+    --report "$out/run_$n.json"; then
+    echo "the ${n}² run failed or outlasted ${RUN_TIMEOUT:-600} s"
+  fi
+done
+echo "== wgcloth bench --gpu-only"
+"$bin" bench --gpu-only --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"

@@ -60,6 +60,10 @@ struct BenchArgs {
     /// memory-traffic floor, 128² to 1024² (a minute or two).
     #[arg(long, conflicts_with = "quick")]
     iterations: bool,
+    /// Only the GPU's rows, with 512² and 1024² on a hardware GPU (what
+    /// scripts/bench-gpu.sh runs); an error where there is no adapter.
+    #[arg(long, conflicts_with = "iterations")]
+    gpu_only: bool,
     /// Write the table as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -441,9 +445,19 @@ fn bench(args: &BenchArgs) -> Result<()> {
         (_, true) => wgcloth_cli::bench::BenchOptions::iterations(),
         _ => wgcloth_cli::bench::BenchOptions::full(),
     };
+    let options = match args.gpu_only {
+        true => options.gpu_only(),
+        false => options,
+    };
     let spinner = ProgressBar::new_spinner();
     spinner.enable_steady_tick(std::time::Duration::from_millis(200));
-    let report = wgcloth_cli::bench::bench(&options, |what| spinner.set_message(what.to_string()))?;
+    // Without a terminal (a log, a remote machine) each step of the
+    // measurement is a line, so a bench cut short still says how far it got.
+    let start = std::time::Instant::now();
+    let report = wgcloth_cli::bench::bench(&options, |what| match spinner.is_hidden() {
+        true => eprintln!("[{:7.1} s] {what}", start.elapsed().as_secs_f64()),
+        false => spinner.set_message(what.to_string()),
+    })?;
     spinner.finish_and_clear();
     print!("{}", report.table());
     if let Some(path) = &args.report {

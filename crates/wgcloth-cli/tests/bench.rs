@@ -26,7 +26,37 @@ fn tiny() -> BenchOptions {
         batch_sizes: vec![7, 40],
         repeats: 2,
         iteration_grids: vec![16],
+        gpu_only: false,
     }
+}
+
+/// `--gpu-only`: the GPU's rows and nothing of the CPU's, or an error
+/// where there is no adapter.
+#[test]
+fn a_gpu_only_bench_has_no_cpu_row() {
+    let opts = BenchOptions {
+        grids: vec![6],
+        period_steps: 2,
+        batch_sizes: vec![7],
+        repeats: 1,
+        ..tiny()
+    }
+    .gpu_only();
+    let report = match bench(&opts, |_| {}) {
+        Ok(report) => report,
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI needs a GPU adapter: {e}")
+        }
+        Err(e) => {
+            assert!(e.to_string().contains("adapter"), "{e}");
+            return;
+        }
+    };
+    assert_eq!(report.rows.len(), VARIANTS.len());
+    assert!(report.rows.iter().all(|r| r.report.backend == "gpu"));
+    assert!(report.periods.iter().all(|p| p.backend == "gpu") && !report.periods.is_empty());
+    assert!(report.networks.iter().all(|n| n.backend == "gpu"));
+    assert!(report.iterations.is_empty());
 }
 
 #[test]

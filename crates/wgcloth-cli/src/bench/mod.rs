@@ -184,6 +184,10 @@ pub struct BenchOptions {
     pub repeats: usize,
     /// Grids of the CPU solver-iteration rows.
     pub iteration_grids: Vec<u32>,
+    /// The GPU's rows alone: no CPU step, period, network or
+    /// solver-iteration row (a hardware GPU's run, where the CPU's rows
+    /// would take most of the time and are measured elsewhere).
+    pub gpu_only: bool,
 }
 
 impl BenchOptions {
@@ -202,6 +206,16 @@ impl BenchOptions {
             batch_sizes: vec![1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000],
             repeats: 3,
             iteration_grids: vec![128, 256, 512],
+            gpu_only: false,
+        }
+    }
+
+    /// These options' GPU rows alone.
+    pub fn gpu_only(self) -> BenchOptions {
+        BenchOptions {
+            gpu_only: true,
+            iteration_grids: Vec::new(),
+            ..self
         }
     }
 
@@ -423,21 +437,23 @@ pub struct BenchReport {
     pub periods: Vec<PeriodRow>,
 }
 
-/// The CPU, and the GPU where an adapter exists; the adapter, or why
-/// there is none.
-fn backends() -> (Vec<Chosen>, String) {
+/// The CPU (unless `gpu_only`), and the GPU where an adapter exists; the
+/// adapter, or why there is none. GPU rows alone with no adapter is an error.
+fn backends(gpu_only: bool) -> Result<(Vec<Chosen>, String)> {
     match GpuContext::headless() {
         Ok(ctx) => {
             let note = describe(&ctx.adapter);
-            (vec![Chosen::Cpu, Chosen::gpu(ctx)], note)
+            let cpu = (!gpu_only).then_some(Chosen::Cpu);
+            Ok((cpu.into_iter().chain([Chosen::gpu(ctx)]).collect(), note))
         }
-        Err(e) => (vec![Chosen::Cpu], format!("no GPU rows: {e}")),
+        Err(e) if gpu_only => Err(e),
+        Err(e) => Ok((vec![Chosen::Cpu], format!("no GPU rows: {e}"))),
     }
 }
 
 /// Runs the whole table; `progress` hears what is being measured.
 pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<BenchReport> {
-    let (chosen, gpu_note) = backends();
+    let (chosen, gpu_note) = backends(opts.gpu_only)?;
     let mut rows = Vec::new();
     for backend in &chosen {
         for grid in grids(opts, backend) {
@@ -454,6 +470,13 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
                     .map_or(0, |n| n.jacobian_multiply_adds());
                 let report = run::run(backend, scene, opts.steps, Default::default())?;
                 let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
+                progress(&format!(
+                    "  {:.3} ms/step (median), {:.3} (mean), {:.1} iterations a step, worst residual {:.1e}",
+                    report.ms_per_step,
+                    report.ms_per_step_mean,
+                    report.cg_iterations_mean,
+                    report.cg_residual_max
+                ));
                 rows.push(StepRow {
                     label,
                     converged: v.solve != Solve::Thesis,
@@ -838,7 +861,7 @@ fn network_rows(
             let rows_n = n * evaluations;
             let batch = &inputs[..rows_n * net.inputs()];
             let flop = 2 * network.jacobian_multiply_adds();
-            if (n * flop) as f64 <= CPU_BUDGET {
+            if !opts.gpu_only && (n * flop) as f64 <= CPU_BUDGET {
                 progress(&format!("network {} cpu {n}", shipped.path));
                 let ms = timed(opts.repeats, || {
                     net.forward_jacobian_parallel(batch, wrt.clone());
