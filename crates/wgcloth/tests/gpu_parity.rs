@@ -252,6 +252,44 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
     }
 }
 
+/// Face–vertex contacts on a cloth of several super-tiles (130²: 3 × 3 of
+/// them), where each rigid vertex's workgroup searches one super-tile a
+/// round: every rigid vertex hits the triangle the CPU's search finds, at
+/// the same depth.
+#[test]
+fn face_vertex_contacts_match_the_cpu_across_super_tiles() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let scene = sphere(130, ModelKind::Friction);
+    let mut cpu = cpu_after(&scene, IN_CONTACT);
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.step();
+    cpu.step();
+    let (_, fv) = gpu.read_contacts().unwrap();
+    let on_cpu: Vec<_> = cpu
+        .contacts()
+        .iter()
+        .filter_map(|c| {
+            c.cloth_triangle
+                .map(|t| (c.rigid_feature as usize, t, c.distance))
+        })
+        .collect();
+    assert!(on_cpu.len() > 10, "the state must be in contact");
+    assert_eq!(
+        fv.iter().filter(|(c, _)| c.valid != 0).count(),
+        on_cpu.len()
+    );
+    for (k, t, distance) in on_cpu {
+        let g = fv[k].0;
+        assert_eq!((g.valid, g.triangle), (1, t), "rigid vertex {k}");
+        assert!(
+            (g.distance - distance).abs() < 1e-5,
+            "rigid vertex {k}: {} vs {distance}",
+            g.distance
+        );
+    }
+}
+
 #[test]
 fn thesis_scene_runs_like_the_cpu_with_both_models() {
     let Some((ctx, kernels)) = gpu() else { return };

@@ -111,63 +111,112 @@ fn cloth_normal(t: u32, rigid_normal: vec3<f32>) -> vec3<f32> {
     return select(n / len, -n / len, dot(n, rigid_normal) > 0.0);
 }
 
-// (b) The cloth triangle closest to each rigid vertex.
-@compute @workgroup_size(WORKGROUP)
-fn face_vertex(@builtin(global_invocation_id) id: vec3<u32>) {
-    let k = id.x;
-    if k >= params.n_rigid_vertices {
-        return;
-    }
-    let p = rigid[k].xyz;
-    let np = rigid[params.n_rigid_vertices + k].xyz;
+// (b) The cloth triangle closest to each rigid vertex: one workgroup per
+// rigid vertex (strided when there are more than workgroups), one lane per
+// tile of a super-tile and then per cell of a tile, so a vertex's thousands
+// of triangle tests at a fine grid spread over TILE² lanes instead of
+// running in one. Each lane keeps its best, and lane 0 picks the best of
+// those by `better`, a total order (larger d, then the lower triangle), so
+// the contact is the one a single search finds, as on the CPU.
+// The near tiles of the super-tile being searched, in any order (the
+// winner does not depend on it), and their count, one counter per parity
+// of the search's round so that one is reset while the other is read.
+var<workgroup> near_tiles: array<u32, FACE_VERTEX_LANES>;
+var<workgroup> near_count: array<atomic<u32>, 2>;
+var<workgroup> lane_d: array<f32, FACE_VERTEX_LANES>;
+var<workgroup> lane_t: array<u32, FACE_VERTEX_LANES>;
+// Written by lane 0 after the next vertex's first barrier, by which every
+// lane has read this one's.
+var<workgroup> lane_winner: u32;
+
+@compute @workgroup_size(FACE_VERTEX_LANES)
+fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
+               @builtin(local_invocation_index) lid: u32) {
     let r = reach();
-    var best_t = NO_TRIANGLE;
-    var best = vec4<f32>(0.0);
-    var best_n = vec3<f32>(0.0);
-    for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
-        let sb = bounds[params.tiles_x * params.tiles_y + s];
-        if !box_near(sb.lo.xyz, sb.hi.xyz, p, r) {
-            continue;
-        }
-        let sx = s % params.supertiles_x;
-        let sy = s / params.supertiles_x;
-        for (var ty = sy * TILE; ty < min(sy * TILE + TILE, params.tiles_y); ty++) {
-            for (var tx = sx * TILE; tx < min(sx * TILE + TILE, params.tiles_x); tx++) {
+    // This lane's tile of a super-tile, and its cell of a tile.
+    let lx = lid % TILE;
+    let ly = lid / TILE;
+    var round = 0u;
+    for (var k = wg.x; k < params.n_rigid_vertices; k += groups.x) {
+        let p = rigid[k].xyz;
+        let np = rigid[params.n_rigid_vertices + k].xyz;
+        var best_t = NO_TRIANGLE;
+        var best = vec4<f32>(0.0);
+        var best_n = vec3<f32>(0.0);
+        for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
+            let sb = bounds[params.tiles_x * params.tiles_y + s];
+            let near = box_near(sb.lo.xyz, sb.hi.xyz, p, r);
+            let sx = s % params.supertiles_x;
+            let sy = s / params.supertiles_x;
+            let tx = sx * TILE + lx;
+            let ty = sy * TILE + ly;
+            let parity = round % 2u;
+            round++;
+            if near && tx < params.tiles_x && ty < params.tiles_y {
                 let tb = bounds[ty * params.tiles_x + tx];
-                if !box_near(tb.lo.xyz, tb.hi.xyz, p, r) {
+                if box_near(tb.lo.xyz, tb.hi.xyz, p, r) {
+                    near_tiles[atomicAdd(&near_count[parity], 1u)] = lid;
+                }
+            }
+            workgroupBarrier();
+            if lid == 0u {
+                // Last read in the previous round, which a barrier ended.
+                atomicStore(&near_count[1u - parity], 0u);
+            }
+            for (var i = 0u; i < atomicLoad(&near_count[parity]); i++) {
+                let j = near_tiles[i];
+                let cx = (sx * TILE + j % TILE) * TILE + lx;
+                let cy = (sy * TILE + j / TILE) * TILE + ly;
+                if cx >= params.cells_x || cy >= params.cells_y {
                     continue;
                 }
-                for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
-                    for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
-                        for (var half = 0u; half < 2u; half++) {
-                            let t = 2u * (cy * params.cells_x + cx) + half;
-                            let n = cloth_normal(t, np);
-                            if all(n == vec3<f32>(0.0)) {
-                                continue;
-                            }
-                            let hit = point_triangle(p, x[cloth_index(3u * t)].xyz, x[cloth_index(3u * t + 1u)].xyz,
-                                                     x[cloth_index(3u * t + 2u)].xyz, n, params.thickness,
-                                                     params.max_depth);
-                            if found(hit) && better(hit.x, t, best.x, best_t) {
-                                best_t = t;
-                                best = hit;
-                                best_n = n;
-                            }
-                        }
+                for (var half = 0u; half < 2u; half++) {
+                    let t = 2u * (cy * params.cells_x + cx) + half;
+                    let n = cloth_normal(t, np);
+                    if all(n == vec3<f32>(0.0)) {
+                        continue;
+                    }
+                    let hit = point_triangle(p, x[cloth_index(3u * t)].xyz, x[cloth_index(3u * t + 1u)].xyz,
+                                             x[cloth_index(3u * t + 2u)].xyz, n, params.thickness,
+                                             params.max_depth);
+                    if found(hit) && better(hit.x, t, best.x, best_t) {
+                        best_t = t;
+                        best = hit;
+                        best_n = n;
                     }
                 }
             }
+            // The next round writes the list again.
+            workgroupBarrier();
+        }
+        lane_d[lid] = best.x;
+        lane_t[lid] = best_t;
+        workgroupBarrier();
+        if lid == 0u {
+            var d = lane_d[0];
+            var t = lane_t[0];
+            for (var l = 1u; l < FACE_VERTEX_LANES; l++) {
+                if lane_t[l] != NO_TRIANGLE && better(lane_d[l], lane_t[l], d, t) {
+                    d = lane_d[l];
+                    t = lane_t[l];
+                }
+            }
+            lane_winner = t;
+        }
+        let winner = workgroupUniformLoad(&lane_winner);
+        // The lane that found the winner writes it (triangles are unique).
+        if winner != NO_TRIANGLE && best_t == winner {
+            let verts = vec3<u32>(cloth_index(3u * best_t), cloth_index(3u * best_t + 1u), cloth_index(3u * best_t + 2u));
+            contacts[params.n_vertices + k] = Contact(best_n, best.x - params.thickness, -best.yzw, best.x,
+                                                      frame.velocity, 1u, verts, best_t);
+            // Linked in at the head of the triangle's list (entries are k + 1;
+            // 0 ends a list): one node per rigid vertex, so nothing can overflow.
+            let next = atomicExchange(&triangle_contacts[best_t], k + 1u);
+            atomicStore(&triangle_contacts[params.n_triangles + k], next);
+            atomicAdd(&state.contacts_last, 1u);
+        }
+        if winner == NO_TRIANGLE && lid == 0u {
+            contacts[params.n_vertices + k] = no_contact();
         }
     }
-    var c = no_contact();
-    if best_t != NO_TRIANGLE {
-        let verts = vec3<u32>(cloth_index(3u * best_t), cloth_index(3u * best_t + 1u), cloth_index(3u * best_t + 2u));
-        c = Contact(best_n, best.x - params.thickness, -best.yzw, best.x, frame.velocity, 1u, verts, best_t);
-        // Linked in at the head of the triangle's list (entries are k + 1;
-        // 0 ends a list): one node per rigid vertex, so nothing can overflow.
-        let next = atomicExchange(&triangle_contacts[best_t], k + 1u);
-        atomicStore(&triangle_contacts[params.n_triangles + k], next);
-        atomicAdd(&state.contacts_last, 1u);
-    }
-    contacts[params.n_vertices + k] = c;
 }

@@ -305,6 +305,23 @@ pub struct StepRow {
     pub report: Report,
 }
 
+impl StepRow {
+    /// The step at which the run stopped as diverging (its state exploding,
+    /// e.g. the thesis's 25 iterations at 1024²): it has no step time to
+    /// compare, and the table says so rather than print one.
+    pub fn diverged_at(&self) -> Option<u64> {
+        self.report.divergence.as_ref().map(|d| d.step)
+    }
+}
+
+/// A row's ms/step in a column `width` wide, or the step it diverged at.
+fn ms_or_diverged(ms: f64, diverged_at: Option<u64>, width: usize) -> String {
+    match diverged_at {
+        Some(step) => format!("{:>width$}", format!("div@{step}")),
+        None => format!("{ms:>width$.3}"),
+    }
+}
+
 /// Wall time of one sphere period (at 32² unless told otherwise), from a
 /// fresh simulator.
 #[derive(Clone, Debug, Serialize)]
@@ -389,8 +406,10 @@ pub struct ConvergedRow {
     /// jump in iterations (the sphere reaching the cloth) can outrun it once.
     pub steps_cut: u64,
     /// This row's ms/step over the thesis-solve row's (same backend, model
-    /// and grid; not solved to any tolerance).
+    /// and grid; not solved to any tolerance), where neither diverged.
     pub times_thesis_step: Option<f64>,
+    /// The step at which this row's run diverged ([`StepRow::diverged_at`]).
+    pub diverged_at: Option<u64>,
 }
 
 /// One stage of the default model's thesis-solve rows against its floor
@@ -451,6 +470,35 @@ fn backends(gpu_only: bool) -> Result<(Vec<Chosen>, String)> {
     }
 }
 
+/// One step row: `v` on `backend` at `grid`².
+fn step_row(backend: &Chosen, v: Variant, grid: u32, steps: Steps) -> Result<StepRow> {
+    let scene = v.scene(grid)?;
+    let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
+    let triangles = scene.cloth.triangles.len();
+    let body_vertices = scene.rigid.as_ref().map_or(0, |b| b.mesh.vertices.len());
+    let network_multiply_adds = scene
+        .network
+        .as_ref()
+        .map_or(0, |n| n.jacobian_multiply_adds());
+    let report = run::run(backend, scene, steps, Default::default())?;
+    // A run that diverged before its timed steps has no step time.
+    let stage_coverage = match report.ms_per_step > 0.0 {
+        true => report.stage_ms.values().sum::<f64>() / report.ms_per_step,
+        false => 0.0,
+    };
+    Ok(StepRow {
+        label: v.label(),
+        converged: v.solve != Solve::Thesis,
+        particles,
+        springs,
+        triangles,
+        body_vertices,
+        stage_coverage,
+        network_multiply_adds,
+        report,
+    })
+}
+
 /// Runs the whole table; `progress` hears what is being measured.
 pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<BenchReport> {
     let (chosen, gpu_note) = backends(opts.gpu_only)?;
@@ -458,36 +506,17 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     for backend in &chosen {
         for grid in grids(opts, backend) {
             for v in VARIANTS {
-                let label = v.label();
-                progress(&format!("step {} {label} {grid}²", name(backend)));
-                let scene = v.scene(grid)?;
-                let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
-                let triangles = scene.cloth.triangles.len();
-                let body_vertices = scene.rigid.as_ref().map_or(0, |b| b.mesh.vertices.len());
-                let network_multiply_adds = scene
-                    .network
-                    .as_ref()
-                    .map_or(0, |n| n.jacobian_multiply_adds());
-                let report = run::run(backend, scene, opts.steps, Default::default())?;
-                let stage_coverage = report.stage_ms.values().sum::<f64>() / report.ms_per_step;
-                progress(&format!(
-                    "  {:.3} ms/step (median), {:.3} (mean), {:.1} iterations a step, worst residual {:.1e}",
-                    report.ms_per_step,
-                    report.ms_per_step_mean,
-                    report.cg_iterations_mean,
-                    report.cg_residual_max
-                ));
-                rows.push(StepRow {
-                    label,
-                    converged: v.solve != Solve::Thesis,
-                    particles,
-                    springs,
-                    triangles,
-                    body_vertices,
-                    stage_coverage,
-                    network_multiply_adds,
-                    report,
+                progress(&format!("step {} {} {grid}²", name(backend), v.label()));
+                let row = step_row(backend, v, grid, opts.steps)?;
+                let r = &row.report;
+                progress(&match &r.divergence {
+                    Some(d) => format!("  diverged at step {}: {}", d.step, d.reason),
+                    None => format!(
+                        "  {:.3} ms/step (median), {:.3} (mean), {:.1} iterations a step, worst residual {:.1e}",
+                        r.ms_per_step, r.ms_per_step_mean, r.cg_iterations_mean, r.cg_residual_max
+                    ),
                 });
+                rows.push(row);
             }
         }
     }
@@ -568,6 +597,7 @@ fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
                     && t.label == report.model.name()
                     && t.report.backend == report.backend
                     && t.report.grid[0] == grid
+                    && t.diverged_at().is_none()
             });
             ConvergedRow {
                 backend: report.backend.clone(),
@@ -580,7 +610,10 @@ fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
                 residual_max: report.cg_residual_max,
                 steps_above_goal: report.cg_steps_above_goal,
                 steps_cut: report.cg_steps_cut,
-                times_thesis_step: thesis.map(|t| report.ms_per_step / t.report.ms_per_step),
+                times_thesis_step: thesis
+                    .filter(|_| r.diverged_at().is_none())
+                    .map(|t| report.ms_per_step / t.report.ms_per_step),
+                diverged_at: r.diverged_at(),
             }
         })
         .collect()
@@ -613,6 +646,7 @@ fn scaling(rows: &[StepRow]) -> Vec<ScalingRow> {
         let of: Vec<&StepRow> = rows
             .iter()
             .filter(|r| r.report.backend == backend && r.label == label)
+            .filter(|r| r.diverged_at().is_none())
             .collect();
         let Some(to) = of.iter().max_by_key(|r| r.particles) else {
             continue;
@@ -640,7 +674,7 @@ fn scaling(rows: &[StepRow]) -> Vec<ScalingRow> {
 /// The friction rows' PCG iterations against the floor of their backend.
 fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<TrafficRow> {
     rows.iter()
-        .filter(|r| r.label == ModelKind::Friction.name())
+        .filter(|r| r.label == ModelKind::Friction.name() && r.diverged_at().is_none())
         .filter_map(|r| {
             let backend = r.report.backend.as_str();
             let gb_per_s = bandwidth.iter().find(|b| b.backend == backend)?.gb_per_s;
@@ -767,6 +801,7 @@ fn stage_traffic(
     for r in rows
         .iter()
         .filter(|r| !r.converged && r.label == ModelKind::FrictionNet.name())
+        .filter(|r| r.diverged_at().is_none())
     {
         let backend = r.report.backend.as_str();
         let (Some(b), Some(a)) = (
@@ -966,11 +1001,11 @@ impl BenchReport {
         section(&mut out, &self.rows, header + "\n", |row| {
             let r = &row.report;
             let mut line = format!(
-                "{:<8}{:<32}{:>6}{:>11.3}{:>10.1}{:>6.1}{:>6.0}%",
+                "{:<8}{:<32}{:>6}{}{:>10.1}{:>6.1}{:>6.0}%",
                 r.backend,
                 row.label,
                 r.grid[0],
-                r.ms_per_step,
+                ms_or_diverged(r.ms_per_step, row.diverged_at(), 11),
                 r.contacts_mean,
                 r.cg_iterations_mean,
                 100.0 * row.stage_coverage
@@ -1000,11 +1035,11 @@ impl BenchReport {
             ),
             |c| {
                 format!(
-                    "{:<8}{:<32}{:>6}{:>11.3}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
+                    "{:<8}{:<32}{:>6}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
                     c.backend,
                     c.label,
                     c.grid,
-                    c.ms_per_step,
+                    ms_or_diverged(c.ms_per_step, c.diverged_at, 11),
                     c.iterations_mean,
                     c.iterations_max,
                     c.residual_max,
@@ -1158,5 +1193,87 @@ impl BenchReport {
             },
         );
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgcloth::health::Divergence;
+
+    /// A diverged row has no step time: the table names the step it
+    /// diverged at, and the growth, iteration-traffic and thesis ratios
+    /// leave it out rather than divide by its zero.
+    #[test]
+    fn a_diverged_row_is_named_and_left_out() {
+        let steps = Steps {
+            untimed: 1,
+            total: 3,
+        };
+        let model = ModelKind::Friction;
+        let thesis = Variant::of(model);
+        let solved = Variant::converged(model, Preconditioner::Multigrid);
+        let mut rows = Vec::new();
+        for grid in [6, 10, 14] {
+            for v in [thesis, solved] {
+                rows.push(step_row(&Chosen::Cpu, v, grid, steps).expect("a tiny CPU run"));
+            }
+        }
+        let kept =
+            |rows: &[StepRow]| (scaling(rows), cg_traffic(rows, &[traffic::cpu_bandwidth()]));
+        let (growth, traffic) = kept(&rows);
+        assert!(
+            growth.iter().all(|g| g.to_grid == 14) && growth.len() == 2,
+            "{growth:?}"
+        );
+        assert_eq!(traffic.len(), 3);
+        // The largest thesis row diverges at step 2 before any timed step.
+        let last = rows
+            .iter_mut()
+            .rfind(|r| !r.converged)
+            .expect("a thesis row");
+        last.report.divergence = Some(Divergence {
+            step: 2,
+            vertex: 0,
+            reason: "planted".into(),
+        });
+        last.report.ms_per_step = 0.0;
+        let (growth, traffic) = kept(&rows);
+        let thesis_growth = growth
+            .iter()
+            .find(|g| g.label == thesis.label())
+            .expect("a thesis series");
+        assert_eq!(thesis_growth.to_grid, 10, "the diverged 14² row left out");
+        assert!(thesis_growth.exponent.is_finite());
+        assert_eq!(traffic.len(), 2, "{traffic:?}");
+        let solves = converged(&rows);
+        let at_14 = solves.iter().find(|c| c.grid == 14).expect("the 14² solve");
+        assert_eq!(at_14.times_thesis_step, None, "no ratio to a diverged row");
+        assert!(
+            solves
+                .iter()
+                .filter(|c| c.grid < 14)
+                .all(|c| c.times_thesis_step.is_some())
+        );
+        let report = BenchReport {
+            quick: true,
+            period_grid: 6,
+            period_steps: 0,
+            cpu: String::new(),
+            gpu: String::new(),
+            converged: solves,
+            scaling: growth,
+            cg_traffic: traffic,
+            iterations: Vec::new(),
+            stage_traffic: Vec::new(),
+            bandwidth: Vec::new(),
+            arithmetic: Vec::new(),
+            rows,
+            networks: Vec::new(),
+            periods: Vec::new(),
+        };
+        let table = report.table();
+        assert!(table.contains("div@2"), "{table}");
+        assert!(!table.contains("inf") && !table.contains("NaN"), "{table}");
     }
 }

@@ -13,6 +13,8 @@ pub const NO_TRIANGLE: u32 = u32::MAX;
 /// Cloth grid cells per tile edge, and tiles per super-tile edge (the
 /// face–vertex broad phase).
 pub const TILE: u32 = 8;
+/// Lanes of a face–vertex workgroup: one per cell of a tile.
+pub const FACE_VERTEX_LANES: u32 = TILE * TILE;
 
 /// Network rows per contact of the contact-frame network
 /// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
@@ -92,13 +94,14 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 31] = [
+pub const SHARED: [(&str, u32); 32] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
     ("BATCH_GROUP", BATCH_GROUP),
     ("NO_TRIANGLE", NO_TRIANGLE),
     ("TILE", TILE),
+    ("FACE_VERTEX_LANES", FACE_VERTEX_LANES),
     ("EDGE_PAIR", separate::EDGE_PAIR),
     ("SELF_PAIR_COUNT", self_header::PAIR_COUNT),
     ("SELF_CHANGED", self_header::CHANGED),

@@ -12,6 +12,9 @@ pub(crate) struct Collide {
     supertiles: Bound,
     vertex_face: Bound,
     face_vertex: Bound,
+    /// The most workgroups one dispatch may have: `face_vertex` runs one
+    /// per rigid vertex, each taking every this-many-th beyond.
+    max_groups: u32,
     triangle_contacts: wgpu::Buffer,
 }
 
@@ -39,6 +42,7 @@ impl Collide {
             supertiles: bind(Entry::CollideSupertiles),
             vertex_face: bind(Entry::CollideVertexFace),
             face_vertex: bind(Entry::CollideFaceVertex),
+            max_groups: device.limits().max_compute_workgroups_per_dimension,
             triangle_contacts: b.triangle_contacts.clone(),
         }
     }
@@ -55,8 +59,8 @@ impl Collide {
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
         self.vertex_face.dispatch(pass, p.n_vertices, WORKGROUP);
-        self.face_vertex
-            .dispatch(pass, p.n_rigid_vertices, WORKGROUP);
+        self.face_vertex.set(pass);
+        pass.dispatch_workgroups(p.n_rigid_vertices.min(self.max_groups), 1, 1);
         4
     }
 }
