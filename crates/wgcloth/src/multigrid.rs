@@ -24,6 +24,20 @@ pub const COARSEST_NODES: u32 = 16;
 pub const COARSE_SWEEPS: u32 = 12;
 /// The most levels a hierarchy has (a 2²⁶-particle cloth needs 23).
 pub const MAX_LEVELS: u32 = 24;
+/// The most nodes of a level the GPU's V-cycle takes in its tail, one
+/// dispatch of one workgroup for all the levels from there down. Each dispatch costs
+/// a barrier that drains the device (about 8 µs on an H200, 90 µs on
+/// lavapipe); below this size one workgroup does a level's work in less.
+pub const TAIL_NODES: u32 = 256;
+
+/// The first level of the tail: the first coarse level of at most
+/// [`TAIL_NODES`] nodes (the coarsest has at most [`COARSEST_NODES`]).
+pub fn tail_from(nodes: &[u32]) -> usize {
+    (1..nodes.len())
+        .find(|&l| nodes[l] <= TAIL_NODES)
+        .unwrap_or(nodes.len() - 1)
+}
+
 /// ω of the damped block-Jacobi smoother ω D⁻¹, where the row allows it.
 pub const SMOOTH_WEIGHT: f32 = 1.0;
 /// How close a row's ω may come to its bound 2 / (1 + s) (see [`row_weight`]).

@@ -392,14 +392,14 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     ctx.finish().unwrap();
     // 10 outside the solve; PCG's init, init_scalars, spmv, conclude and
     // finish; per iteration `next` (but the first) and `advance`; the
-    // multigrid setup (one per coarse level L) and a V-cycle (4 L + 1: a
-    // residual and a restriction down, a guess and a sweep up, per level)
-    // at the start and in every iteration.
-    let (iters, coarse) = (
-        scene.config.solver.cg_iters,
-        wgcloth::multigrid::levels(12, 12).len() as u32 - 1,
-    );
-    let cycle = 4 * coarse + 1;
+    // multigrid setup (one per coarse level L) and a V-cycle (4 T + 1: a
+    // residual and a restriction down, a guess and a sweep up, per level
+    // above the tail's first T, and the tail) at the start and in every
+    // iteration.
+    let levels = wgcloth::multigrid::levels(12, 12);
+    let nodes: Vec<u32> = levels.iter().map(|l| l.nodes() as u32).collect();
+    let (iters, coarse) = (scene.config.solver.cg_iters, levels.len() as u32 - 1);
+    let cycle = 4 * wgcloth::multigrid::tail_from(&nodes) as u32 + 1;
     let pcg = 5 + (iters - 1) + iters * (1 + cycle) + coarse + cycle;
     assert_eq!(dispatches, 50 * (10 + pcg), "dispatches per step");
     assert_eq!(

@@ -4,7 +4,9 @@
 // src/cpu/multigrid.rs, function by function.
 //
 // Each dispatch works between two levels, `hop.fine` and `hop.coarse`,
-// bound per dispatch; level 0 is the cloth, whose operator is A itself
+// bound per dispatch, except `tail`, which takes the coarsest levels in one
+// workgroup, a barrier where the per-level kernels take a dispatch (each
+// costs more than those levels' work); level 0 is the cloth, whose operator is A itself
 // (diagonal blocks and spring blocks), its pinned vertices filtered out of
 // the interpolation (P̃ = S P). No level stores its pre-smoothing
 // a = ω D⁻¹ r (the residual kernel recomputes it where it reads it, nine
@@ -34,7 +36,11 @@ struct Hop {
     coarse: Grid,
 }
 
-@group(1) @binding(0) var<storage, read> hop: Hop;
+@group(1) @binding(0) var<storage, read> bound_hop: Hop;
+// Every level's hop (the coarsest level's `fine` is itself), for `tail`.
+@group(1) @binding(6) var<storage, read> hop_list: array<Hop>;
+// The hop being worked on: the bound one, or the one `tail` is at.
+var<private> hop: Hop;
 // A of the cloth: its diagonal blocks (one per vertex), then one per spring.
 @group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
 // Every level's smoother blocks and every coarse level's stencils.
@@ -246,6 +252,7 @@ fn add_entry(cc: vec2<u32>, wi: f32, j: u32, block: Sym3) {
 // writes the smoothers of the cloth vertices it owns, (2 cc + {0, 1}).
 @compute @workgroup_size(WORKGROUP)
 fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
+    hop = bound_hop;
     let I = id.x;
     if I >= nodes(hop.coarse) {
         return;
@@ -317,20 +324,27 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
 // the work vector.
 @compute @workgroup_size(WORKGROUP)
 fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i < nodes(hop.fine) {
-        vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false), 0.0);
+    hop = bound_hop;
+    if id.x < nodes(hop.fine) {
+        residual_at(id.x);
     }
+}
+
+fn residual_at(i: u32) {
+    vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false), 0.0);
 }
 
 // Down one level: the coarse right-hand side is the restricted residual,
 // Pᵀ (r − A ω D⁻¹ r).
 @compute @workgroup_size(WORKGROUP)
 fn down(@builtin(global_invocation_id) id: vec3<u32>) {
-    let I = id.x;
-    if I >= nodes(hop.coarse) {
-        return;
+    hop = bound_hop;
+    if id.x < nodes(hop.coarse) {
+        down_at(id.x);
     }
+}
+
+fn down_at(I: u32) {
     let g = hop.fine;
     let cc = coords(hop.coarse, I);
     let xs = children(cc.x, g.nx);
@@ -350,10 +364,45 @@ fn down(@builtin(global_invocation_id) id: vec3<u32>) {
 
 var<workgroup> sweep: array<vec4<f32>, COARSEST_NODES>;
 
-// The coarsest level (`hop.fine`, at most COARSEST_NODES nodes), in one
-// workgroup: COARSE_SWEEPS damped Jacobi sweeps from zero.
+// The levels from `bound_hop.fine` down, in one workgroup: each one's
+// residual and restriction, the coarsest level's sweeps, then each one's
+// guess and correction back up; the per-level kernels' work, node by node.
+// It starts below the cloth (level 0 leaves PCG's partial rᵀz, one per
+// workgroup of the cloth's dispatches).
 @compute @workgroup_size(WORKGROUP)
-fn coarse(@builtin(local_invocation_index) lid: u32) {
+fn tail(@builtin(local_invocation_index) lid: u32) {
+    let first = bound_hop.fine.level;
+    let coarsest = arrayLength(&hop_list) - 1u;
+    for (var l = first; l < coarsest; l++) {
+        hop = hop_list[l];
+        for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
+            residual_at(i);
+        }
+        storageBarrier();
+        for (var i = lid; i < nodes(hop.coarse); i += WORKGROUP) {
+            down_at(i);
+        }
+        storageBarrier();
+    }
+    hop = hop_list[coarsest];
+    coarse(lid);
+    storageBarrier();
+    for (var l = coarsest; l > first; l--) {
+        hop = hop_list[l - 1u];
+        for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
+            guess_at(i);
+        }
+        storageBarrier();
+        for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
+            _ = up_at(i);
+        }
+        storageBarrier();
+    }
+}
+
+// The coarsest level (`hop.fine`, at most COARSEST_NODES nodes), by one
+// workgroup: COARSE_SWEEPS damped Jacobi sweeps from zero.
+fn coarse(lid: u32) {
     let g = hop.fine;
     let mine = lid < nodes(g);
     var e = vec3<f32>(0.0);
@@ -391,10 +440,14 @@ fn coarse(@builtin(local_invocation_index) lid: u32) {
 // correction, into the work vector.
 @compute @workgroup_size(WORKGROUP)
 fn guess_up(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i < nodes(hop.fine) {
-        vectors[hop.fine.work_at + i] = vec4<f32>(pre(i) + interpolate(i), 0.0);
+    hop = bound_hop;
+    if id.x < nodes(hop.fine) {
+        guess_at(id.x);
     }
+}
+
+fn guess_at(i: u32) {
+    vectors[hop.fine.work_at + i] = vec4<f32>(pre(i) + interpolate(i), 0.0);
 }
 
 // Up one level: one more damped Jacobi sweep from the stored guess. On the
@@ -402,21 +455,26 @@ fn guess_up(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(WORKGROUP)
 fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
           @builtin(workgroup_id) wg: vec3<u32>) {
-    let i = id.x;
-    let g = hop.fine;
+    hop = bound_hop;
     var rz = 0.0;
-    if i < nodes(g) {
-        let ri = fine_rhs(i);
-        let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
-        if g.level == 0u {
-            zq[i] = vec4<f32>(zi, 0.0);
-            rz = dot(ri, zi);
-        } else {
-            vectors[g.correction_at + i] = vec4<f32>(zi, 0.0);
-        }
+    if id.x < nodes(hop.fine) {
+        rz = up_at(id.x);
     }
     let s = workgroup_sum(lid, rz);
-    if g.level == 0u && lid == 0u {
+    if hop.fine.level == 0u && lid == 0u {
         store_partial(RZ, wg.x, s);
     }
+}
+
+// Node i's corrected guess, z on the cloth (returning rᵀz there, else 0).
+fn up_at(i: u32) -> f32 {
+    let g = hop.fine;
+    let ri = fine_rhs(i);
+    let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
+    if g.level == 0u {
+        zq[i] = vec4<f32>(zi, 0.0);
+        return dot(ri, zi);
+    }
+    vectors[g.correction_at + i] = vec4<f32>(zi, 0.0);
+    return 0.0;
 }

@@ -70,6 +70,8 @@ pub(crate) struct Buffers {
     pub(crate) vectors: wgpu::Buffer,
     /// Multigrid: one `Hop` per level, what its dispatches work between.
     pub(crate) hops: Vec<wgpu::Buffer>,
+    /// Multigrid: the same hops in one array, for the coarse levels' tail.
+    pub(crate) hop_list: wgpu::Buffer,
     pub(crate) state: wgpu::Buffer,
     pub(crate) body_vertices: wgpu::Buffer,
     pub(crate) body_normals: wgpu::Buffer,
@@ -599,6 +601,10 @@ impl Buffers {
                 .iter()
                 .map(|hop| storage("multigrid hop", bytemuck::bytes_of(hop)))
                 .collect(),
+            hop_list: storage(
+                "multigrid hops",
+                bytemuck::cast_slice(&hops(&multigrid_grids(scene))),
+            ),
             state: zeroed("step state", size_of::<StepState>() as u64),
             body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
             body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),

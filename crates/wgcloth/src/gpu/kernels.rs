@@ -66,8 +66,8 @@ pub enum Entry {
     MgResidual,
     /// Its restriction to the next level (`multigrid::down`).
     MgDown,
-    /// The coarsest level's sweeps (`multigrid::coarse`).
-    MgCoarse,
+    /// The coarsest levels, down and up, in one workgroup (`multigrid::tail`).
+    MgTail,
     /// A level's guess: pre-smoothing plus the interpolated coarse
     /// correction (`multigrid::guess_up`).
     MgGuess,
@@ -147,7 +147,7 @@ impl Entry {
         Entry::MgGalerkin,
         Entry::MgResidual,
         Entry::MgDown,
-        Entry::MgCoarse,
+        Entry::MgTail,
         Entry::MgGuess,
         Entry::MgUp,
         Entry::Integrate,
@@ -201,7 +201,7 @@ impl Entry {
             Entry::MgGalerkin => ("multigrid", "galerkin"),
             Entry::MgResidual => ("multigrid", "residual"),
             Entry::MgDown => ("multigrid", "down"),
-            Entry::MgCoarse => ("multigrid", "coarse"),
+            Entry::MgTail => ("multigrid", "tail"),
             Entry::MgGuess => ("multigrid", "guess_up"),
             Entry::MgUp => ("multigrid", "up"),
             Entry::Integrate => ("integrate", "main"),

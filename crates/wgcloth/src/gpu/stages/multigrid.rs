@@ -1,26 +1,31 @@
 //! Stage "pcg"'s multigrid preconditioner (wgsl/multigrid.wgsl; CPU twin
 //! cpu/multigrid.rs): the coarse operators rebuilt once a step, then one
-//! V-cycle per PCG iteration, each dispatch bound to its pair of levels.
+//! V-cycle per PCG iteration, each dispatch bound to its pair of levels down
+//! to the tail: the levels of at most [`TAIL_NODES`] nodes, in one dispatch
+//! of one workgroup.
 
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::{Grid, Scalars};
+#[cfg(doc)]
+use crate::multigrid::TAIL_NODES;
+use crate::multigrid::tail_from;
 
 pub(crate) struct Multigrid {
     /// Nodes per level, the cloth first.
     nodes: Vec<u32>,
     /// Per level l < L: level l + 1's operator and smoother.
     galerkin: Vec<Bound>,
-    /// Per level l < L: level l's residual after pre-smoothing.
+    /// Per level l above the tail: level l's residual after pre-smoothing.
     residual: Vec<Bound>,
-    /// Per level l < L: level l + 1's right-hand side.
+    /// Per level l above the tail: level l + 1's right-hand side.
     down: Vec<Bound>,
-    /// The coarsest level's sweeps.
-    coarse: Bound,
-    /// Per level l < L: level l's guess.
+    /// The levels from the tail's first down and back up.
+    tail: Bound,
+    /// Per level l above the tail: level l's guess.
     guess: Vec<Bound>,
-    /// Per level l < L: level l's correction (z on the cloth).
+    /// Per level l above the tail: level l's correction (z on the cloth).
     up: Vec<Bound>,
 }
 
@@ -37,7 +42,8 @@ impl Multigrid {
             kernels.kernel(entry).bind_parts(
                 device,
                 &[
-                    ("hop", &b.hops[l]),
+                    ("bound_hop", &b.hops[l]),
+                    ("hop_list", &b.hop_list),
                     ("vectors", &b.vectors),
                     ("r", &b.r),
                     ("zq", &b.zq),
@@ -46,15 +52,17 @@ impl Multigrid {
                 &[&b.topology, &b.matrix, &b.operators],
             )
         };
-        let hops = |entry| (0..last).map(|l| bind(entry, l)).collect();
+        let nodes: Vec<u32> = grids.iter().map(|g| g.nx * g.ny).collect();
+        let tail = tail_from(&nodes);
+        let hops = |entry, end| (0..end).map(|l| bind(entry, l)).collect();
         Some(Multigrid {
-            nodes: grids.iter().map(|g| g.nx * g.ny).collect(),
-            galerkin: hops(Entry::MgGalerkin),
-            residual: hops(Entry::MgResidual),
-            down: hops(Entry::MgDown),
-            coarse: bind(Entry::MgCoarse, last),
-            guess: hops(Entry::MgGuess),
-            up: hops(Entry::MgUp),
+            galerkin: hops(Entry::MgGalerkin, last),
+            residual: hops(Entry::MgResidual, tail),
+            down: hops(Entry::MgDown, tail),
+            tail: bind(Entry::MgTail, tail),
+            guess: hops(Entry::MgGuess, tail),
+            up: hops(Entry::MgUp, tail),
+            nodes,
         })
     }
 
@@ -81,16 +89,17 @@ impl Multigrid {
                 pass.dispatch_workgroups(groups(self.nodes[level]), 1, 1);
             }
         };
-        let levels = self.down.len();
-        for l in 0..levels {
+        let above = self.down.len();
+        for l in 0..above {
             dispatch(pass, &self.residual[l], l);
             dispatch(pass, &self.down[l], l + 1);
         }
-        dispatch(pass, &self.coarse, levels);
-        for l in (0..levels).rev() {
+        // One workgroup while the solve goes on: the coarsest level's size.
+        dispatch(pass, &self.tail, self.nodes.len() - 1);
+        for l in (0..above).rev() {
             dispatch(pass, &self.guess[l], l);
             dispatch(pass, &self.up[l], l);
         }
-        4 * levels as u32 + 1
+        4 * above as u32 + 1
     }
 }
