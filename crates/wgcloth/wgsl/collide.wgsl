@@ -111,13 +111,105 @@ fn cloth_normal(t: u32, rigid_normal: vec3<f32>) -> vec3<f32> {
     return select(n / len, -n / len, dot(n, rigid_normal) > 0.0);
 }
 
-// (b) The cloth triangle closest to each rigid vertex: one workgroup per
-// rigid vertex (strided when there are more than workgroups), one lane per
-// tile of a super-tile and then per cell of a tile, so a vertex's thousands
-// of triangle tests at a fine grid spread over TILE² lanes instead of
-// running in one. Each lane keeps its best, and lane 0 picks the best of
-// those by `better`, a total order (larger d, then the lower triangle), so
-// the contact is the one a single search finds, as on the CPU.
+// (b) The cloth triangle closest to each rigid vertex, in one of two
+// ways with the same result (`Collide::new` picks by the cloth's size):
+// `face_vertex_serial`, one invocation per rigid vertex walking every cell
+// of every near tile, or `face_vertex`, one workgroup per rigid vertex
+// with a lane per tile of a super-tile and then per cell of a tile. On a
+// fine grid a vertex has thousands of triangles within reach, which the
+// second spreads over TILE² lanes; on a coarse one its barriers cost more
+// than they spread. Both keep the best by `better`, a total order (larger
+// d, then the lower triangle), so the contact is the one the CPU finds.
+
+// A rigid vertex's best hit so far.
+struct Hit {
+    t: u32,
+    at: vec4<f32>,
+    normal: vec3<f32>,
+}
+
+fn no_hit() -> Hit {
+    return Hit(NO_TRIANGLE, vec4<f32>(0.0), vec3<f32>(0.0));
+}
+
+// `best`, or the hit on either triangle of cell (cx, cy) of rigid vertex
+// p (outward normal np) where it is better.
+fn cell_hit(best: Hit, cx: u32, cy: u32, p: vec3<f32>, np: vec3<f32>) -> Hit {
+    var out = best;
+    for (var half = 0u; half < 2u; half++) {
+        let t = 2u * (cy * params.cells_x + cx) + half;
+        let n = cloth_normal(t, np);
+        if all(n == vec3<f32>(0.0)) {
+            continue;
+        }
+        let hit = point_triangle(p, x[cloth_index(3u * t)].xyz, x[cloth_index(3u * t + 1u)].xyz,
+                                 x[cloth_index(3u * t + 2u)].xyz, n, params.thickness, params.max_depth);
+        if found(hit) && better(hit.x, t, out.at.x, out.t) {
+            out = Hit(t, hit, n);
+        }
+    }
+    return out;
+}
+
+// Rigid vertex k's contact slot, and its link into the triangle's list.
+fn store_face_vertex(k: u32, best: Hit) {
+    var c = no_contact();
+    if best.t != NO_TRIANGLE {
+        let verts = vec3<u32>(cloth_index(3u * best.t), cloth_index(3u * best.t + 1u), cloth_index(3u * best.t + 2u));
+        c = Contact(best.normal, best.at.x - params.thickness, -best.at.yzw, best.at.x, frame.velocity, 1u, verts,
+                    best.t);
+        // Linked in at the head of the triangle's list (entries are k + 1;
+        // 0 ends a list): one node per rigid vertex, so nothing can overflow.
+        let next = atomicExchange(&triangle_contacts[best.t], k + 1u);
+        atomicStore(&triangle_contacts[params.n_triangles + k], next);
+        atomicAdd(&state.contacts_last, 1u);
+    }
+    contacts[params.n_vertices + k] = c;
+}
+
+fn super_tile_near(s: u32, p: vec3<f32>) -> bool {
+    let sb = bounds[params.tiles_x * params.tiles_y + s];
+    return box_near(sb.lo.xyz, sb.hi.xyz, p, reach());
+}
+
+// Whether tile (tx, ty) exists and is within reach of p.
+fn tile_near(tx: u32, ty: u32, p: vec3<f32>) -> bool {
+    if tx >= params.tiles_x || ty >= params.tiles_y {
+        return false;
+    }
+    let tb = bounds[ty * params.tiles_x + tx];
+    return box_near(tb.lo.xyz, tb.hi.xyz, p, reach());
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn face_vertex_serial(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = id.x;
+    if k >= params.n_rigid_vertices {
+        return;
+    }
+    let p = rigid[k].xyz;
+    let np = rigid[params.n_rigid_vertices + k].xyz;
+    var best = no_hit();
+    for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
+        if !super_tile_near(s, p) {
+            continue;
+        }
+        for (var j = 0u; j < FACE_VERTEX_LANES; j++) {
+            let tx = (s % params.supertiles_x) * TILE + j % TILE;
+            let ty = (s / params.supertiles_x) * TILE + j / TILE;
+            if !tile_near(tx, ty, p) {
+                continue;
+            }
+            for (var cy = ty * TILE; cy < min(ty * TILE + TILE, params.cells_y); cy++) {
+                for (var cx = tx * TILE; cx < min(tx * TILE + TILE, params.cells_x); cx++) {
+                    best = cell_hit(best, cx, cy, p, np);
+                }
+            }
+        }
+    }
+    store_face_vertex(k, best);
+}
+
 // The near tiles of the super-tile being searched, in any order (the
 // winner does not depend on it), and their count, one counter per parity
 // of the search's round so that one is reset while the other is read.
@@ -132,31 +224,23 @@ var<workgroup> lane_winner: u32;
 @compute @workgroup_size(FACE_VERTEX_LANES)
 fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {
-    let r = reach();
     // This lane's tile of a super-tile, and its cell of a tile.
     let lx = lid % TILE;
     let ly = lid / TILE;
     var round = 0u;
+    // Rigid vertex k, strided when there are more than workgroups.
     for (var k = wg.x; k < params.n_rigid_vertices; k += groups.x) {
         let p = rigid[k].xyz;
         let np = rigid[params.n_rigid_vertices + k].xyz;
-        var best_t = NO_TRIANGLE;
-        var best = vec4<f32>(0.0);
-        var best_n = vec3<f32>(0.0);
+        var best = no_hit();
         for (var s = 0u; s < params.supertiles_x * params.supertiles_y; s++) {
-            let sb = bounds[params.tiles_x * params.tiles_y + s];
-            let near = box_near(sb.lo.xyz, sb.hi.xyz, p, r);
+            let near = super_tile_near(s, p);
             let sx = s % params.supertiles_x;
             let sy = s / params.supertiles_x;
-            let tx = sx * TILE + lx;
-            let ty = sy * TILE + ly;
             let parity = round % 2u;
             round++;
-            if near && tx < params.tiles_x && ty < params.tiles_y {
-                let tb = bounds[ty * params.tiles_x + tx];
-                if box_near(tb.lo.xyz, tb.hi.xyz, p, r) {
-                    near_tiles[atomicAdd(&near_count[parity], 1u)] = lid;
-                }
+            if near && tile_near(sx * TILE + lx, sy * TILE + ly, p) {
+                near_tiles[atomicAdd(&near_count[parity], 1u)] = lid;
             }
             workgroupBarrier();
             if lid == 0u {
@@ -167,30 +251,15 @@ fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) gr
                 let j = near_tiles[i];
                 let cx = (sx * TILE + j % TILE) * TILE + lx;
                 let cy = (sy * TILE + j / TILE) * TILE + ly;
-                if cx >= params.cells_x || cy >= params.cells_y {
-                    continue;
-                }
-                for (var half = 0u; half < 2u; half++) {
-                    let t = 2u * (cy * params.cells_x + cx) + half;
-                    let n = cloth_normal(t, np);
-                    if all(n == vec3<f32>(0.0)) {
-                        continue;
-                    }
-                    let hit = point_triangle(p, x[cloth_index(3u * t)].xyz, x[cloth_index(3u * t + 1u)].xyz,
-                                             x[cloth_index(3u * t + 2u)].xyz, n, params.thickness,
-                                             params.max_depth);
-                    if found(hit) && better(hit.x, t, best.x, best_t) {
-                        best_t = t;
-                        best = hit;
-                        best_n = n;
-                    }
+                if cx < params.cells_x && cy < params.cells_y {
+                    best = cell_hit(best, cx, cy, p, np);
                 }
             }
             // The next round writes the list again.
             workgroupBarrier();
         }
-        lane_d[lid] = best.x;
-        lane_t[lid] = best_t;
+        lane_d[lid] = best.at.x;
+        lane_t[lid] = best.t;
         workgroupBarrier();
         if lid == 0u {
             var d = lane_d[0];
@@ -204,19 +273,10 @@ fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) gr
             lane_winner = t;
         }
         let winner = workgroupUniformLoad(&lane_winner);
-        // The lane that found the winner writes it (triangles are unique).
-        if winner != NO_TRIANGLE && best_t == winner {
-            let verts = vec3<u32>(cloth_index(3u * best_t), cloth_index(3u * best_t + 1u), cloth_index(3u * best_t + 2u));
-            contacts[params.n_vertices + k] = Contact(best_n, best.x - params.thickness, -best.yzw, best.x,
-                                                      frame.velocity, 1u, verts, best_t);
-            // Linked in at the head of the triangle's list (entries are k + 1;
-            // 0 ends a list): one node per rigid vertex, so nothing can overflow.
-            let next = atomicExchange(&triangle_contacts[best_t], k + 1u);
-            atomicStore(&triangle_contacts[params.n_triangles + k], next);
-            atomicAdd(&state.contacts_last, 1u);
-        }
-        if winner == NO_TRIANGLE && lid == 0u {
-            contacts[params.n_vertices + k] = no_contact();
+        // The lane that found the winner stores it (triangles are unique);
+        // lane 0 stores that there is none.
+        if (winner != NO_TRIANGLE && best.t == winner) || (winner == NO_TRIANGLE && lid == 0u) {
+            store_face_vertex(k, best);
         }
     }
 }

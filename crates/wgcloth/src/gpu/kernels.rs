@@ -25,6 +25,9 @@ pub enum Entry {
     CollideVertexFace,
     /// The cloth triangle closest to each rigid vertex (`collide::face_vertex`).
     CollideFaceVertex,
+    /// The same, one invocation per rigid vertex
+    /// (`collide::face_vertex_serial`).
+    CollideFaceVertexSerial,
     /// The analytic models' response of every contact slot (`contact::respond_slots`).
     ContactRespondSlots,
     /// Empties the network batch (`contact::reset_batch`).
@@ -122,12 +125,13 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 49] = [
+    pub const ALL: [Entry; 50] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
         Entry::CollideVertexFace,
         Entry::CollideFaceVertex,
+        Entry::CollideFaceVertexSerial,
         Entry::ContactRespondSlots,
         Entry::ContactResetBatch,
         Entry::ContactGather,
@@ -182,6 +186,7 @@ impl Entry {
             Entry::CollideSupertiles => ("collide", "supertiles"),
             Entry::CollideVertexFace => ("collide", "vertex_face"),
             Entry::CollideFaceVertex => ("collide", "face_vertex"),
+            Entry::CollideFaceVertexSerial => ("collide", "face_vertex_serial"),
             Entry::ContactRespondSlots => ("contact", "respond_slots"),
             Entry::ContactResetBatch => ("contact", "reset_batch"),
             Entry::ContactGather => ("contact", "gather"),

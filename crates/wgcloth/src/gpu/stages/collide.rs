@@ -7,11 +7,19 @@ use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 
+/// Cells along the cloth's longer side from which the face–vertex search
+/// takes a workgroup per rigid vertex (wgsl/collide.wgsl, part (b)): a
+/// rigid vertex then has hundreds of triangles within reach. On a coarser
+/// cloth one invocation per rigid vertex is faster, on a hardware GPU and
+/// on lavapipe alike.
+pub const FACE_VERTEX_TILED_FROM: u32 = 128;
+
 pub(crate) struct Collide {
     tiles: Bound,
     supertiles: Bound,
     vertex_face: Bound,
     face_vertex: Bound,
+    face_vertex_serial: Bound,
     /// The most workgroups one dispatch may have: `face_vertex` runs one
     /// per rigid vertex, each taking every this-many-th beyond.
     max_groups: u32,
@@ -42,6 +50,7 @@ impl Collide {
             supertiles: bind(Entry::CollideSupertiles),
             vertex_face: bind(Entry::CollideVertexFace),
             face_vertex: bind(Entry::CollideFaceVertex),
+            face_vertex_serial: bind(Entry::CollideFaceVertexSerial),
             max_groups: device.limits().max_compute_workgroups_per_dimension,
             triangle_contacts: b.triangle_contacts.clone(),
         }
@@ -59,8 +68,13 @@ impl Collide {
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
         self.vertex_face.dispatch(pass, p.n_vertices, WORKGROUP);
-        self.face_vertex.set(pass);
-        pass.dispatch_workgroups(p.n_rigid_vertices.min(self.max_groups), 1, 1);
+        if p.cells_x.max(p.cells_y) >= FACE_VERTEX_TILED_FROM {
+            self.face_vertex.set(pass);
+            pass.dispatch_workgroups(p.n_rigid_vertices.min(self.max_groups), 1, 1);
+        } else {
+            self.face_vertex_serial
+                .dispatch(pass, p.n_rigid_vertices, WORKGROUP);
+        }
         4
     }
 }
