@@ -25,16 +25,24 @@ pub const COARSE_SWEEPS: u32 = 12;
 /// The most levels a hierarchy has (a 2²⁶-particle cloth needs 23).
 pub const MAX_LEVELS: u32 = 24;
 /// The most nodes of a level the GPU's V-cycle takes in its tail, one
-/// dispatch of one workgroup for all the levels from there down. Each dispatch costs
-/// a barrier that drains the device (about 8 µs on an H200, 90 µs on
-/// lavapipe); below this size one workgroup does a level's work in less.
-pub const TAIL_NODES: u32 = 256;
+/// dispatch of one workgroup for all the levels from there down. Each
+/// dispatch costs a barrier that drains the device (6–8 µs on an H200,
+/// work or not); below this size one workgroup does a level's work in
+/// less. A CPU adapter (lavapipe) runs a workgroup on one thread, so it
+/// stops sooner: a 1024-node tail made the H200's PCG 4–6 % faster and
+/// lavapipe's 19 % slower at 64² (BENCHMARKS.md "Hardware GPU").
+pub fn tail_nodes(cpu_adapter: bool) -> u32 {
+    match cpu_adapter {
+        true => 256,
+        false => 1024,
+    }
+}
 
-/// The first level of the tail: the first coarse level of at most
-/// [`TAIL_NODES`] nodes (the coarsest has at most [`COARSEST_NODES`]).
-pub fn tail_from(nodes: &[u32]) -> usize {
+/// The first level of the tail: the first coarse level of at most `most`
+/// nodes ([`tail_nodes`]; the coarsest has at most [`COARSEST_NODES`]).
+pub fn tail_from(nodes: &[u32], most: u32) -> usize {
     (1..nodes.len())
-        .find(|&l| nodes[l] <= TAIL_NODES)
+        .find(|&l| nodes[l] <= most)
         .unwrap_or(nodes.len() - 1)
 }
 

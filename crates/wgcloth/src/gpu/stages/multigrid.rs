@@ -1,16 +1,14 @@
 //! Stage "pcg"'s multigrid preconditioner (wgsl/multigrid.wgsl; CPU twin
 //! cpu/multigrid.rs): the coarse operators rebuilt once a step, then one
 //! V-cycle per PCG iteration, each dispatch bound to its pair of levels down
-//! to the tail: the levels of at most [`TAIL_NODES`] nodes, in one dispatch
+//! to the tail: the levels of at most [`tail_nodes`] nodes, in one dispatch
 //! of one workgroup.
 
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::{Grid, Scalars};
-#[cfg(doc)]
-use crate::multigrid::TAIL_NODES;
-use crate::multigrid::tail_from;
+use crate::multigrid::{tail_from, tail_nodes};
 
 pub(crate) struct Multigrid {
     /// Nodes per level, the cloth first.
@@ -53,7 +51,8 @@ impl Multigrid {
             )
         };
         let nodes: Vec<u32> = grids.iter().map(|g| g.nx * g.ny).collect();
-        let tail = tail_from(&nodes);
+        let cpu_adapter = device.adapter_info().device_type == wgpu::DeviceType::Cpu;
+        let tail = tail_from(&nodes, tail_nodes(cpu_adapter));
         let hops = |entry, end| (0..end).map(|l| bind(entry, l)).collect();
         Some(Multigrid {
             galerkin: hops(Entry::MgGalerkin, last),
