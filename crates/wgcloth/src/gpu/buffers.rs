@@ -466,6 +466,7 @@ impl Buffers {
         (topology, sections): (Vec<u32>, Sections),
     ) -> Buffers {
         let cloth = &scene.cloth;
+        let level_hops = hops(&multigrid_grids(scene));
         let usage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
@@ -597,14 +598,11 @@ impl Buffers {
                 params.operators_splits,
             ),
             vectors: zeroed("multigrid vectors", sizes.vectors),
-            hops: hops(&multigrid_grids(scene))
+            hops: level_hops
                 .iter()
                 .map(|hop| storage("multigrid hop", bytemuck::bytes_of(hop)))
                 .collect(),
-            hop_list: storage(
-                "multigrid hops",
-                bytemuck::cast_slice(&hops(&multigrid_grids(scene))),
-            ),
+            hop_list: storage("multigrid hops", bytemuck::cast_slice(&level_hops)),
             state: zeroed("step state", size_of::<StepState>() as u64),
             body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
             body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),
