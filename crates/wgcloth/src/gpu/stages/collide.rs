@@ -11,9 +11,8 @@ use crate::gpu::layout::Params;
 /// takes a workgroup per rigid vertex (wgsl/collide.wgsl, part (b)): a
 /// rigid vertex then has hundreds of triangles within reach. On a coarser
 /// cloth one invocation per rigid vertex is faster on lavapipe (measured
-/// from 16² to 256²); on an H200 the whole collide stage took 0.45 ms at
-/// 64² with it, and the
-/// workgroup search was not measured below 256² there.
+/// from 16² to 256²). On an H200 the whole collide stage took 0.45 ms at
+/// 64² with it; the workgroup search was not measured below 256² there.
 pub const FACE_VERTEX_TILED_FROM: u32 = 128;
 
 pub(crate) struct Collide {
