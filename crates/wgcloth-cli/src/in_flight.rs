@@ -2,9 +2,10 @@
 //! of its statistics and timestamps into a reused staging buffer, mapped
 //! asynchronously, so the host waits only when [`DEPTH`] steps are already
 //! in flight (for the oldest) and never creates a buffer per step. Each
-//! step's starting positions and velocities are kept on the GPU in a ring
-//! one deeper than the steps in flight, so a step found diverging a few
-//! steps late still has the state before it.
+//! step's starting positions, velocities and statistics are kept on the
+//! GPU in a ring one deeper than the steps in flight, so a step found cut
+//! short or diverging a few steps late still has the state before it: to
+//! solve it again ([`InFlight::rewind`]) or to name what failed.
 
 use std::collections::VecDeque;
 
@@ -24,6 +25,8 @@ struct Slot {
     staging: Staging,
     x: wgpu::Buffer,
     v: wgpu::Buffer,
+    /// The statistics before the step (its clock among them).
+    stats: wgpu::Buffer,
 }
 
 struct Pending {
@@ -74,6 +77,7 @@ impl InFlight {
                 staging: Staging::new(device, "step statistics", TICKS_AT + ticks),
                 x: buffer("kept positions", vectors, kept),
                 v: buffer("kept velocities", vectors, kept),
+                stats: buffer("kept statistics", sim.statistics().size(), kept),
             })
             .collect();
         InFlight {
@@ -104,11 +108,15 @@ impl InFlight {
         let k = step as usize % self.slots.len();
         let slot = &self.slots[k];
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        let size = sim.positions().size();
-        encoder.copy_buffer_to_buffer(sim.positions(), 0, &slot.x, 0, size);
-        encoder.copy_buffer_to_buffer(sim.velocities(), 0, &slot.v, 0, size);
-        self.dispatches = sim.encode_step(&mut encoder);
         let (stats, staging) = (sim.statistics(), slot.staging.buffer());
+        for (from, to) in [
+            (sim.positions(), &slot.x),
+            (sim.velocities(), &slot.v),
+            (stats, &slot.stats),
+        ] {
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+        }
+        self.dispatches = sim.encode_step(&mut encoder);
         encoder.copy_buffer_to_buffer(stats, 0, staging, 0, stats.size());
         if let Some(t) = sim.timestamps() {
             encoder.copy_buffer_to_buffer(t, 0, staging, TICKS_AT, t.size());
@@ -179,6 +187,25 @@ impl InFlight {
             },
             slot: oldest.slot,
         }))
+    }
+
+    /// Puts `sim` back where `finished`'s step started (positions,
+    /// velocities, clock and run statistics), after waiting for the steps
+    /// in flight behind it and dropping them unread: they followed a state
+    /// that is being replaced.
+    pub fn rewind(&mut self, ctx: &GpuContext, sim: &GpuSim, finished: &Finished) -> Result<()> {
+        while self.next(ctx, sim, true)?.is_some() {}
+        let slot = &self.slots[finished.slot];
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        for (from, to) in [
+            (&slot.x, sim.positions()),
+            (&slot.v, sim.velocities()),
+            (&slot.stats, sim.statistics()),
+        ] {
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Ok(())
     }
 
     /// The positions and velocities `finished`'s step started from.

@@ -146,9 +146,10 @@ pub struct Report {
     pub cg_residual_max: f32,
     pub cg_residual_median: f32,
     pub cg_steps_above_goal: u64,
-    /// GPU steps whose solve the run loop's iteration budget cut short of
-    /// `solver.cg_tol` (`GpuSim::set_cg_budget`; always 0 on the CPU).
-    pub cg_steps_cut: u64,
+    /// GPU steps the run loop solved again from their start because its
+    /// iteration budget had cut them short of `solver.cg_tol`
+    /// (`GpuSim::set_cg_budget`, `CgBudget::cut`; always 0 on the CPU).
+    pub cg_steps_resolved: u64,
     pub cg_breakdowns: u64,
     pub contacts_mean: f64,
     /// Total energy (kinetic + gravitational + elastic) at the end, J.
@@ -493,7 +494,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_residual_max: residuals.max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
-        cg_steps_cut: 0,
+        cg_steps_resolved: 0,
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
@@ -553,14 +554,16 @@ fn run_gpu(
     let mut budget = CgBudget::new(config.solver.cg_iters, config.solver.cg_tol);
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
-    let (mut cg_iterations, mut contacts, mut cut) = (0u64, 0u64, 0u64);
+    let (mut cg_iterations, mut contacts, mut resolved) = (0u64, 0u64, 0u64);
+    // The budget for a step solved again after its budget cut it.
+    let mut retry = None;
     let mut since = Instant::now();
     while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
         let mut finished = Vec::new();
         // Whether the host needs the state after the step just submitted.
         let mut synced = false;
         if submitted < steps.total {
-            sim.set_cg_budget(budget.next());
+            sim.set_cg_budget(retry.take().unwrap_or_else(|| budget.next()));
             finished.extend(flight.submit(ctx, &sim, submitted)?);
             submitted += 1;
             synced = obs.recording.as_ref().is_some_and(|r| r.due(submitted))
@@ -573,7 +576,18 @@ fn run_gpu(
         while let Some(f) = flight.next(ctx, &sim, wait)? {
             finished.push(f);
         }
+        let mut rewound = false;
         for f in finished {
+            let state = f.state;
+            if budget.cut(state.last_iterations, f.budget, state.last_residual) {
+                // Solve the step again from its start with the whole
+                // cap, dropping the steps recorded after it. Its time
+                // runs on, so it includes what was thrown away.
+                flight.rewind(ctx, &sim, &f)?;
+                retry = Some(budget.cap());
+                (submitted, resolved, rewound) = (f.step, resolved + 1, true);
+                break;
+            }
             // With the ring full the host waits for each step in turn, so
             // the time between completions is the step's.
             let now = Instant::now();
@@ -584,9 +598,8 @@ fn run_gpu(
                 );
             }
             since = now;
-            let state = f.state;
             residuals.push(state.last_residual, state.last_iterations);
-            cut += u64::from(budget.observe(state.last_iterations, f.budget, state.last_residual));
+            budget.observe(state.last_iterations, f.budget, state.last_residual);
             cg_iterations += state.last_iterations as u64;
             contacts += state.contacts_last as u64;
             let breakdown = state.cg_breakdowns > breakdowns;
@@ -626,7 +639,9 @@ fn run_gpu(
             }
             obs.progress(f.step + 1);
         }
-        if !synced || divergence.is_some() {
+        // After a rewind the step a due frame, sample or checkpoint was
+        // for comes again.
+        if !synced || divergence.is_some() || rewound {
             continue;
         }
         if let Some(r) = obs.recording.as_deref_mut() {
@@ -688,7 +703,7 @@ fn run_gpu(
         cg_residual_max: last.cg_residual_max,
         cg_residual_median: residuals.median(),
         cg_steps_above_goal: residuals.above_goal,
-        cg_steps_cut: cut,
+        cg_steps_resolved: resolved,
         cg_breakdowns: last.cg_breakdowns as u64,
         contacts_mean: contacts as f64 / done,
         energy_final: cpu::energy(scene, &x, &v).total(),
@@ -822,7 +837,7 @@ impl Report {
              ms/step      {:.3} (median{dispatches}), {:.3} (mean)\n\
              {memory}\
              stages (ms)  {}\n\
-             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} cut by the iteration budget, {} breakdowns\n\
+             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} solved again after the iteration budget cut them, {} breakdowns\n\
              contacts     {:.1} per step\n\
              penetration  {:.4} m deepest (thickness not counted)\n\
              state        {} (final energy {:.4} J)",
@@ -851,7 +866,7 @@ impl Report {
             self.cg_residual_median,
             self.cg_residual_max,
             self.cg_steps_above_goal,
-            self.cg_steps_cut,
+            self.cg_steps_resolved,
             self.cg_breakdowns,
             self.contacts_mean,
             self.max_penetration,

@@ -412,7 +412,7 @@ impl Default for SolverConfig {
         SolverConfig {
             dt: 0.01,
             steps: 200,
-            cg_iters: 100,
+            cg_iters: 200,
             cg_tol: 1e-3,
             preconditioner: Preconditioner::Multigrid,
             gravity: [0.0, -9.81, 0.0],

@@ -227,7 +227,8 @@ fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) gr
     // This lane's tile of a super-tile, and its cell of a tile.
     let lx = lid % TILE;
     let ly = lid / TILE;
-    var round = 0u;
+    // Super-tiles searched so far (not `round`, a WGSL built-in).
+    var searched = 0u;
     // Rigid vertex k, strided when there are more than workgroups.
     for (var k = wg.x; k < params.n_rigid_vertices; k += groups.x) {
         let p = rigid[k].xyz;
@@ -237,8 +238,8 @@ fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) gr
             let near = super_tile_near(s, p);
             let sx = s % params.supertiles_x;
             let sy = s / params.supertiles_x;
-            let parity = round % 2u;
-            round++;
+            let parity = searched % 2u;
+            searched++;
             if near && tile_near(sx * TILE + lx, sy * TILE + ly, p) {
                 near_tiles[atomicAdd(&near_count[parity], 1u)] = lid;
             }

@@ -397,14 +397,14 @@ pub struct ConvergedRow {
     pub iterations_mean: f64,
     pub iterations_max: u32,
     /// The worst relative residual a step ended at, and the steps that
-    /// ended above the goal (a solve cut short by the iteration cap or the
-    /// run loop's budget among them).
+    /// ended above the goal (a solve the iteration cap cut short).
     pub residual_max: f32,
     pub steps_above_goal: u64,
-    /// Of those, the steps the run loop's budget cut (`Report::cg_steps_cut`):
-    /// the budget follows steps read back a few steps late, so a sudden
-    /// jump in iterations (the sphere reaching the cloth) can outrun it once.
-    pub steps_cut: u64,
+    /// Steps the run loop solved again because its budget had cut them
+    /// (`Report::cg_steps_resolved`): the budget follows steps read back a
+    /// few steps late, so a sudden jump in iterations (the sphere reaching
+    /// the cloth) can outrun it.
+    pub steps_resolved: u64,
     /// This row's ms/step over the thesis-solve row's (same backend, model
     /// and grid; not solved to any tolerance), where neither diverged.
     pub times_thesis_step: Option<f64>,
@@ -609,7 +609,7 @@ fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
                 iterations_max: report.cg_iterations_max,
                 residual_max: report.cg_residual_max,
                 steps_above_goal: report.cg_steps_above_goal,
-                steps_cut: report.cg_steps_cut,
+                steps_resolved: report.cg_steps_resolved,
                 times_thesis_step: thesis
                     .filter(|_| r.diverged_at().is_none())
                     .map(|t| report.ms_per_step / t.report.ms_per_step),
@@ -1022,7 +1022,7 @@ impl BenchReport {
             &mut out,
             &self.converged,
             format!(
-                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>10}\n",
+                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>7}{:>10}\n",
                 "backend",
                 "model",
                 "grid",
@@ -1031,11 +1031,12 @@ impl BenchReport {
                 "most",
                 "worst",
                 "above",
+                "again",
                 "× thesis"
             ),
             |c| {
                 format!(
-                    "{:<8}{:<32}{:>6}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>10}\n",
+                    "{:<8}{:<32}{:>6}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>7}{:>10}\n",
                     c.backend,
                     c.label,
                     c.grid,
@@ -1044,6 +1045,7 @@ impl BenchReport {
                     c.iterations_max,
                     c.residual_max,
                     c.steps_above_goal,
+                    c.steps_resolved,
                     c.times_thesis_step
                         .map(|r| format!("{r:.2}"))
                         .unwrap_or_default()

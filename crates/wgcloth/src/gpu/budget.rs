@@ -8,10 +8,19 @@ use crate::gpu::GpuSim;
 
 /// How many PCG iterations the next GPU step records: enough for twice
 /// the most any of the last [`CgBudget::WINDOW`] steps took, never more
-/// than `solver.cg_iters`; a step that ran out before the tolerance sends
-/// the next ones back to the whole cap. Converged iterations dispatch no
-/// work, but each recorded one costs its dispatches' overhead (about 90 µs
-/// each on lavapipe).
+/// than `solver.cg_iters`, the whole cap for the first step. Converged
+/// iterations dispatch no work, but each recorded one costs its
+/// dispatches' overhead (about 90 µs each on lavapipe, 6–8 µs on an H200),
+/// so recording the whole cap every step costs more than most steps'
+/// solve.
+///
+/// A step the budget cuts short of the tolerance ([`CgBudget::cut`]) can
+/// be handled two ways:
+/// - a loop that keeps each step's start state (`wgcloth run`) solves it
+///   again from there with the whole cap, so every step converges, and a
+///   cut costs that repeat and the steps in flight behind it;
+/// - a loop that cannot (the browser demo) keeps the cut step, and
+///   [`CgBudget::observe`] sends the next steps back to the whole cap.
 pub struct CgBudget {
     cap: u32,
     tol: f32,
@@ -42,17 +51,31 @@ impl CgBudget {
         }
     }
 
-    /// A step that took `iterations` of a budget of `budget` and ended at
-    /// relative residual `residual`; true when the budget cut it short of
-    /// the tolerance (a budget at the cap cuts nothing).
+    /// The whole cap: what a step solved again records.
+    pub fn cap(&self) -> u32 {
+        self.cap
+    }
+
+    /// Whether a step that took `iterations` of a budget of `budget` and
+    /// ended at relative residual `residual` was cut short of the
+    /// tolerance by the budget (a budget at the cap cuts nothing).
+    pub fn cut(&self, iterations: u32, budget: u32, residual: f32) -> bool {
+        iterations >= budget && residual > self.tol && budget < self.cap
+    }
+
+    /// Counts a step that took `iterations` of a budget of `budget` and
+    /// ended at relative residual `residual` towards the next budgets;
+    /// true when the budget cut it ([`CgBudget::cut`]). A step that ran out
+    /// (cut, or unsolved at the cap) counts as needing the whole cap.
     pub fn observe(&mut self, iterations: u32, budget: u32, residual: f32) -> bool {
+        let cut = self.cut(iterations, budget, residual);
         let ran_out = iterations >= budget && residual > self.tol;
         if self.recent.len() == Self::WINDOW {
             self.recent.pop_front();
         }
         self.recent
             .push_back(if ran_out { self.cap } else { iterations });
-        ran_out && budget < self.cap
+        cut
     }
 }
 
@@ -71,10 +94,12 @@ mod tests {
         b.observe(20, 100, 9e-4);
         assert_eq!(b.next(), 40);
         // Out of budget above the tolerance: the whole cap.
+        assert!(b.cut(40, 40, 2e-3));
         assert!(b.observe(40, 40, 2e-3), "a cut step");
         assert_eq!(b.next(), 100);
         // Converged on the budget's last iteration is not running out.
         let mut b = CgBudget::new(100, 1e-3);
+        assert!(!b.cut(30, 30, 8e-4));
         assert!(!b.observe(30, 30, 8e-4));
         assert_eq!(b.next(), 60);
         // Only the last WINDOW steps count.
@@ -84,7 +109,8 @@ mod tests {
         assert_eq!(b.next(), CgBudget::LEAST);
         // The thesis's solve (tolerance 0) never converges early: the cap.
         let mut b = CgBudget::new(25, 0.0);
-        assert!(!b.observe(25, 25, 0.1), "the cap cuts nothing");
+        assert!(!b.cut(25, 25, 0.1), "the cap cuts nothing");
+        assert!(!b.observe(25, 25, 0.1));
         assert_eq!(b.next(), 25);
     }
 }
