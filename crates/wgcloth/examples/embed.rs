@@ -1,8 +1,9 @@
 // An app embeds wgcloth: its own device with WebGPU's default limits, the
 // thesis scene stepped in its own encoder, the cloth drawn by its own
-// render pass straight from the simulator's buffers, and the positions read
-// back without waiting. Run: cargo run --release -p wgcloth --example embed
-use wgcloth::gpu::{GpuSim, Readback};
+// render pass straight from the simulator's buffers, and the positions and
+// the solver's statistics read back without waiting. Run:
+// cargo run --release -p wgcloth --example embed
+use wgcloth::gpu::{CgBudget, GpuSim, Readback, layout::StepState};
 use wgcloth::{Config, Scene};
 
 const SHADER: &str = "
@@ -18,8 +19,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // DeviceDescriptor::default() asks for wgpu::Limits::default().
     let (device, queue) = pollster::block_on(adapter.request_device(&Default::default()))?;
 
-    let sim = GpuSim::new(&device, &queue, &Scene::new(&Config::default())?)?;
+    let scene = Scene::new(&Config::default())?;
+    let sim = GpuSim::new(&device, &queue, &scene)?;
     let mut readback = Readback::new(&device, sim.positions().size(), 2);
+    // A step records as many PCG iterations as recent steps needed, not the
+    // whole cap: each empty one still costs its dispatches.
+    let mut statistics = Readback::new(&device, sim.statistics().size(), 2);
+    let mut budget = CgBudget::new(scene.config.solver.cg_iters, scene.config.solver.cg_tol);
 
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("cloth"),
@@ -89,16 +95,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         pass.draw_indexed(0..sim.index_count(), 0, 0..1);
         drop(pass);
         readback.encode_copy(&mut encoder, sim.positions());
+        statistics.encode_copy(&mut encoder, sim.statistics());
         queue.submit([encoder.finish()]);
         readback.submitted();
+        statistics.submitted();
         device.poll(wgpu::PollType::Poll)?; // runs finished map_async callbacks
         if let Some(x) = readback.try_take::<[f32; 4]>() {
             lowest = x.iter().map(|p| p[1]).reduce(f32::min);
         }
+        if let Some(s) = statistics.try_take::<StepState>() {
+            // A step or two old, so the budget it ran under is taken as the
+            // current one: at worst a step counts as cut.
+            budget.observe(s[0].last_iterations, sim.cg_budget(), s[0].last_residual);
+            sim.set_cg_budget(budget.next());
+        }
     }
     println!(
-        "50 steps on {}; lowest cloth point read back: {lowest:?} m",
-        adapter.get_info().name
+        "50 steps on {}; lowest cloth point read back: {lowest:?} m; PCG iterations recorded a step: {} of {}",
+        adapter.get_info().name,
+        sim.cg_budget(),
+        scene.config.solver.cg_iters
     );
     Ok(())
 }

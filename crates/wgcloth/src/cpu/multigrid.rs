@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
+use crate::math::RowSum;
 use crate::multigrid::{
     COARSE_SWEEPS, Level, STENCIL, STORED_STENCIL, levels, parents, row_weight, stencil_slot,
     stored_at, weight,
@@ -152,9 +153,9 @@ impl Multigrid {
         i: usize,
         x: impl Fn(usize) -> Vec3,
     ) -> Vec3 {
-        let mut acc = Vec3::ZERO;
-        self.row_entries(a, cloth, l, i, |j, block| acc += block * x(j));
-        acc
+        let mut acc = RowSum::default();
+        self.row_entries(a, cloth, l, i, |j, block| acc.add(block, x(j)));
+        acc.total()
     }
 
     /// The weight of fine node `i` (level `l`) in coarse node `(cc, rc)`,
