@@ -9,7 +9,9 @@ ones when A <= B. When A > B the run loop solves the step again from its
 start with the whole cap: the cut attempt (F + B real iterations), the
 DEPTH steps in flight behind it, thrown away, and the repeat (F + A real
 + cap - A empty). The budget for step s sees the steps up to s - LAG: the
-run loop sets it before waiting for step s - 4.
+run loop sets it before it waits for step s - 3, the oldest in flight, so
+at worst it has read up to s - 4. Every policy is replayed under the run
+loop as it is now (a cut step solved again).
 
 Costs in ms (real iteration, empty iteration, rest of the step):
   h200:     1024² on an H200 (BENCHMARKS.md "Hardware GPU": 0.89, 0.16, ~4)

@@ -191,8 +191,8 @@ impl InFlight {
 
     /// Puts `sim` back where `finished`'s step started (positions,
     /// velocities, clock and run statistics), after waiting for the steps
-    /// in flight behind it and dropping them unread: they followed a state
-    /// that is being replaced.
+    /// in flight behind it and dropping them (read, not counted): they
+    /// followed a state that is being replaced.
     pub fn rewind(&mut self, ctx: &GpuContext, sim: &GpuSim, finished: &Finished) -> Result<()> {
         while self.next(ctx, sim, true)?.is_some() {}
         let slot = &self.slots[finished.slot];

@@ -292,11 +292,19 @@ impl Timings {
 pub struct Steps {
     pub total: u64,
     pub untimed: u64,
+    /// PCG iterations the first GPU step records, instead of the whole
+    /// cap: with too few, the run loop solves it again at once (what
+    /// `tests/in_flight.rs` needs of it).
+    pub first_budget: Option<u32>,
 }
 
 impl Steps {
     pub fn all(total: u64) -> Steps {
-        Steps { total, untimed: 0 }
+        Steps {
+            total,
+            untimed: 0,
+            first_budget: None,
+        }
     }
 }
 
@@ -555,8 +563,9 @@ fn run_gpu(
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut resolved) = (0u64, 0u64, 0u64);
-    // The budget for a step solved again after its budget cut it.
-    let mut retry = None;
+    // A budget set for the next step: the whole cap for a step solved
+    // again, or the first step's.
+    let mut retry = steps.first_budget;
     let mut since = Instant::now();
     while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
         let mut finished = Vec::new();

@@ -20,6 +20,7 @@ fn tiny() -> BenchOptions {
         steps: Steps {
             untimed: 2,
             total: 5,
+            first_budget: None,
         },
         period_grid: 6,
         period_steps: 3,

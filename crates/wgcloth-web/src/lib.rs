@@ -356,7 +356,8 @@ impl App {
 
     fn update(&mut self, state: &StepState) {
         // The copy may be a frame or two old, so the budget it ran under
-        // is taken as the current one: at worst a step is counted as cut.
+        // is taken as the current one: a step may be counted against a
+        // budget it did not run under, cut or not.
         if state.steps > 0 {
             self.budget.observe(
                 state.last_iterations,

@@ -105,7 +105,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         if let Some(s) = statistics.try_take::<StepState>() {
             // A step or two old, so the budget it ran under is taken as the
-            // current one: at worst a step counts as cut.
+            // current one: a step may be counted against a budget it did
+            // not run under, cut or not.
             budget.observe(s[0].last_iterations, sim.cg_budget(), s[0].last_residual);
             sim.set_cg_budget(budget.next());
         }

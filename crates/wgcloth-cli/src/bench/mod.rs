@@ -200,6 +200,7 @@ impl BenchOptions {
             steps: Steps {
                 untimed: UNTIMED_STEPS,
                 total: UNTIMED_STEPS + 40,
+                first_budget: None,
             },
             period_grid: 32,
             period_steps: PERIOD_STEPS,
@@ -228,6 +229,7 @@ impl BenchOptions {
             steps: Steps {
                 untimed: UNTIMED_STEPS,
                 total: UNTIMED_STEPS + 20,
+                first_budget: None,
             },
             batch_sizes: vec![1_000, 16_000],
             repeats: 1,
@@ -1211,6 +1213,7 @@ mod tests {
         let steps = Steps {
             untimed: 1,
             total: 3,
+            first_budget: None,
         };
         let model = ModelKind::Friction;
         let thesis = Variant::of(model);

@@ -9,9 +9,9 @@ use crate::gpu::GpuSim;
 /// How many PCG iterations the next GPU step records: half again the
 /// most any of the last [`CgBudget::WINDOW`] steps took, plus
 /// [`CgBudget::MARGIN`], never more than `solver.cg_iters`; the whole cap
-/// for the first step. Converged iterations dispatch no work, but each
-/// recorded one costs its dispatches' overhead (about 90 µs each on
-/// lavapipe, 6–8 µs on an H200), so recording more than a step needs costs
+/// until a step has been read back. Converged iterations dispatch no work,
+/// but each recorded one costs its dispatches' overhead (about 48 µs each
+/// on lavapipe, 6–8 µs on an H200), so recording more than a step needs costs
 /// time, and recording fewer costs the step's repeat.
 ///
 /// A step the budget cuts short of the tolerance ([`CgBudget::cut`]) can
