@@ -62,10 +62,11 @@ fn steps_in_flight_count_every_step_and_end_where_a_plain_loop_does() {
         let summary = report.summary();
         assert_eq!(report.steps, steps, "{summary}");
         assert_eq!(report.cg_steps_above_goal, 0, "{summary}");
-        assert!(
-            first_budget.is_none() || report.cg_steps_resolved >= 1,
-            "{summary}"
-        );
+        // The default budget follows these steps, never short of them.
+        match first_budget {
+            Some(_) => assert!(report.cg_steps_resolved >= 1, "{summary}"),
+            None => assert_eq!(report.cg_steps_resolved, 0, "{summary}"),
+        }
         assert_eq!(report.cg_iterations_max, most, "{summary}");
         assert_eq!(
             report.cg_iterations_mean,
