@@ -65,6 +65,23 @@ fn coords(level: Level, i: usize) -> (u32, u32) {
     )
 }
 
+/// A node of a level: its index and its grid coordinates (c, r).
+type Node = (usize, u32, u32);
+
+/// Sets `out[i] = f(node i)` for every node of `level`, a grid row at a
+/// time, so no node's coordinates are divided out of its index.
+fn for_each_node<T: Send>(level: Level, out: &mut [T], f: impl Fn(Node) -> T + Sync) {
+    let nx = level.nx as usize;
+    out.par_chunks_mut(nx)
+        .with_min_len(GRAIN.div_ceil(nx))
+        .enumerate()
+        .for_each(|(r, row)| {
+            for (c, o) in row.iter_mut().enumerate() {
+                *o = f((r * nx + c, c as u32, r as u32));
+            }
+        });
+}
+
 impl Multigrid {
     /// The hierarchy of `cloth`'s grid, operators zero until [`setup`](Self::setup).
     pub fn new(cloth: &Cloth) -> Multigrid {
@@ -114,76 +131,80 @@ impl Multigrid {
         self.stencils[l - 1][node * STORED_STENCIL as usize + slot]
     }
 
-    /// Calls `f(j, A_ij)` for every block of row `i` of level `l`'s operator.
+    /// Calls `f(j, A_ij)` for every block of row `i` (at `(c, r)`) of level
+    /// `l`'s operator, j as a node.
     fn row_entries(
         &self,
         a: &BlockMatrix,
         cloth: &Cloth,
         l: usize,
-        i: usize,
-        mut f: impl FnMut(usize, Mat3),
+        (i, c, r): Node,
+        mut f: impl FnMut(Node, Mat3),
     ) {
         if l == 0 {
-            f(i, a.diag[i]);
+            f((i, c, r), a.diag[i]);
             let adj = &cloth.adjacency;
             for k in adj.range(i) {
-                f(adj.other[k] as usize, a.off[adj.spring[k] as usize]);
+                let j = adj.other[k] as usize;
+                let (cj, rj) = coords(self.levels[0], j);
+                f((j, cj, rj), a.off[adj.spring[k] as usize]);
             }
             return;
         }
         let level = self.levels[l];
-        let (c, r) = coords(level, i);
         for dy in -2..=2i32 {
             for dx in -2..=2i32 {
                 let (cj, rj) = (c as i32 + dx, r as i32 + dy);
                 if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
                     let j = rj as usize * level.nx as usize + cj as usize;
-                    f(j, self.stored_block(l, i, j, dx, dy));
+                    f(
+                        (j, cj as u32, rj as u32),
+                        self.stored_block(l, i, j, dx, dy),
+                    );
                 }
             }
         }
     }
 
-    /// Row `i` of level `l`'s operator times the vector `x(j)`.
+    /// Row `node` of level `l`'s operator times the vector `x(j)`.
     fn row(
         &self,
         a: &BlockMatrix,
         cloth: &Cloth,
         l: usize,
-        i: usize,
+        node: Node,
         x: impl Fn(usize) -> Vec3,
     ) -> Vec3 {
         let mut acc = RowSum::default();
-        self.row_entries(a, cloth, l, i, |j, block| acc.add(block, x(j)));
+        self.row_entries(a, cloth, l, node, |(j, ..), block| acc.add(block, x(j)));
         acc.total()
     }
 
-    /// The weight of fine node `i` (level `l`) in coarse node `(cc, rc)`,
-    /// zero at a pinned vertex (P̃ = S P).
-    fn fine_weight(&self, cloth: &Cloth, l: usize, i: usize, coarse: (u32, u32)) -> f32 {
+    /// The weight of fine node `i` at `(c, r)` (level `l`) in coarse node
+    /// `(cc, rc)`, zero at a pinned vertex (P̃ = S P).
+    fn fine_weight(&self, cloth: &Cloth, l: usize, (i, c, r): Node, coarse: (u32, u32)) -> f32 {
         if l == 0 && cloth.pinned[i] {
             return 0.0;
         }
-        let (fine, next) = (self.levels[l], self.levels[l + 1]);
-        let (c, r) = coords(fine, i);
+        let next = self.levels[l + 1];
         weight(c, coarse.0, next.nx) * weight(r, coarse.1, next.ny)
     }
 
     /// The fine nodes coarse node `(cc, rc)` gathers from: up to 3 × 3.
-    fn children(fine: Level, (cc, rc): (u32, u32)) -> impl Iterator<Item = usize> {
+    fn children(fine: Level, (cc, rc): (u32, u32)) -> impl Iterator<Item = Node> {
         let span = |k: u32, n: u32| (2 * k).saturating_sub(1)..(2 * k + 2).min(n);
         span(rc, fine.ny).flat_map(move |r| {
-            span(cc, fine.nx).map(move |c| r as usize * fine.nx as usize + c as usize)
+            span(cc, fine.nx).map(move |c| (r as usize * fine.nx as usize + c as usize, c, r))
         })
     }
 
-    /// Σ over coarse parents (level `l` + 1) of fine node `i`, weighted.
-    fn interpolate(&self, cloth: &Cloth, l: usize, i: usize, coarse: &[Vec3]) -> Vec3 {
+    /// Σ over coarse parents (level `l` + 1) of fine node `(i, c, r)`,
+    /// weighted.
+    fn interpolate(&self, cloth: &Cloth, l: usize, (i, c, r): Node, coarse: &[Vec3]) -> Vec3 {
         if l == 0 && cloth.pinned[i] {
             return Vec3::ZERO;
         }
-        let (fine, next) = (self.levels[l], self.levels[l + 1]);
-        let (c, r) = coords(fine, i);
+        let next = self.levels[l + 1];
         let mut acc = Vec3::ZERO;
         for (pr, wr) in parents(r, next.ny) {
             for (pc, wc) in parents(c, next.nx) {
@@ -223,16 +244,15 @@ impl Multigrid {
                 .for_each(|(coarse, (stored, smoother_block))| {
                     let (cc, rc) = coords(to, coarse);
                     let mut out = [Mat3::ZERO; STENCIL as usize];
-                    for i in Self::children(from, (cc, rc)) {
-                        let wi = self.fine_weight(cloth, l, i, (cc, rc));
+                    for node in Self::children(from, (cc, rc)) {
+                        let wi = self.fine_weight(cloth, l, node, (cc, rc));
                         if wi == 0.0 {
                             continue;
                         }
-                        self.row_entries(a, cloth, l, i, |j, block| {
+                        self.row_entries(a, cloth, l, node, |(j, c, r), block| {
                             if l == 0 && cloth.pinned[j] {
                                 return;
                             }
-                            let (c, r) = coords(from, j);
                             for (pr, wr) in parents(r, to.ny) {
                                 for (pc, wc) in parents(c, to.nx) {
                                     let w = wi * wr * wc;
@@ -272,21 +292,15 @@ impl Multigrid {
                 .with_min_len(GRAIN)
                 .enumerate()
                 .for_each(|(i, a_i)| *a_i = smooth[i] * fine_rhs[i]);
-            residual
-                .par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .for_each(|(i, t)| *t = fine_rhs[i] - self.row(a, cloth, l, i, |j| pre[j]));
-            let to = self.levels[l + 1];
-            out.par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .for_each(|(coarse, sum)| {
-                    let cr = coords(to, coarse);
-                    *sum = Self::children(self.levels[l], cr)
-                        .map(|i| self.fine_weight(cloth, l, i, cr) * residual[i])
-                        .sum();
-                });
+            let (from, to) = (self.levels[l], self.levels[l + 1]);
+            for_each_node(from, &mut residual, |node| {
+                fine_rhs[node.0] - self.row(a, cloth, l, node, |j| pre[j])
+            });
+            for_each_node(to, &mut out, |(_, cc, rc)| {
+                Self::children(from, (cc, rc))
+                    .map(|node| self.fine_weight(cloth, l, node, (cc, rc)) * residual[node.0])
+                    .sum()
+            });
             (self.pre[l], self.work[l], self.rhs[l]) = (pre, residual, out);
         }
         // The coarsest level: damped Jacobi sweeps from zero (`coarse`).
@@ -295,9 +309,14 @@ impl Multigrid {
         let mut e: Vec<Vec3> = (0..coarse_rhs.len())
             .map(|i| smooth[i] * coarse_rhs[i])
             .collect();
+        let level = self.levels[last];
         for _ in 1..COARSE_SWEEPS {
             e = (0..e.len())
-                .map(|i| e[i] + smooth[i] * (coarse_rhs[i] - self.row(a, cloth, last, i, |j| e[j])))
+                .map(|i| {
+                    let (c, r) = coords(level, i);
+                    let row = self.row(a, cloth, last, (i, c, r), |j| e[j]);
+                    e[i] + smooth[i] * (coarse_rhs[i] - row)
+                })
                 .collect();
         }
         self.correction[last - 1] = e;
@@ -311,24 +330,18 @@ impl Multigrid {
             };
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
             let (smooth, coarse, pre) = (&self.smoothers[l], &self.correction[l], &self.pre[l]);
-            guess
-                .par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .for_each(|(i, e)| *e = pre[i] + self.interpolate(cloth, l, i, coarse));
-            let post = |i: usize| {
-                guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, i, |j| guess[j]))
+            let level = self.levels[l];
+            for_each_node(level, &mut guess, |node| {
+                pre[node.0] + self.interpolate(cloth, l, node, coarse)
+            });
+            let post = |node: Node| {
+                let i = node.0;
+                guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, node, |j| guess[j]))
             };
             if l == 0 {
-                z.par_iter_mut()
-                    .with_min_len(GRAIN)
-                    .enumerate()
-                    .for_each(|(i, zi)| *zi = post(i));
+                for_each_node(level, z, post);
             } else {
-                out.par_iter_mut()
-                    .with_min_len(GRAIN)
-                    .enumerate()
-                    .for_each(|(i, o)| *o = post(i));
+                for_each_node(level, &mut out, post);
                 self.correction[l - 1] = out;
             }
             self.work[l] = guess;
