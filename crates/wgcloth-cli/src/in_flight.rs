@@ -32,6 +32,7 @@ struct Slot {
 struct Pending {
     step: u64,
     budget: u32,
+    dispatches: u32,
     slot: usize,
     submission: wgpu::SubmissionIndex,
 }
@@ -43,6 +44,8 @@ pub struct Finished {
     pub step: u64,
     /// The PCG iterations the step recorded.
     pub budget: u32,
+    /// The compute dispatches the step recorded.
+    pub dispatches: u32,
     /// The clock and statistics right after the step.
     pub state: StepState,
     /// Each pass's time, empty without timestamp queries.
@@ -54,8 +57,6 @@ pub struct Finished {
 pub struct InFlight {
     slots: Vec<Slot>,
     pending: VecDeque<Pending>,
-    /// Dispatches the last submitted step recorded.
-    pub dispatches: u32,
 }
 
 impl InFlight {
@@ -83,7 +84,6 @@ impl InFlight {
         InFlight {
             slots,
             pending: VecDeque::new(),
-            dispatches: 0,
         }
     }
 
@@ -116,7 +116,7 @@ impl InFlight {
         ] {
             encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
         }
-        self.dispatches = sim.encode_step(&mut encoder);
+        let dispatches = sim.encode_step(&mut encoder);
         encoder.copy_buffer_to_buffer(stats, 0, staging, 0, stats.size());
         if let Some(t) = sim.timestamps() {
             encoder.copy_buffer_to_buffer(t, 0, staging, TICKS_AT, t.size());
@@ -127,6 +127,7 @@ impl InFlight {
         self.pending.push_back(Pending {
             step,
             budget: sim.cg_budget(),
+            dispatches,
             slot: k,
             submission,
         });
@@ -180,6 +181,7 @@ impl InFlight {
         Ok(Some(Finished {
             step: oldest.step,
             budget: oldest.budget,
+            dispatches: oldest.dispatches,
             state,
             stage_ms: match ticks.is_empty() {
                 true => Vec::new(),

@@ -111,7 +111,8 @@ pub struct Report {
     /// Median time of each stage per step, ms (GPU: timestamp queries,
     /// absent where the adapter has none).
     pub stage_ms: BTreeMap<String, f64>,
-    /// Compute dispatches one step records (GPU only).
+    /// Compute dispatches a step records, the median over the timed steps
+    /// (GPU only; the iteration budget varies them from step to step).
     pub dispatches_per_step: Option<u32>,
     /// GPU memory of the scene's state, bytes (`GpuSim::state_bytes`; GPU
     /// only), and per cloth vertex.
@@ -563,16 +564,17 @@ fn run_gpu(
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut resolved) = (0u64, 0u64, 0u64);
-    // A budget set for the next step: the whole cap for a step solved
-    // again, or the first step's.
-    let mut retry = steps.first_budget;
+    let mut dispatches = Series::default();
+    // Iterations the next step records instead of the budget's: the whole
+    // cap for a step solved again, or the first step's (`first_budget`).
+    let mut forced = steps.first_budget;
     let mut since = Instant::now();
     while divergence.is_none() && (submitted < steps.total || !flight.is_empty()) {
         let mut finished = Vec::new();
         // Whether the host needs the state after the step just submitted.
         let mut synced = false;
         if submitted < steps.total {
-            sim.set_cg_budget(retry.take().unwrap_or_else(|| budget.next()));
+            sim.set_cg_budget(forced.take().unwrap_or_else(|| budget.next()));
             finished.extend(flight.submit(ctx, &sim, submitted)?);
             submitted += 1;
             synced = obs.recording.as_ref().is_some_and(|r| r.due(submitted))
@@ -593,7 +595,7 @@ fn run_gpu(
                 // cap, dropping the steps recorded after it. Its time
                 // runs on, so it includes what was thrown away.
                 flight.rewind(ctx, &sim, &f)?;
-                retry = Some(budget.cap());
+                forced = Some(budget.cap());
                 (submitted, resolved, rewound) = (f.step, resolved + 1, true);
                 break;
             }
@@ -605,6 +607,7 @@ fn run_gpu(
                     (now - since).as_secs_f64() * 1e3,
                     f.stage_ms.iter().copied(),
                 );
+                dispatches.push(f.dispatches as f64);
             }
             since = now;
             residuals.push(state.last_residual, state.last_iterations);
@@ -692,7 +695,7 @@ fn run_gpu(
         ms_per_step,
         ms_per_step_mean,
         stage_ms,
-        dispatches_per_step: Some(flight.dispatches),
+        dispatches_per_step: Some(median(&mut dispatches.values).round() as u32),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
         gpu_split_arrays: sim
