@@ -132,22 +132,20 @@ impl Multigrid {
     }
 
     /// Calls `f(j, A_ij)` for every block of row `i` (at `(c, r)`) of level
-    /// `l`'s operator, j as a node.
+    /// `l`'s operator.
     fn row_entries(
         &self,
         a: &BlockMatrix,
         cloth: &Cloth,
         l: usize,
         (i, c, r): Node,
-        mut f: impl FnMut(Node, Mat3),
+        mut f: impl FnMut(usize, Mat3),
     ) {
         if l == 0 {
-            f((i, c, r), a.diag[i]);
+            f(i, a.diag[i]);
             let adj = &cloth.adjacency;
             for k in adj.range(i) {
-                let j = adj.other[k] as usize;
-                let (cj, rj) = coords(self.levels[0], j);
-                f((j, cj, rj), a.off[adj.spring[k] as usize]);
+                f(adj.other[k] as usize, a.off[adj.spring[k] as usize]);
             }
             return;
         }
@@ -157,10 +155,7 @@ impl Multigrid {
                 let (cj, rj) = (c as i32 + dx, r as i32 + dy);
                 if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
                     let j = rj as usize * level.nx as usize + cj as usize;
-                    f(
-                        (j, cj as u32, rj as u32),
-                        self.stored_block(l, i, j, dx, dy),
-                    );
+                    f(j, self.stored_block(l, i, j, dx, dy));
                 }
             }
         }
@@ -176,7 +171,7 @@ impl Multigrid {
         x: impl Fn(usize) -> Vec3,
     ) -> Vec3 {
         let mut acc = RowSum::default();
-        self.row_entries(a, cloth, l, node, |(j, ..), block| acc.add(block, x(j)));
+        self.row_entries(a, cloth, l, node, |j, block| acc.add(block, x(j)));
         acc.total()
     }
 
@@ -249,10 +244,11 @@ impl Multigrid {
                         if wi == 0.0 {
                             continue;
                         }
-                        self.row_entries(a, cloth, l, node, |(j, c, r), block| {
+                        self.row_entries(a, cloth, l, node, |j, block| {
                             if l == 0 && cloth.pinned[j] {
                                 return;
                             }
+                            let (c, r) = coords(from, j);
                             for (pr, wr) in parents(r, to.ny) {
                                 for (pc, wc) in parents(c, to.nx) {
                                     let w = wi * wr * wc;
