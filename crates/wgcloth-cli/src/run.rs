@@ -555,6 +555,11 @@ fn run_gpu(
         let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
         m.record(0, scene, &x, &v, Some(&ctx.device))?;
     }
+    // The checkpoint holds the initial state; its interval counts from the
+    // first step, not from building the kernels (seconds on lavapipe).
+    if let Some(c) = checkpoint.as_deref_mut() {
+        c.taken = Instant::now();
+    }
     let config = &scene.config;
     let dt = config.solver.dt as f64;
     let mut timings = Timings::default();

@@ -135,9 +135,10 @@ fn a_failed_submission_ends_a_gpu_run_with_an_error() {
     );
 }
 
-/// `auto` finishes on the CPU from the last checkpoint. The run is shorter
-/// than the checkpoint interval, so that is the initial state and the
-/// result is exactly a CPU run's.
+/// `auto` finishes on the CPU from the last checkpoint. The steps before
+/// the fault take less than the checkpoint interval (which counts from
+/// the first step, not from building the kernels), so that is the initial
+/// state and the result is exactly a CPU run's.
 #[test]
 fn auto_finishes_on_the_cpu_after_a_device_fault() {
     let cpu =
