@@ -39,6 +39,68 @@ pub struct Multigrid {
     /// its residual on the way down and its guess on the way up.
     pre: Vec<Vec<Vec3>>,
     work: Vec<Vec<Vec3>>,
+    /// Per level but the coarsest, with the patch smoother: each 2 × 2
+    /// patch's inverse ([`Multigrid::set_patches`]).
+    patch_inverses: Vec<Vec<PatchInverse>>,
+    patches: bool,
+}
+
+/// Nodes a patch holds, 2 × 2: local node k = 2 dy + dx.
+const PATCH: usize = 4;
+/// Unknowns a patch holds.
+const PATCH_UNKNOWNS: usize = 3 * PATCH;
+/// A patch's inverse, row-major (local node k's unknowns 3k..3k + 3).
+type PatchInverse = [f32; PATCH_UNKNOWNS * PATCH_UNKNOWNS];
+
+/// The patch grid of `level`: ⌈nx / 2⌉ × ⌈ny / 2⌉.
+fn patch_grid(level: Level) -> (usize, usize) {
+    (level.nx.div_ceil(2) as usize, level.ny.div_ceil(2) as usize)
+}
+
+/// The nodes of patch (pc, pr) of `level`, by local index; None past the
+/// grid's edge.
+fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH] {
+    std::array::from_fn(|k| {
+        let (c, r) = ((2 * pc + k % 2) as u32, (2 * pr + k / 2) as u32);
+        (c < level.nx && r < level.ny).then_some((
+            r as usize * level.nx as usize + c as usize,
+            c,
+            r,
+        ))
+    })
+}
+
+/// The inverse of a symmetric positive definite matrix, by Cholesky in
+/// f64; None if it is not positive definite.
+fn spd_inverse(m: &[[f64; PATCH_UNKNOWNS]; PATCH_UNKNOWNS]) -> Option<PatchInverse> {
+    const N: usize = PATCH_UNKNOWNS;
+    let mut l = [[0f64; N]; N];
+    for j in 0..N {
+        let d = m[j][j] - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        l[j][j] = d.sqrt();
+        for i in j + 1..N {
+            l[i][j] = (m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>()) / l[j][j];
+        }
+    }
+    let mut out = [0f32; N * N];
+    for c in 0..N {
+        // Solve L Lᵀ x = e_c.
+        let mut y = [0f64; N];
+        for i in 0..N {
+            let e = if i == c { 1.0 } else { 0.0 };
+            y[i] = (e - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+        }
+        for i in (0..N).rev() {
+            y[i] = (y[i] - (i + 1..N).map(|k| l[k][i] * y[k]).sum::<f64>()) / l[i][i];
+        }
+        for (r, v) in y.iter().enumerate() {
+            out[r * N + c] = *v as f32;
+        }
+    }
+    Some(out)
 }
 
 /// ω_i D⁻¹ of a row with diagonal block `d` and off-diagonal blocks `off`
@@ -102,6 +164,8 @@ impl Multigrid {
             correction: coarse().collect(),
             pre: upper().collect(),
             work: upper().collect(),
+            patch_inverses: Vec::new(),
+            patches: false,
             levels,
         }
     }
@@ -209,6 +273,125 @@ impl Multigrid {
         acc
     }
 
+    /// Smooths every level but the coarsest by block Gauss-Seidel over its
+    /// 2 × 2-node patches, each solved exactly, in four colours (forward
+    /// down, backward up), instead of damped block Jacobi per node.
+    pub fn set_patches(&mut self, on: bool) {
+        self.patches = on;
+    }
+
+    /// Each patch's inverse of level `l`'s operator among its unknowns
+    /// (pinned vertices' and missing nodes' unknowns held at zero).
+    fn patch_inverses_of(&self, a: &BlockMatrix, cloth: &Cloth, l: usize) -> Vec<PatchInverse> {
+        let level = self.levels[l];
+        let (px, py) = patch_grid(level);
+        let held = |node: Option<Node>| match node {
+            None => true,
+            Some((i, ..)) => l == 0 && cloth.pinned[i],
+        };
+        (0..px * py)
+            .into_par_iter()
+            .map(|p| {
+                let nodes = patch_nodes(level, (p % px, p / px));
+                let mut m = [[0f64; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
+                for (k, &node) in nodes.iter().enumerate() {
+                    let Some(node) = node.filter(|_| !held(node)) else {
+                        for t in 0..3 {
+                            m[3 * k + t][3 * k + t] = 1.0;
+                        }
+                        continue;
+                    };
+                    self.row_entries(a, cloth, l, node, |(j, ..), block| {
+                        let local = nodes.iter().position(|n| n.is_some_and(|n| n.0 == j));
+                        if let Some(b) = local.filter(|&b| !held(nodes[b])) {
+                            for (c, column) in [block.x_axis, block.y_axis, block.z_axis]
+                                .iter()
+                                .enumerate()
+                            {
+                                for r in 0..3 {
+                                    m[3 * k + r][3 * b + c] = column[r] as f64;
+                                }
+                            }
+                        }
+                    });
+                }
+                // Not positive definite only if A is not: leave the patch alone.
+                spd_inverse(&m).unwrap_or([0.0; PATCH_UNKNOWNS * PATCH_UNKNOWNS])
+            })
+            .collect()
+    }
+
+    /// One block Gauss-Seidel pass over level `l`'s patches on `z` for
+    /// A z = `rhs`, the colours in `colours`' order. Patches of a colour
+    /// share no spring (those within two nodes are of other colours), so
+    /// each colour's are solved from the same z.
+    fn patch_sweep(
+        &self,
+        a: &BlockMatrix,
+        cloth: &Cloth,
+        l: usize,
+        rhs: &[Vec3],
+        z: &mut [Vec3],
+        colours: impl Iterator<Item = usize>,
+    ) {
+        let level = self.levels[l];
+        let (px, py) = patch_grid(level);
+        let inverses = &self.patch_inverses[l];
+        // Each colour in turn over the whole grid would stream the level's
+        // operator four times. The same sums, a few patch rows at a time:
+        // the colour at place q in the order runs q rows behind the first,
+        // so a patch's neighbours of earlier colours are done and those of
+        // later ones not yet begun.
+        let order: Vec<usize> = colours.collect();
+        const ROWS: usize = 32;
+        for start in (0..py + order.len()).step_by(ROWS) {
+            for (q, &colour) in order.iter().enumerate() {
+                let (cx, cy) = (colour % 2, colour / 2);
+                let rows = start.saturating_sub(q)..(start + ROWS).saturating_sub(q).min(py);
+                let patches: Vec<(usize, usize)> = rows
+                    .filter(|pr| pr % 2 == cy)
+                    .flat_map(|pr| (cx..px).step_by(2).map(move |pc| (pc, pr)))
+                    .collect();
+                let z_now: &[Vec3] = z;
+                let updates: Vec<[(usize, Vec3); PATCH]> = patches
+                    .par_iter()
+                    .with_min_len(GRAIN / (16 * PATCH))
+                    .map(|&(pc, pr)| {
+                        let nodes = patch_nodes(level, (pc, pr));
+                        let mut res = [0f32; PATCH_UNKNOWNS];
+                        // A pinned vertex stays at zero (P̃ = S P).
+                        let free =
+                            |node: &Option<Node>| node.filter(|n| l > 0 || !cloth.pinned[n.0]);
+                        for (k, node) in nodes.iter().enumerate() {
+                            if let Some(node) = free(node) {
+                                let r = rhs[node.0] - self.row(a, cloth, l, node, |j| z_now[j]);
+                                res[3 * k..3 * k + 3].copy_from_slice(&r.to_array());
+                            }
+                        }
+                        // d = M⁻¹ res, a column at a time (M⁻¹ is symmetric, so
+                        // its rows are its columns): twelve sums side by side.
+                        let inverse = &inverses[pr * px + pc];
+                        let mut d = [0f32; PATCH_UNKNOWNS];
+                        for (column, &r) in inverse.chunks_exact(PATCH_UNKNOWNS).zip(&res) {
+                            for (d, m) in d.iter_mut().zip(column) {
+                                *d += m * r;
+                            }
+                        }
+                        std::array::from_fn(|k| match free(&nodes[k]) {
+                            Some((i, ..)) => (i, Vec3::from_slice(&d[3 * k..3 * k + 3])),
+                            None => (usize::MAX, Vec3::ZERO),
+                        })
+                    })
+                    .collect();
+                for (i, d) in updates.into_iter().flatten() {
+                    if i != usize::MAX {
+                        z[i] += d;
+                    }
+                }
+            }
+        }
+    }
+
     /// Rebuilds every level's smoother and coarse operator from this step's
     /// A (kernel `galerkin`).
     pub fn setup(&mut self, a: &BlockMatrix, cloth: &Cloth) {
@@ -269,6 +452,12 @@ impl Multigrid {
                 });
             (self.stencils[l], self.smoothers[l + 1]) = (stencil, smoothers);
         }
+        self.patch_inverses = match self.patches {
+            true => (0..self.levels.len() - 1)
+                .map(|l| self.patch_inverses_of(a, cloth, l))
+                .collect(),
+            false => Vec::new(),
+        };
     }
 
     /// z = M⁻¹ r, one V-cycle, returning rᵀz. `r` is zero on pinned rows
@@ -284,10 +473,17 @@ impl Multigrid {
             let mut out = take(&mut self.rhs[l]);
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
             let smooth = &self.smoothers[l];
-            pre.par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .for_each(|(i, a_i)| *a_i = smooth[i] * fine_rhs[i]);
+            match self.patches {
+                true => {
+                    pre.iter_mut().for_each(|p| *p = Vec3::ZERO);
+                    self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, 0..4);
+                }
+                false => pre
+                    .par_iter_mut()
+                    .with_min_len(GRAIN)
+                    .enumerate()
+                    .for_each(|(i, a_i)| *a_i = smooth[i] * fine_rhs[i]),
+            }
             let (from, to) = (self.levels[l], self.levels[l + 1]);
             for_each_node(from, &mut residual, |node| {
                 fine_rhs[node.0] - self.row(a, cloth, l, node, |j| pre[j])
@@ -330,14 +526,21 @@ impl Multigrid {
             for_each_node(level, &mut guess, |node| {
                 pre[node.0] + self.interpolate(cloth, l, node, coarse)
             });
-            let post = |node: Node| {
-                let i = node.0;
-                guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, node, |j| guess[j]))
+            let target: &mut [Vec3] = match l {
+                0 => z,
+                _ => &mut out,
             };
-            if l == 0 {
-                for_each_node(level, z, post);
-            } else {
-                for_each_node(level, &mut out, post);
+            match self.patches {
+                true => {
+                    self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, (0..4).rev());
+                    target.copy_from_slice(&guess);
+                }
+                false => for_each_node(level, target, |node: Node| {
+                    let i = node.0;
+                    guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, node, |j| guess[j]))
+                }),
+            }
+            if l > 0 {
                 self.correction[l - 1] = out;
             }
             self.work[l] = guess;

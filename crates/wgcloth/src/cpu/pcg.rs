@@ -146,7 +146,10 @@ pub fn solve(
                 // A hierarchy built for another cloth is rebuilt.
                 let fits = |mg: &Multigrid| mg.levels()[0] == Level::of(cloth);
                 if !s.multigrid.as_ref().is_some_and(fits) {
-                    s.multigrid = Some(Multigrid::new(cloth));
+                    let mut mg = Multigrid::new(cloth);
+                    // WIP: the patch smoother, until it is a setting.
+                    mg.set_patches(std::env::var_os("WGCLOTH_PATCHES").is_some());
+                    s.multigrid = Some(mg);
                 }
                 if let Some(mg) = &mut s.multigrid {
                     mg.setup(a, cloth);
