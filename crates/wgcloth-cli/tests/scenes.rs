@@ -217,6 +217,7 @@ fn the_gpu_pushes_the_cloth_against_itself_as_the_cpu_does() {
         max_iters: config.solver.cg_iters,
         tol: config.solver.cg_tol,
         preconditioner: config.solver.preconditioner,
+        smoother: config.solver.smoother,
     };
     let b = b.to_vec();
     pcg::solve(

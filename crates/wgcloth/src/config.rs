@@ -44,6 +44,33 @@ impl Preconditioner {
     }
 }
 
+/// How the multigrid preconditioner smooths each level but the coarsest
+/// (`solver.smoother`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Smoother {
+    /// Block Gauss-Seidel over 2 × 2-node patches, each solved exactly, in
+    /// four colours: forward before the coarse correction, backward after
+    /// (docs/DESIGN.md "The solve").
+    #[default]
+    Patches,
+    /// Damped block Jacobi, one 3 × 3 block per node.
+    BlockJacobi,
+}
+
+impl Smoother {
+    /// Every smoother.
+    pub const ALL: [Smoother; 2] = [Smoother::Patches, Smoother::BlockJacobi];
+
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Smoother::Patches => "patches",
+            Smoother::BlockJacobi => "block-jacobi",
+        }
+    }
+}
+
 /// The collision model (`model`; DESIGN "Collision models").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -400,6 +427,8 @@ pub struct SolverConfig {
     pub cg_tol: f32,
     /// The PCG preconditioner (thesis: Jacobi).
     pub preconditioner: Preconditioner,
+    /// The multigrid preconditioner's smoother.
+    pub smoother: Smoother,
     /// m/s².
     pub gravity: [f32; 3],
     /// m/s: a vertex faster than this stops the run as diverging (the
@@ -415,6 +444,7 @@ impl Default for SolverConfig {
             cg_iters: 200,
             cg_tol: 1e-3,
             preconditioner: Preconditioner::Multigrid,
+            smoother: Smoother::Patches,
             gravity: [0.0, -9.81, 0.0],
             max_speed: 100.0,
         }

@@ -62,6 +62,99 @@ pub fn row_weight(spread: f32) -> f32 {
     SMOOTH_WEIGHT.min(2.0 * SMOOTH_MARGIN / (1.0 + spread))
 }
 
+/// Nodes of a smoothing patch (the patch smoother, `Smoother::Patches`):
+/// 2 × 2, local node k at (k % 2, k / 2) from the patch's first.
+pub const PATCH: u32 = 4;
+/// Unknowns of a patch.
+pub const PATCH_UNKNOWNS: usize = 3 * PATCH as usize;
+/// Packed symmetric blocks (6 floats each) that hold a patch's inverse, a
+/// symmetric 12 × 12 of 78 floats: its four diagonal 3 × 3 blocks, then
+/// the six above them ([`upper_block`]), 9 floats each, column-major.
+pub const PATCH_BLOCKS: u32 = 13;
+/// Colours of the patches (see [`colour_grid`]).
+pub const PATCH_COLOURS: usize = 4;
+/// `patches_at` of a level smoothed by block Jacobi (the coarsest always).
+pub const NO_PATCHES: u32 = u32::MAX;
+
+/// A patch's matrix or inverse, row-major.
+pub type PatchMatrix = [[f32; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
+
+/// The patches of `level`, per axis: patch (pc, pr) holds nodes
+/// 2 pc..2 pc + 2 × 2 pr..2 pr + 2 within the grid.
+pub fn patch_grid(level: Level) -> (u32, u32) {
+    (level.nx.div_ceil(2), level.ny.div_ceil(2))
+}
+
+/// The patches of one colour, at most, per axis. Colour c = cx + 2 cy holds
+/// patches (cx + 2 i, cy + 2 j): no two share a spring (a spring reaches
+/// two nodes, and such patches are four apart), so each colour's are solved
+/// side by side.
+pub fn colour_grid(level: Level) -> (u32, u32) {
+    let (px, py) = patch_grid(level);
+    (px.div_ceil(2), py.div_ceil(2))
+}
+
+/// Threads of a patch sweep of `level`: four per patch of a colour.
+pub fn patch_threads(level: Level) -> u32 {
+    let (cx, cy) = colour_grid(level);
+    PATCH * cx * cy
+}
+
+/// Index among a patch's six blocks above the diagonal of block (k, b),
+/// k < b: (0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3).
+pub fn upper_block(k: u32, b: u32) -> u32 {
+    3 * k - k * k.saturating_sub(1) / 2 + b - k - 1
+}
+
+/// The inverse of a symmetric positive definite patch matrix (its lower
+/// half read), by Cholesky M = L Lᵀ and M⁻¹ = L⁻ᵀ L⁻¹, so it is exactly
+/// symmetric; None if M is not positive definite. In f32, operation for
+/// operation as `patch_inverse` in wgsl/multigrid.wgsl.
+pub fn patch_inverse(m: &PatchMatrix) -> Option<PatchMatrix> {
+    const N: usize = PATCH_UNKNOWNS;
+    let mut l = [[0f32; N]; N];
+    for j in 0..N {
+        let mut d = m[j][j];
+        for k in 0..j {
+            d -= l[j][k] * l[j][k];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        l[j][j] = d.sqrt();
+        for i in j + 1..N {
+            let mut s = m[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            l[i][j] = s / l[j][j];
+        }
+    }
+    // W = L⁻¹, lower, a column at a time.
+    let mut w = [[0f32; N]; N];
+    for c in 0..N {
+        w[c][c] = 1.0 / l[c][c];
+        for i in c + 1..N {
+            let mut s = 0.0;
+            for k in c..i {
+                s += l[i][k] * w[k][c];
+            }
+            w[i][c] = -s / l[i][i];
+        }
+    }
+    let mut out = [[0f32; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut s = 0.0;
+            for k in i..N {
+                s += w[k][i] * w[k][j];
+            }
+            (out[i][j], out[j][i]) = (s, s);
+        }
+    }
+    Some(out)
+}
+
 /// One level's grid: `nx × ny` nodes, node (c, r) at index r · nx + c.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Level {

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use common::sphere;
 use glam::{Mat3, Vec3};
-use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
+use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::{Config, Scene};
@@ -40,16 +40,31 @@ fn mat_dev(a: &[Mat3], b: &[Mat3]) -> (f32, f32) {
 }
 
 fn hang(grid: u32) -> Scene {
-    hang_solved(grid, Preconditioner::default(), 100, 1e-3)
+    hang_solved(grid, MULTIGRID, 100, 1e-3)
 }
 
-fn hang_solved(grid: u32, preconditioner: Preconditioner, iters: u32, tol: f32) -> Scene {
+/// Multigrid with the default smoother.
+const MULTIGRID: (Preconditioner, Smoother) = (Preconditioner::Multigrid, Smoother::Patches);
+
+/// Each preconditioner, multigrid with each smoother.
+const PRECONDITIONERS: [(Preconditioner, Smoother); 3] = [
+    (Preconditioner::Jacobi, Smoother::Patches),
+    (Preconditioner::Multigrid, Smoother::Patches),
+    (Preconditioner::Multigrid, Smoother::BlockJacobi),
+];
+
+fn hang_solved(
+    grid: u32,
+    (preconditioner, smoother): (Preconditioner, Smoother),
+    iters: u32,
+    tol: f32,
+) -> Scene {
     let mut c = Config {
         scene: SceneKind::Hang,
         ..Default::default()
     };
     c.cloth.grid = [grid, grid];
-    c.solver.preconditioner = preconditioner;
+    (c.solver.preconditioner, c.solver.smoother) = (preconditioner, smoother);
     (c.solver.cg_iters, c.solver.cg_tol) = (iters, tol);
     Scene::new(&c).unwrap()
 }
@@ -93,8 +108,15 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
     let Some((ctx, kernels)) = gpu() else { return };
     // A fixed iteration count on both sides (tolerance 0): the thesis's 25
     // Jacobi iterations, and 5 multigrid V-cycles, about what 1e-3 takes.
-    for (preconditioner, iters) in [(Preconditioner::Jacobi, 25), (Preconditioner::Multigrid, 5)] {
-        let scene = hang_solved(16, preconditioner, iters, 0.0);
+    for solve in PRECONDITIONERS {
+        let (preconditioner, smoother) = solve;
+        // Multigrid at 33²: on lavapipe its second level (17², past
+        // `tail_nodes`) has its own dispatches, as the cloth's.
+        let (grid, iters) = match preconditioner {
+            Preconditioner::Jacobi => (16, 25),
+            Preconditioner::Multigrid => (33, 5),
+        };
+        let scene = hang_solved(grid, solve, iters, 0.0);
         let cpu = cpu_after(&scene, 60);
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         for _ in 0..60 {
@@ -104,14 +126,14 @@ fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
         let dev = max_dev(&x, &cpu.state.x);
         let state = gpu.read_state().unwrap();
         eprintln!(
-            "{preconditioner:?}, 60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}"
+            "{preconditioner:?} ({smoother:?}), 60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}"
         );
         assert_eq!(state.steps, 60);
         assert_eq!(state.cg_iterations_total, 60 * iters);
         assert_eq!(state.clock, 60);
         assert!(
             dev < 1e-4,
-            "{preconditioner:?}: GPU and CPU drifted {dev} m apart"
+            "{preconditioner:?} ({smoother:?}): GPU and CPU drifted {dev} m apart"
         );
         for (i, p) in scene.cloth.pinned.iter().enumerate() {
             if *p {
@@ -392,17 +414,18 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     ctx.finish().unwrap();
     // 10 outside the solve; PCG's init, init_scalars, spmv, conclude and
     // finish; per iteration `next` (but the first) and `advance`; the
-    // multigrid setup (one per coarse level L) and a V-cycle (4 T + 1: a
-    // residual and a restriction down, a guess and a sweep up, per level
-    // above the tail's first T, and the tail) at the start and in every
-    // iteration.
+    // multigrid setup (per coarse level L its operator, and per level but
+    // the coarsest its patch inverses) and a V-cycle (11 T + 2: four
+    // forward patch sweeps, a residual and a restriction down, a guess and
+    // four backward sweeps up, per level above the tail's first T; the
+    // tail; the cloth's rᵀz) at the start and in every iteration.
     let levels = wgcloth::multigrid::levels(12, 12);
     let nodes: Vec<u32> = levels.iter().map(|l| l.nodes() as u32).collect();
     let (iters, coarse) = (scene.config.solver.cg_iters, levels.len() as u32 - 1);
     let cpu_adapter = ctx.adapter.device_type == wgpu::DeviceType::Cpu;
     let most = wgcloth::multigrid::tail_nodes(cpu_adapter);
-    let cycle = 4 * wgcloth::multigrid::tail_from(&nodes, most) as u32 + 1;
-    let pcg = 5 + (iters - 1) + iters * (1 + cycle) + coarse + cycle;
+    let cycle = 11 * wgcloth::multigrid::tail_from(&nodes, most) as u32 + 2;
+    let pcg = 5 + (iters - 1) + iters * (1 + cycle) + 2 * coarse + cycle;
     assert_eq!(dispatches, 50 * (10 + pcg), "dispatches per step");
     assert_eq!(
         embedded.read_positions().unwrap(),
@@ -445,9 +468,10 @@ fn a_lost_device_is_an_error_not_a_panic_or_a_hang() {
 #[test]
 fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     let Some((ctx, kernels)) = gpu() else { return };
-    for preconditioner in Preconditioner::ALL {
+    for solve in PRECONDITIONERS {
+        let (preconditioner, smoother) = solve;
         // An odd side: the last node of each axis is a coarse node itself.
-        let scene = hang_solved(21, preconditioner, 300, 1e-4);
+        let scene = hang_solved(21, solve, 300, 1e-4);
         let mut cpu = CpuSim::new(scene.clone());
         let mut cpu_iters = 0;
         let mut cpu_worst = 0.0f32;
@@ -463,7 +487,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
         let state = gpu.read_state().unwrap();
         let gpu_iters = state.cg_iterations_total;
         eprintln!(
-            "{preconditioner:?}: PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} \
+            "{preconditioner:?} ({smoother:?}): PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} \
              (cap 6000); worst residual GPU {:.2e}, CPU {cpu_worst:.2e}",
             state.cg_residual_max
         );
@@ -476,7 +500,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
         // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
         assert!(
             (gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0,
-            "{preconditioner:?}: GPU {gpu_iters}, CPU {cpu_iters}"
+            "{preconditioner:?} ({smoother:?}): GPU {gpu_iters}, CPU {cpu_iters}"
         );
     }
 }
@@ -673,7 +697,7 @@ fn a_network_beyond_the_adapters_limits_is_one_clear_error() {
 #[test]
 fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let scene = hang_solved(32, Preconditioner::Multigrid, 40, 1e-3);
+    let scene = hang_solved(32, MULTIGRID, 40, 1e-3);
     let whole = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     assert!(
         whole.split_arrays().is_empty(),
@@ -719,7 +743,7 @@ fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
         &narrow,
         &device,
         &queue,
-        &hang_solved(48, Preconditioner::Multigrid, 40, 1e-3),
+        &hang_solved(48, MULTIGRID, 40, 1e-3),
     )
     .err()
     .expect("a 48² topology does not fit three 110 KiB bindings")

@@ -8,7 +8,7 @@ mod common;
 
 use common::Rng;
 use glam::{Mat3, Vec3};
-use wgcloth::config::{Preconditioner, SceneKind};
+use wgcloth::config::{Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::multigrid::Multigrid;
 use wgcloth::cpu::pcg::BlockMatrix;
@@ -102,7 +102,7 @@ fn coarse_operators_are_galerkin_products_with_pins_filtered() {
     let mut rng = Rng(5);
     let cloth = Cloth::grid(9, 9, 1.0, 1.0, &[0, 8, 40], |u, v| Vec3::new(u, -v, 0.0));
     let a = random_system(&cloth, &mut rng);
-    let mut mg = Multigrid::new(&cloth);
+    let mut mg = Multigrid::new(&cloth, Smoother::default());
     mg.setup(&a, &cloth);
     let levels = mg.levels().to_vec();
     assert_eq!(levels.len(), 3, "9×9 → 5×5 → 3×3");
@@ -127,9 +127,15 @@ fn coarse_operators_are_galerkin_products_with_pins_filtered() {
 }
 
 /// uᵀ M⁻¹ v = vᵀ M⁻¹ u and uᵀ M⁻¹ u > 0 for `b` and random u, v, all
-/// free of the pins.
+/// free of the pins, with each smoother.
 fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
-    let mut mg = Multigrid::new(cloth);
+    for smoother in Smoother::ALL {
+        check_spd_with(a, cloth, b, rng, smoother);
+    }
+}
+
+fn check_spd_with(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng, smoother: Smoother) {
+    let mut mg = Multigrid::new(cloth, smoother);
     mg.setup(a, cloth);
     let n = cloth.vertex_count();
     let free = |i: usize, v: Vec3| if cloth.pinned[i] { Vec3::ZERO } else { v };
@@ -149,7 +155,11 @@ fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
         })
         .collect();
     for (k, (u, mu)) in vectors.iter().zip(&applied).enumerate() {
-        assert!(dot(u, mu) > 0.0, "vector {k}: uᵀM⁻¹u = {}", dot(u, mu));
+        assert!(
+            dot(u, mu) > 0.0,
+            "{smoother:?}, vector {k}: uᵀM⁻¹u = {}",
+            dot(u, mu)
+        );
         for (i, z) in mu.iter().enumerate() {
             if cloth.pinned[i] {
                 assert_eq!(*z, Vec3::ZERO, "pinned vertex {i} preconditioned");
@@ -162,7 +172,7 @@ fn check_spd(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], rng: &mut Rng) {
         let (uv, vu) = (dot(u, mv), dot(v, mu));
         assert!(
             (uv - vu).abs() <= 1e-4 * norm(u) * norm(mv),
-            "uᵀM⁻¹v = {uv}, vᵀM⁻¹u = {vu}"
+            "{smoother:?}: uᵀM⁻¹v = {uv}, vᵀM⁻¹u = {vu}"
         );
     }
 }
@@ -203,12 +213,17 @@ fn iterations(grid: u32, preconditioner: Preconditioner) -> (f64, u32) {
         scene: SceneKind::Hang,
         ..Default::default()
     };
+    c.solver.preconditioner = preconditioner;
+    iterations_of(c, grid, 15)
+}
+
+/// Mean and most PCG iterations per step to |S r| ≤ 1e-3 |S b| over
+/// `steps` steps of `c` on a `grid`² cloth.
+fn iterations_of(mut c: Config, grid: u32, steps: u32) -> (f64, u32) {
     c.cloth.grid = [grid, grid];
     c.solver.cg_iters = 5000;
     c.solver.cg_tol = 1e-3;
-    c.solver.preconditioner = preconditioner;
     let mut sim = CpuSim::new(Scene::new(&c).unwrap());
-    let steps = 15;
     let (mut total, mut most) = (0, 0);
     for _ in 0..steps {
         let out = sim.step().pcg;
@@ -237,4 +252,21 @@ fn multigrid_iterations_stay_nearly_flat_as_the_grid_grows() {
         mg[2].0 * 4.0 <= jacobi[1].0,
         "multigrid {mg:?}, Jacobi {jacobi:?}"
     );
+}
+
+/// The steps after the sphere leaves the cloth, which swings stiff against
+/// its mass, are the hard ones (docs/DESIGN.md "The hardest steps"): the
+/// patch smoother, which solves each 2 × 2 patch's springs together, takes
+/// well under half block Jacobi's iterations over them.
+#[test]
+fn the_patch_smoother_takes_under_half_block_jacobis_iterations() {
+    let run = |smoother| {
+        let mut c = Config::default();
+        c.solver.smoother = smoother;
+        iterations_of(c, 24, 160)
+    };
+    let (patches, jacobi) = (run(Smoother::Patches), run(Smoother::BlockJacobi));
+    eprintln!("24², 160 steps: patches {patches:?}, block Jacobi {jacobi:?}");
+    assert!(patches.0 < 0.5 * jacobi.0, "{patches:?} against {jacobi:?}");
+    assert!(patches.1 < jacobi.1 / 2, "{patches:?} against {jacobi:?}");
 }

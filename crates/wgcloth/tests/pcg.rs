@@ -8,7 +8,7 @@ use common::Rng;
 use glam::{Mat3, Vec3};
 use wgcloth::config::ModelKind;
 use wgcloth::cpu::CpuSim;
-use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, Preconditioner, SolveSettings, solve};
+use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, Preconditioner, Smoother, SolveSettings, solve};
 use wgcloth::scene::Cloth;
 use wgcloth::{Config, Scene};
 
@@ -105,11 +105,19 @@ fn cholesky_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
     b
 }
 
-/// Runs PCG with each preconditioner to tight tolerance and compares with
-/// the direct solution.
+/// Runs PCG with each preconditioner (multigrid with each smoother) to
+/// tight tolerance and compares with the direct solution.
 fn check_against_direct(a: &BlockMatrix, cloth: &Cloth, b: &[Vec3], guess: &[Vec3]) {
-    for preconditioner in [Preconditioner::Jacobi, Preconditioner::Multigrid] {
-        check_one(a, cloth, b, guess, preconditioner);
+    check_one(
+        a,
+        cloth,
+        b,
+        guess,
+        Preconditioner::Jacobi,
+        Smoother::default(),
+    );
+    for smoother in Smoother::ALL {
+        check_one(a, cloth, b, guess, Preconditioner::Multigrid, smoother);
     }
 }
 
@@ -119,6 +127,7 @@ fn check_one(
     b: &[Vec3],
     guess: &[Vec3],
     preconditioner: Preconditioner,
+    smoother: Smoother,
 ) {
     let (free, dense, rhs) = dense_free_system(a, cloth, b, guess);
     let exact = cholesky_solve(dense, rhs);
@@ -127,10 +136,14 @@ fn check_one(
         max_iters: 2000,
         tol: 1e-6,
         preconditioner,
+        smoother,
     };
     let out = solve(a, cloth, b, &mut x, settings, &mut PcgScratch::default());
-    assert!(!out.breakdown, "{preconditioner:?}");
-    assert!(out.relative_residual <= 1e-6, "{preconditioner:?}: {out:?}");
+    assert!(!out.breakdown, "{preconditioner:?} {smoother:?}");
+    assert!(
+        out.relative_residual <= 1e-6,
+        "{preconditioner:?} {smoother:?}: {out:?}"
+    );
     let norm: f64 = exact.iter().map(|e| e * e).sum::<f64>().sqrt();
     let err: f64 = free
         .iter()

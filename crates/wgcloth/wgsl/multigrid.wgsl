@@ -1,6 +1,8 @@
-// Stage "pcg", its multigrid preconditioner: one symmetric V(1,1)-cycle of
-// damped block Jacobi on the cloth grid's hierarchy (src/multigrid.rs), the
-// Galerkin coarse operators Pᵀ A P rebuilt every step. CPU twin:
+// Stage "pcg", its multigrid preconditioner: one symmetric V(1,1)-cycle on
+// the cloth grid's hierarchy (src/multigrid.rs), the Galerkin coarse
+// operators Pᵀ A P rebuilt every step, each level but the coarsest smoothed
+// by the patch smoother (block Gauss-Seidel over 2 × 2-node patches in four
+// colours, `patch_down` and `patch_up`) or damped block Jacobi. CPU twin:
 // src/cpu/multigrid.rs, function by function.
 //
 // Each dispatch works between two levels, `hop.fine` and `hop.coarse`,
@@ -8,11 +10,13 @@
 // workgroup, a barrier where the per-level kernels take a dispatch (each
 // costs more than those levels' work); level 0 is the cloth, whose operator is A itself
 // (diagonal blocks and spring blocks), its pinned vertices filtered out of
-// the interpolation (P̃ = S P). No level stores its pre-smoothing
-// a = ω D⁻¹ r (the residual kernel recomputes it where it reads it, nine
-// loads against a stored vector's three plus a dispatch); the residual
-// and the guess are stored in the work vector, since every node's is read
-// by up to nine others.
+// the interpolation (P̃ = S P). With block Jacobi no level stores its
+// pre-smoothing a = ω D⁻¹ r (the residual kernel recomputes it where it
+// reads it, nine loads against a stored vector's three plus a dispatch);
+// the residual and the guess are stored in the work vector, since every
+// node's is read by up to nine others. The patch smoother keeps its level's
+// smoothed vector in place (`smoothed`), from the pre-smoothing through the
+// guess to the result.
 
 // One level's grid and where its data lives.
 struct Grid {
@@ -29,11 +33,16 @@ struct Grid {
     correction_at: u32,
     // The work vector (residual down, guess up), one region for all levels.
     work_at: u32,
+    // PATCH_BLOCKS blocks per patch in `operators`, each patch's inverse
+    // (`upper`), or NO_PATCHES where block Jacobi smooths.
+    patches_at: u32,
 }
 
 struct Hop {
     fine: Grid,
     coarse: Grid,
+    // The patches a patch sweep of `fine` solves.
+    colour: u32,
 }
 
 @group(1) @binding(0) var<storage, read> bound_hop: Hop;
@@ -187,22 +196,67 @@ fn work(j: u32) -> vec3<f32> {
     return vectors[hop.fine.work_at + j].xyz;
 }
 
+// Whether the patch smoother smooths the fine level.
+fn patched() -> bool {
+    return hop.fine.patches_at != NO_PATCHES;
+}
+
+// The fine level's smoothed vector, which the patch smoother keeps in
+// place: z on the cloth, the correction on a coarse level.
+fn smoothed(j: u32) -> vec3<f32> {
+    if hop.fine.level == 0u {
+        return zq[j].xyz;
+    }
+    return vectors[hop.fine.correction_at + j].xyz;
+}
+
+fn set_smoothed(j: u32, value: vec3<f32>) {
+    if hop.fine.level == 0u {
+        zq[j] = vec4<f32>(value, 0.0);
+    } else {
+        vectors[hop.fine.correction_at + j] = vec4<f32>(value, 0.0);
+    }
+}
+
 // The fine level's guess at node j: its pre-smoothing on the way down, the
-// stored guess (pre-smoothing plus coarse correction) on the way up.
+// stored guess (pre-smoothing plus coarse correction) on the way up; with
+// patches, the smoothed vector, which holds each.
 fn guess(j: u32, up: bool) -> vec3<f32> {
+    if patched() {
+        return smoothed(j);
+    }
     if up {
         return work(j);
     }
     return pre(j);
 }
 
-// Row i of the fine level's operator times its guess.
-fn row_guess(i: u32, up: bool) -> vec3<f32> {
+// The patch colour of the node at `c` (multigrid::colour_grid).
+fn colour_of(c: vec2<u32>) -> u32 {
+    return (c.x / 2u) % 2u + 2u * ((c.y / 2u) % 2u);
+}
+
+// Whether node j of the fine level is one a row product over the colours
+// below `below` takes (PATCH_COLOURS: every node).
+fn counted(j: u32, below: u32) -> bool {
+    return below == PATCH_COLOURS || colour_of(coords(hop.fine, j)) < below;
+}
+
+// Row i of the fine level's operator times its guess, over the nodes of
+// the colours below `below` (a forward patch sweep's later colours are
+// still zero).
+fn row_guess(i: u32, up: bool, below: u32) -> vec3<f32> {
     let g = hop.fine;
     if g.level == 0u {
-        var acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
+        var acc = vec3<f32>(0.0);
+        if counted(i, below) {
+            acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
+        }
         for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
-            acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), guess(adjacent_vertex(k), up));
+            let j = adjacent_vertex(k);
+            if counted(j, below) {
+                acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), guess(j, up));
+            }
         }
         return acc;
     }
@@ -211,7 +265,7 @@ fn row_guess(i: u32, up: bool) -> vec3<f32> {
     for (var dy = -2; dy <= 2; dy++) {
         for (var dx = -2; dx <= 2; dx++) {
             let j = neighbour(g, c, dx, dy);
-            if j >= 0 {
+            if j >= 0 && counted(u32(j), below) {
                 acc += sym_mul(stencil_block(g, i, u32(j), dx, dy), guess(u32(j), up));
             }
         }
@@ -320,8 +374,8 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// The fine level's residual after its pre-smoothing, r − A ω D⁻¹ r, into
-// the work vector.
+// The fine level's residual after its pre-smoothing, r − A ω D⁻¹ r (with
+// patches r − A s, s the forward sweeps' result), into the work vector.
 @compute @workgroup_size(WORKGROUP)
 fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
     hop = bound_hop;
@@ -331,7 +385,7 @@ fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 fn residual_at(i: u32) {
-    vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false), 0.0);
+    vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false, PATCH_COLOURS), 0.0);
 }
 
 // Down one level: the coarse right-hand side is the restricted residual,
@@ -375,6 +429,9 @@ fn tail(@builtin(local_invocation_index) lid: u32) {
     let coarsest = arrayLength(&hop_list) - 1u;
     for (var l = first; l < coarsest; l++) {
         hop = hop_list[l];
+        if hop_list[l].fine.patches_at != NO_PATCHES {
+            tail_sweeps(lid, l, true);
+        }
         for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
             residual_at(i);
         }
@@ -393,8 +450,29 @@ fn tail(@builtin(local_invocation_index) lid: u32) {
             guess_at(i);
         }
         storageBarrier();
-        for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
-            _ = up_at(i);
+        if hop_list[l - 1u].fine.patches_at != NO_PATCHES {
+            tail_sweeps(lid, l - 1u, false);
+        } else {
+            for (var i = lid; i < nodes(hop.fine); i += WORKGROUP) {
+                _ = up_at(i);
+            }
+            storageBarrier();
+        }
+    }
+}
+
+// Level l's four patch sweeps in the tail's workgroup (`hop` is level l's),
+// in colour order forward, else backward; WORKGROUP threads of a colour's
+// at a time.
+fn tail_sweeps(lid: u32, l: u32, forward: bool) {
+    let g = hop_list[l].fine;
+    let threads = PATCH * ((g.nx + 3u) / 4u) * ((g.ny + 3u) / 4u);
+    for (var k = 0u; k < PATCH_COLOURS; k++) {
+        let colour = select(PATCH_COLOURS - 1u - k, k, forward);
+        for (var t = 0u; t < threads; t += WORKGROUP) {
+            patch_sweep_at(t + lid, lid, colour, forward);
+            // Its patch's residuals are read before the next overwrites them.
+            workgroupBarrier();
         }
         storageBarrier();
     }
@@ -447,11 +525,16 @@ fn guess_up(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 fn guess_at(i: u32) {
+    if patched() {
+        set_smoothed(i, smoothed(i) + interpolate(i));
+        return;
+    }
     vectors[hop.fine.work_at + i] = vec4<f32>(pre(i) + interpolate(i), 0.0);
 }
 
 // Up one level: one more damped Jacobi sweep from the stored guess. On the
-// cloth this is z = P⁻¹ r, with its partial rᵀz for PCG.
+// cloth this is z = P⁻¹ r, with its partial rᵀz for PCG; with patches, the
+// backward sweeps left z, and this is its rᵀz alone.
 @compute @workgroup_size(WORKGROUP)
 fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
           @builtin(workgroup_id) wg: vec3<u32>) {
@@ -470,11 +553,274 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_in
 fn up_at(i: u32) -> f32 {
     let g = hop.fine;
     let ri = fine_rhs(i);
-    let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true));
+    if patched() {
+        return dot(ri, smoothed(i));
+    }
+    let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true, PATCH_COLOURS));
     if g.level == 0u {
         zq[i] = vec4<f32>(zi, 0.0);
         return dot(ri, zi);
     }
     vectors[g.correction_at + i] = vec4<f32>(zi, 0.0);
     return 0.0;
+}
+
+// The patch smoother. Patch (pc, pr) holds nodes 2 pc..2 pc + 2 ×
+// 2 pr..2 pr + 2 of its level, local node k at (k % 2, k / 2); its inverse
+// among those unknowns is built once a step (`patches`), and a sweep of
+// one colour solves each of that colour's patches for its residual, four
+// threads to a patch.
+
+// Each patch's matrix, then its Cholesky factor L (in its lower half), in
+// `patches`; W = L⁻¹.
+var<private> patch_m: array<array<f32, 12>, 12>;
+var<private> patch_w: array<array<f32, 12>, 12>;
+
+// Sets block (k, b) of `patch_m` to `block`.
+fn set_patch_block(k: u32, b: u32, block: Sym3) {
+    for (var c = 0u; c < 3u; c++) {
+        var unit = vec3<f32>(0.0);
+        unit[c] = 1.0;
+        let column = sym_mul(block, unit);
+        for (var r = 0u; r < 3u; r++) {
+            patch_m[3u * k + r][3u * b + c] = column[r];
+        }
+    }
+}
+
+// Index among a patch's six blocks above the diagonal of block (k, b), k < b
+// (multigrid::upper_block), and its inverse.
+fn upper_block(k: u32, b: u32) -> u32 {
+    // k (k − 1) wraps at k = 0, times 0.
+    return 3u * k - k * (k - 1u) / 2u + b - k - 1u;
+}
+
+fn upper_pair(m: u32) -> vec2<u32> {
+    if m < 3u {
+        return vec2<u32>(0u, m + 1u);
+    }
+    if m < 5u {
+        return vec2<u32>(1u, m - 1u);
+    }
+    return vec2<u32>(2u, 3u);
+}
+
+// Float f of a patch's packed inverse (multigrid::PATCH_BLOCKS): the four
+// diagonal blocks as PackedSym3 (xx, yy, zz, xy, xz, yz), then the six
+// blocks above them, 9 floats each, column-major. Entry (i, j), i ≥ j, of
+// M⁻¹ = Wᵀ W.
+fn inverse_float(f: u32) -> f32 {
+    var i: u32;
+    var j: u32;
+    if f < 24u {
+        let k = f / 6u;
+        let e = f % 6u;
+        var rows = array<u32, 6>(0u, 1u, 2u, 0u, 0u, 1u);
+        var cols = array<u32, 6>(0u, 1u, 2u, 1u, 2u, 2u);
+        i = 3u * k + rows[e];
+        j = 3u * k + cols[e];
+    } else {
+        let g = f - 24u;
+        let pair = upper_pair(g / 9u);
+        i = 3u * pair.x + g % 3u;
+        j = 3u * pair.y + (g % 9u) / 3u;
+    }
+    let hi = max(i, j);
+    let lo = min(i, j);
+    var s = 0.0;
+    for (var k = hi; k < 12u; k++) {
+        s += patch_w[k][hi] * patch_w[k][lo];
+    }
+    return s;
+}
+
+// The inverse of `patch_m` (SPD) into `patch_w`'s W = L⁻¹, by Cholesky, as
+// multigrid::patch_inverse does it; false if it is not positive definite.
+fn patch_factor() -> bool {
+    for (var j = 0u; j < 12u; j++) {
+        var d = patch_m[j][j];
+        for (var k = 0u; k < j; k++) {
+            d -= patch_m[j][k] * patch_m[j][k];
+        }
+        if !(d > 0.0 && d < 3.0e38) {
+            return false;
+        }
+        patch_m[j][j] = sqrt(d);
+        for (var i = j + 1u; i < 12u; i++) {
+            var s = patch_m[i][j];
+            for (var k = 0u; k < j; k++) {
+                s -= patch_m[i][k] * patch_m[j][k];
+            }
+            patch_m[i][j] = s / patch_m[j][j];
+        }
+    }
+    for (var c = 0u; c < 12u; c++) {
+        for (var i = 0u; i < 12u; i++) {
+            patch_w[i][c] = 0.0;
+        }
+        patch_w[c][c] = 1.0 / patch_m[c][c];
+        for (var i = c + 1u; i < 12u; i++) {
+            var s = 0.0;
+            for (var k = c; k < i; k++) {
+                s += patch_m[i][k] * patch_w[k][c];
+            }
+            patch_w[i][c] = -s / patch_m[i][i];
+        }
+    }
+    return true;
+}
+
+// Each patch's inverse of the fine level's operator among its unknowns,
+// one thread per patch (pinned vertices' and missing nodes' unknowns held
+// at zero: identity rows). A patch that is not positive definite (only
+// when A is not) gets a zero inverse and is left alone.
+@compute @workgroup_size(WORKGROUP)
+fn patches(@builtin(global_invocation_id) id: vec3<u32>) {
+    hop = bound_hop;
+    let g = hop.fine;
+    let px = (g.nx + 1u) / 2u;
+    let p = id.x;
+    if p >= px * ((g.ny + 1u) / 2u) {
+        return;
+    }
+    let first = 2u * vec2<u32>(p % px, p / px);
+    for (var i = 0u; i < 12u; i++) {
+        for (var j = 0u; j < 12u; j++) {
+            patch_m[i][j] = 0.0;
+        }
+    }
+    for (var k = 0u; k < PATCH; k++) {
+        let c = first + vec2<u32>(k % 2u, k / 2u);
+        let i = c.y * g.nx + c.x;
+        if c.x >= g.nx || c.y >= g.ny || filtered(i) {
+            set_patch_block(k, k, Sym3(vec4<f32>(1.0, 1.0, 1.0, 0.0), vec4<f32>(0.0)));
+            continue;
+        }
+        for (var b = 0u; b < PATCH; b++) {
+            let cb = first + vec2<u32>(b % 2u, b / 2u);
+            let j = cb.y * g.nx + cb.x;
+            if cb.x >= g.nx || cb.y >= g.ny || filtered(j) {
+                continue;
+            }
+            if b == k {
+                if g.level == 0u {
+                    set_patch_block(k, k, sym_unpack(matrix_at(i)));
+                } else {
+                    set_patch_block(k, k, stencil_block(g, i, i, 0, 0));
+                }
+            } else if g.level > 0u {
+                let d = vec2<i32>(cb) - vec2<i32>(c);
+                set_patch_block(k, b, stencil_block(g, i, j, d.x, d.y));
+            }
+        }
+        if g.level == 0u {
+            for (var a = adjacency_begin(i); a < adjacency_begin(i + 1u); a++) {
+                let j = adjacent_vertex(a);
+                let cj = coords(g, j);
+                if cj.x >= first.x && cj.x < first.x + 2u && cj.y >= first.y && cj.y < first.y + 2u && !filtered(j) {
+                    let b = (cj.x - first.x) + 2u * (cj.y - first.y);
+                    set_patch_block(k, b, sym_unpack(matrix_at(params.n_vertices + adjacent_spring(a))));
+                }
+            }
+        }
+    }
+    let ok = patch_factor();
+    let at = g.patches_at + p * PATCH_BLOCKS;
+    for (var s = 0u; s < PATCH_BLOCKS; s++) {
+        var f: array<f32, 6>;
+        for (var e = 0u; e < 6u; e++) {
+            f[e] = select(0.0, inverse_float(6u * s + e), ok);
+        }
+        operators_set(at + s, PackedSym3(vec2<f32>(f[0], f[1]), vec2<f32>(f[2], f[3]), vec2<f32>(f[4], f[5])));
+    }
+}
+
+// Block m above the diagonal of the patch inverse at `at` (see
+// `inverse_float`): 9 floats from float 24 + 9 m, so from block
+// 4 + ⌊3 m / 2⌋, at its first or fourth float.
+fn upper(at: u32, m: u32) -> mat3x3<f32> {
+    let s = at + 4u + 3u * m / 2u;
+    let a = operators_at(s);
+    let b = operators_at(s + 1u);
+    if m % 2u == 0u {
+        return mat3x3<f32>(vec3<f32>(a.xx_yy, a.zz_xy.x), vec3<f32>(a.zz_xy.y, a.xz_yz), vec3<f32>(b.xx_yy, b.zz_xy.x));
+    }
+    return mat3x3<f32>(vec3<f32>(a.zz_xy.y, a.xz_yz), vec3<f32>(b.xx_yy, b.zz_xy.x), vec3<f32>(b.zz_xy.y, b.xz_yz));
+}
+
+// A patch sweep's thread t: node k = t % 4 of the (t / 4)-th patch of its
+// colour (multigrid::colour_grid), `inside` the grid or not, and whether
+// it is free (not a pinned vertex).
+struct PatchNode {
+    index: u32,
+    k: u32,
+    node: u32,
+    inside: bool,
+    free: bool,
+}
+
+fn patch_node(t: u32, colour: u32) -> PatchNode {
+    let g = hop.fine;
+    let px = (g.nx + 1u) / 2u;
+    let per_row = (px + 1u) / 2u;
+    let q = t / PATCH;
+    let k = t % PATCH;
+    let pc = colour % 2u + 2u * (q % per_row);
+    let pr = colour / 2u + 2u * (q / per_row);
+    let c = 2u * vec2<u32>(pc, pr) + vec2<u32>(k % 2u, k / 2u);
+    let inside = pc < px && c.x < g.nx && c.y < g.ny;
+    let node = c.y * g.nx + c.x;
+    return PatchNode(pr * px + pc, k, node, inside, inside && !filtered(node));
+}
+
+var<workgroup> patch_residual: array<vec4<f32>, WORKGROUP>;
+
+// Thread t's part of a patch sweep of `colour` (at `lid` in a workgroup
+// that holds its patch's four threads): its node's residual, shared with
+// its patch, then its node's part of the patch's solve. Forward (down,
+// from zero) the colours below this one are smoothed and the rest zero,
+// and it sets the node's value; backward (up) every node holds its guess,
+// and it corrects the node's value.
+fn patch_sweep_at(t: u32, lid: u32, colour: u32, forward: bool) {
+    let n = patch_node(t, colour);
+    var res = vec3<f32>(0.0);
+    if n.free {
+        res = fine_rhs(n.node) - row_guess(n.node, !forward, select(PATCH_COLOURS, colour, forward));
+    }
+    patch_residual[lid] = vec4<f32>(res, 0.0);
+    workgroupBarrier();
+    if n.inside {
+        // Node k's rows of M⁻¹ res; a pinned vertex's are zero off its own
+        // (identity) block, and its residual zero.
+        let first = lid - n.k;
+        let at = hop.fine.patches_at + n.index * PATCH_BLOCKS;
+        var d = sym_mul(sym_unpack(operators_at(at + n.k)), patch_residual[lid].xyz);
+        for (var b = 0u; b < PATCH; b++) {
+            let rb = patch_residual[first + b].xyz;
+            if b < n.k {
+                d += transpose(upper(at, upper_block(b, n.k))) * rb;
+            } else if b > n.k {
+                d += upper(at, upper_block(n.k, b)) * rb;
+            }
+        }
+        if forward {
+            set_smoothed(n.node, d);
+        } else {
+            set_smoothed(n.node, smoothed(n.node) + d);
+        }
+    }
+}
+
+// A forward sweep of `hop.colour`'s patches, down.
+@compute @workgroup_size(WORKGROUP)
+fn patch_down(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    hop = bound_hop;
+    patch_sweep_at(id.x, lid, hop.colour, true);
+}
+
+// A backward sweep of `hop.colour`'s patches, up.
+@compute @workgroup_size(WORKGROUP)
+fn patch_up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    hop = bound_hop;
+    patch_sweep_at(id.x, lid, hop.colour, false);
 }

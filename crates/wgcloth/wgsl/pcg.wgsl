@@ -33,6 +33,8 @@ struct Scalars {
     next_groups: array<u32, 3>,
     // [workgroups, 1, 1] per multigrid level (level 0: the cloth).
     groups: array<u32, 3 * MAX_LEVELS>,
+    // The same for each level's patch sweeps (multigrid::colour_grid).
+    patch_groups: array<u32, 3 * MAX_LEVELS>,
 }
 
 // A: its diagonal blocks (one per vertex), then one block per spring.
@@ -142,6 +144,7 @@ fn stopped(s: Scalars) -> Scalars {
     out.next_groups[0] = 1u;
     for (var l = 0u; l < MAX_LEVELS; l++) {
         out.groups[3u * l] = 0u;
+        out.patch_groups[3u * l] = 0u;
     }
     return out;
 }
@@ -175,6 +178,10 @@ fn init_scalars(@builtin(local_invocation_index) lid: u32) {
             s.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
             s.groups[3u * l + 1u] = 1u;
             s.groups[3u * l + 2u] = 1u;
+            let threads = PATCH * ((nx + 3u) / 4u) * ((ny + 3u) / 4u);
+            s.patch_groups[3u * l] = select(0u, (threads + WORKGROUP - 1u) / WORKGROUP, on);
+            s.patch_groups[3u * l + 1u] = 1u;
+            s.patch_groups[3u * l + 2u] = 1u;
             nx = (nx + 1u) / 2u;
             ny = (ny + 1u) / 2u;
         }

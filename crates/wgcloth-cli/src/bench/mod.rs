@@ -19,7 +19,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::run::{self, Chosen, RESIDUAL_GOAL, Report, Steps, median};
-use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind};
+use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
 use wgcloth::error::{Error, Result};
@@ -739,6 +739,7 @@ fn solver_iterations(
                     max_iters: iterations,
                     tol: 0.0,
                     preconditioner,
+                    smoother: Smoother::default(),
                 };
                 let mut x = sim.state.v.clone();
                 let start = Instant::now();
@@ -771,8 +772,11 @@ fn solver_iterations(
             }
             let measured_ms = median(&mut per_iteration);
             let bytes = match preconditioner {
-                Preconditioner::Multigrid => traffic::CPU
-                    .multigrid_iteration_bytes(&multigrid::levels(cloth.nx, cloth.ny), springs),
+                Preconditioner::Multigrid => traffic::CPU.multigrid_iteration_bytes(
+                    &multigrid::levels(cloth.nx, cloth.ny),
+                    springs,
+                    Smoother::default(),
+                ),
                 Preconditioner::Jacobi => {
                     traffic::CPU.iteration_bytes(cloth.vertex_count() as u64, springs)
                 }

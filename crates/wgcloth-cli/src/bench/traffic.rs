@@ -10,9 +10,12 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use wgcloth::config::Smoother;
 use wgcloth::error::Result;
 use wgcloth::gpu::{GpuContext, layout};
-use wgcloth::multigrid::{COARSE_SWEEPS, Level, STORED_STENCIL};
+use wgcloth::multigrid::{
+    COARSE_SWEEPS, Level, PATCH_BLOCKS, PATCH_UNKNOWNS, STORED_STENCIL, patch_grid,
+};
 use wgcloth::stage::Stage;
 
 /// How a backend stores the solver's data, in bytes.
@@ -28,6 +31,8 @@ pub struct Layout {
     pub flag: u64,
     /// Vector entries one iteration reads or writes per vertex.
     pub vectors_per_iteration: u64,
+    /// A multigrid patch's inverse (the patch smoother).
+    pub patch_inverse: u64,
     /// A contact slot, its response, and a spring's force and block.
     pub contact: u64,
     pub response: u64,
@@ -70,6 +75,7 @@ pub const GPU: Layout = Layout {
     off_block: size_of::<layout::Sym3>() as u64,
     flag: 4,
     vectors_per_iteration: 12,
+    patch_inverse: PATCH_BLOCKS as u64 * size_of::<layout::Sym3>() as u64,
     contact: size_of::<layout::Contact>() as u64,
     response: size_of::<layout::Response>() as u64,
     // Each spring's force and block is computed where it is gathered.
@@ -86,6 +92,7 @@ pub const CPU: Layout = Layout {
     off_block: 36,
     flag: 1,
     vectors_per_iteration: 13,
+    patch_inverse: (PATCH_UNKNOWNS * PATCH_UNKNOWNS * 4) as u64,
     contact: size_of::<wgcloth::cpu::collide::Contact>() as u64,
     response: size_of::<wgcloth::cpu::contact::Response>() as u64,
     spring_term: 12 + 36,
@@ -114,11 +121,19 @@ impl Layout {
     /// coarse stencils) crosses twice, once for the residual after
     /// pre-smoothing and once for the post-smoothing sweep, and the
     /// smoother blocks twice; the pre, residual, restriction, guess and post
-    /// passes move ten vectors per node and two per coarse node. The coarsest level
+    /// passes move ten vectors per node and two per coarse node. The
+    /// patch smoother's forward sweeps take the operator once more (their
+    /// four colours read each row once) and its sweeps the patch inverses
+    /// once each, and move eleven vectors per node. The coarsest level
     /// runs its sweeps over its stencils. A V-cycle cannot fuse below two
     /// operator passes per level: each sweep needs its neighbours' result
     /// of the one before.
-    pub fn multigrid_iteration_bytes(&self, levels: &[Level], springs: u64) -> u64 {
+    pub fn multigrid_iteration_bytes(
+        &self,
+        levels: &[Level],
+        springs: u64,
+        smoother: Smoother,
+    ) -> u64 {
         let v = self.vector;
         let vertices = levels[0].nodes() as u64;
         let operator = |l: usize| match l {
@@ -129,7 +144,14 @@ impl Layout {
         let cycle: u64 = (0..last)
             .map(|l| {
                 let (n, coarse) = (levels[l].nodes() as u64, levels[l + 1].nodes() as u64);
-                2 * operator(l) + n * (2 * self.diag_block + 10 * v) + coarse * 2 * v
+                let smoothing = match smoother {
+                    Smoother::BlockJacobi => 2 * operator(l) + n * (2 * self.diag_block + 10 * v),
+                    Smoother::Patches => {
+                        let (px, py) = patch_grid(levels[l]);
+                        3 * operator(l) + 2 * (px * py) as u64 * self.patch_inverse + n * 11 * v
+                    }
+                };
+                smoothing + coarse * 2 * v
             })
             .sum();
         let coarsest =

@@ -317,6 +317,7 @@ impl CpuSim {
                     max_iters: cfg.cg_iters,
                     tol: cfg.cg_tol,
                     preconditioner: cfg.preconditioner,
+                    smoother: cfg.smoother,
                 };
                 stats.pcg = pcg::solve(
                     &self.matrix,

@@ -12,12 +12,13 @@ use std::mem::take;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
+use crate::config::Smoother;
 use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
 use crate::math::RowSum;
 use crate::multigrid::{
-    COARSE_SWEEPS, Level, STENCIL, STORED_STENCIL, levels, parents, row_weight, stencil_slot,
-    stored_at, weight,
+    COARSE_SWEEPS, Level, PATCH, PATCH_UNKNOWNS, PatchMatrix, STENCIL, STORED_STENCIL, levels,
+    parents, patch_grid, patch_inverse, row_weight, stencil_slot, stored_at, weight,
 };
 use crate::scene::Cloth;
 
@@ -40,26 +41,14 @@ pub struct Multigrid {
     pre: Vec<Vec<Vec3>>,
     work: Vec<Vec<Vec3>>,
     /// Per level but the coarsest, with the patch smoother: each 2 × 2
-    /// patch's inverse ([`Multigrid::set_patches`]).
-    patch_inverses: Vec<Vec<PatchInverse>>,
-    patches: bool,
-}
-
-/// Nodes a patch holds, 2 × 2: local node k = 2 dy + dx.
-const PATCH: usize = 4;
-/// Unknowns a patch holds.
-const PATCH_UNKNOWNS: usize = 3 * PATCH;
-/// A patch's inverse, row-major (local node k's unknowns 3k..3k + 3).
-type PatchInverse = [f32; PATCH_UNKNOWNS * PATCH_UNKNOWNS];
-
-/// The patch grid of `level`: ⌈nx / 2⌉ × ⌈ny / 2⌉.
-fn patch_grid(level: Level) -> (usize, usize) {
-    (level.nx.div_ceil(2) as usize, level.ny.div_ceil(2) as usize)
+    /// patch's inverse, patch (pc, pr) at pr · px + pc.
+    patch_inverses: Vec<Vec<PatchMatrix>>,
+    smoother: Smoother,
 }
 
 /// The nodes of patch (pc, pr) of `level`, by local index; None past the
 /// grid's edge.
-fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH] {
+fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH as usize] {
     std::array::from_fn(|k| {
         let (c, r) = ((2 * pc + k % 2) as u32, (2 * pr + k / 2) as u32);
         (c < level.nx && r < level.ny).then_some((
@@ -68,39 +57,6 @@ fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH] 
             r,
         ))
     })
-}
-
-/// The inverse of a symmetric positive definite matrix, by Cholesky in
-/// f64; None if it is not positive definite.
-fn spd_inverse(m: &[[f64; PATCH_UNKNOWNS]; PATCH_UNKNOWNS]) -> Option<PatchInverse> {
-    const N: usize = PATCH_UNKNOWNS;
-    let mut l = [[0f64; N]; N];
-    for j in 0..N {
-        let d = m[j][j] - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
-        if !(d > 0.0 && d.is_finite()) {
-            return None;
-        }
-        l[j][j] = d.sqrt();
-        for i in j + 1..N {
-            l[i][j] = (m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>()) / l[j][j];
-        }
-    }
-    let mut out = [0f32; N * N];
-    for c in 0..N {
-        // Solve L Lᵀ x = e_c.
-        let mut y = [0f64; N];
-        for i in 0..N {
-            let e = if i == c { 1.0 } else { 0.0 };
-            y[i] = (e - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
-        }
-        for i in (0..N).rev() {
-            y[i] = (y[i] - (i + 1..N).map(|k| l[k][i] * y[k]).sum::<f64>()) / l[i][i];
-        }
-        for (r, v) in y.iter().enumerate() {
-            out[r * N + c] = *v as f32;
-        }
-    }
-    Some(out)
 }
 
 /// ω_i D⁻¹ of a row with diagonal block `d` and off-diagonal blocks `off`
@@ -146,7 +102,7 @@ fn for_each_node<T: Send>(level: Level, out: &mut [T], f: impl Fn(Node) -> T + S
 
 impl Multigrid {
     /// The hierarchy of `cloth`'s grid, operators zero until [`setup`](Self::setup).
-    pub fn new(cloth: &Cloth) -> Multigrid {
+    pub fn new(cloth: &Cloth, smoother: Smoother) -> Multigrid {
         let levels = levels(cloth.nx, cloth.ny);
         let coarse = || levels[1..].iter().map(|l| vec![Vec3::ZERO; l.nodes()]);
         let upper = || {
@@ -165,9 +121,14 @@ impl Multigrid {
             pre: upper().collect(),
             work: upper().collect(),
             patch_inverses: Vec::new(),
-            patches: false,
+            smoother,
             levels,
         }
+    }
+
+    /// How it smooths.
+    pub fn smoother(&self) -> Smoother {
+        self.smoother
     }
 
     /// The grid levels, the cloth first.
@@ -273,18 +234,12 @@ impl Multigrid {
         acc
     }
 
-    /// Smooths every level but the coarsest by block Gauss-Seidel over its
-    /// 2 × 2-node patches, each solved exactly, in four colours (forward
-    /// down, backward up), instead of damped block Jacobi per node.
-    pub fn set_patches(&mut self, on: bool) {
-        self.patches = on;
-    }
-
     /// Each patch's inverse of level `l`'s operator among its unknowns
     /// (pinned vertices' and missing nodes' unknowns held at zero).
-    fn patch_inverses_of(&self, a: &BlockMatrix, cloth: &Cloth, l: usize) -> Vec<PatchInverse> {
+    fn patch_inverses_of(&self, a: &BlockMatrix, cloth: &Cloth, l: usize) -> Vec<PatchMatrix> {
         let level = self.levels[l];
         let (px, py) = patch_grid(level);
+        let (px, py) = (px as usize, py as usize);
         let held = |node: Option<Node>| match node {
             None => true,
             Some((i, ..)) => l == 0 && cloth.pinned[i],
@@ -293,7 +248,7 @@ impl Multigrid {
             .into_par_iter()
             .map(|p| {
                 let nodes = patch_nodes(level, (p % px, p / px));
-                let mut m = [[0f64; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
+                let mut m = [[0f32; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
                 for (k, &node) in nodes.iter().enumerate() {
                     let Some(node) = node.filter(|_| !held(node)) else {
                         for t in 0..3 {
@@ -301,7 +256,7 @@ impl Multigrid {
                         }
                         continue;
                     };
-                    self.row_entries(a, cloth, l, node, |(j, ..), block| {
+                    self.row_entries(a, cloth, l, node, |j, block| {
                         let local = nodes.iter().position(|n| n.is_some_and(|n| n.0 == j));
                         if let Some(b) = local.filter(|&b| !held(nodes[b])) {
                             for (c, column) in [block.x_axis, block.y_axis, block.z_axis]
@@ -309,14 +264,14 @@ impl Multigrid {
                                 .enumerate()
                             {
                                 for r in 0..3 {
-                                    m[3 * k + r][3 * b + c] = column[r] as f64;
+                                    m[3 * k + r][3 * b + c] = column[r];
                                 }
                             }
                         }
                     });
                 }
                 // Not positive definite only if A is not: leave the patch alone.
-                spd_inverse(&m).unwrap_or([0.0; PATCH_UNKNOWNS * PATCH_UNKNOWNS])
+                patch_inverse(&m).unwrap_or([[0.0; PATCH_UNKNOWNS]; PATCH_UNKNOWNS])
             })
             .collect()
     }
@@ -336,6 +291,7 @@ impl Multigrid {
     ) {
         let level = self.levels[l];
         let (px, py) = patch_grid(level);
+        let (px, py) = (px as usize, py as usize);
         let inverses = &self.patch_inverses[l];
         // Each colour in turn over the whole grid would stream the level's
         // operator four times. The same sums, a few patch rows at a time:
@@ -353,9 +309,9 @@ impl Multigrid {
                     .flat_map(|pr| (cx..px).step_by(2).map(move |pc| (pc, pr)))
                     .collect();
                 let z_now: &[Vec3] = z;
-                let updates: Vec<[(usize, Vec3); PATCH]> = patches
+                let updates: Vec<[(usize, Vec3); PATCH as usize]> = patches
                     .par_iter()
-                    .with_min_len(GRAIN / (16 * PATCH))
+                    .with_min_len(GRAIN / (16 * PATCH as usize))
                     .map(|&(pc, pr)| {
                         let nodes = patch_nodes(level, (pc, pr));
                         let mut res = [0f32; PATCH_UNKNOWNS];
@@ -372,7 +328,7 @@ impl Multigrid {
                         // its rows are its columns): twelve sums side by side.
                         let inverse = &inverses[pr * px + pc];
                         let mut d = [0f32; PATCH_UNKNOWNS];
-                        for (column, &r) in inverse.chunks_exact(PATCH_UNKNOWNS).zip(&res) {
+                        for (column, &r) in inverse.iter().zip(&res) {
                             for (d, m) in d.iter_mut().zip(column) {
                                 *d += m * r;
                             }
@@ -452,11 +408,11 @@ impl Multigrid {
                 });
             (self.stencils[l], self.smoothers[l + 1]) = (stencil, smoothers);
         }
-        self.patch_inverses = match self.patches {
-            true => (0..self.levels.len() - 1)
+        self.patch_inverses = match self.smoother {
+            Smoother::Patches => (0..self.levels.len() - 1)
                 .map(|l| self.patch_inverses_of(a, cloth, l))
                 .collect(),
-            false => Vec::new(),
+            Smoother::BlockJacobi => Vec::new(),
         };
     }
 
@@ -473,12 +429,12 @@ impl Multigrid {
             let mut out = take(&mut self.rhs[l]);
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
             let smooth = &self.smoothers[l];
-            match self.patches {
-                true => {
+            match self.smoother {
+                Smoother::Patches => {
                     pre.iter_mut().for_each(|p| *p = Vec3::ZERO);
                     self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, 0..4);
                 }
-                false => pre
+                Smoother::BlockJacobi => pre
                     .par_iter_mut()
                     .with_min_len(GRAIN)
                     .enumerate()
@@ -530,12 +486,12 @@ impl Multigrid {
                 0 => z,
                 _ => &mut out,
             };
-            match self.patches {
-                true => {
+            match self.smoother {
+                Smoother::Patches => {
                     self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, (0..4).rev());
                     target.copy_from_slice(&guess);
                 }
-                false => for_each_node(level, target, |node: Node| {
+                Smoother::BlockJacobi => for_each_node(level, target, |node: Node| {
                     let i = node.0;
                     guess[i] + smooth[i] * (fine_rhs[i] - self.row(a, cloth, l, node, |j| guess[j]))
                 }),

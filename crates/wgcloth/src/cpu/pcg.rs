@@ -7,7 +7,7 @@
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
-pub use crate::config::Preconditioner;
+pub use crate::config::{Preconditioner, Smoother};
 use crate::cpu::GRAIN;
 use crate::cpu::multigrid::Multigrid;
 use crate::cpu::self_contact::Couplings;
@@ -102,6 +102,8 @@ pub struct SolveSettings {
     pub tol: f32,
     /// The preconditioner P.
     pub preconditioner: Preconditioner,
+    /// Multigrid's smoother.
+    pub smoother: Smoother,
 }
 
 /// Work vectors and the multigrid hierarchy, kept between steps.
@@ -143,13 +145,12 @@ pub fn solve(
         }
         match settings.preconditioner {
             Preconditioner::Multigrid => {
-                // A hierarchy built for another cloth is rebuilt.
-                let fits = |mg: &Multigrid| mg.levels()[0] == Level::of(cloth);
+                // A hierarchy built for another cloth or smoother is rebuilt.
+                let fits = |mg: &Multigrid| {
+                    mg.levels()[0] == Level::of(cloth) && mg.smoother() == settings.smoother
+                };
                 if !s.multigrid.as_ref().is_some_and(fits) {
-                    let mut mg = Multigrid::new(cloth);
-                    // WIP: the patch smoother, until it is a setting.
-                    mg.set_patches(std::env::var_os("WGCLOTH_PATCHES").is_some());
-                    s.multigrid = Some(mg);
+                    s.multigrid = Some(Multigrid::new(cloth, settings.smoother));
                 }
                 if let Some(mg) = &mut s.multigrid {
                     mg.setup(a, cloth);

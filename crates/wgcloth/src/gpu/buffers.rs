@@ -6,7 +6,7 @@
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
-use crate::config::{ModelKind, Preconditioner};
+use crate::config::{ModelKind, Preconditioner, Smoother};
 use crate::cpu::{self_contact, separate};
 use crate::error::{Error, Result};
 use crate::gpu::constants::{TILE, WORKGROUP, cloth_header, model, motion, self_header};
@@ -15,7 +15,7 @@ use crate::gpu::layout::{
     StepState, Sym3,
 };
 use crate::gpu::shaders::PARTS;
-use crate::multigrid::{self, STORED_STENCIL};
+use crate::multigrid::{self, NO_PATCHES, PATCH_BLOCKS, PATCH_COLOURS, STORED_STENCIL};
 use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
 use crate::stage::SelfContactStages;
@@ -64,12 +64,14 @@ pub(crate) struct Buffers {
     /// indirect dispatch sizes.
     pub(crate) scalars: [wgpu::Buffer; 2],
     /// Multigrid: every level's smoother blocks, then every coarse level's
-    /// stencils (one element when Jacobi preconditions).
+    /// stencils, then the patch smoother's inverses (one element when
+    /// Jacobi preconditions).
     pub(crate) operators: Parts,
     /// Multigrid: every coarse level's right-hand side and correction.
     pub(crate) vectors: wgpu::Buffer,
-    /// Multigrid: one `Hop` per level, what its dispatches work between.
-    pub(crate) hops: Vec<wgpu::Buffer>,
+    /// Multigrid: per level, its `Hop` with each patch colour, what its
+    /// dispatches work between (colour 0's but for the patch sweeps).
+    pub(crate) hops: Vec<[wgpu::Buffer; PATCH_COLOURS]>,
     /// Multigrid: the same hops in one array, for the coarse levels' tail.
     pub(crate) hop_list: wgpu::Buffer,
     pub(crate) state: wgpu::Buffer,
@@ -265,9 +267,15 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
     }
     let levels = multigrid::levels(scene.cloth.nx, scene.cloth.ny);
     let total: u32 = levels.iter().map(|l| l.nodes() as u32).sum();
+    let coarse_total = total - levels[0].nodes() as u32;
+    // Operators: every level's smoother blocks, every coarse level's
+    // stencils, then the patches' inverses of every level but the coarsest.
     let (mut smoothers, mut stencils, mut vectors) = (0, total, 0);
+    let mut patches = total + coarse_total * STORED_STENCIL;
+    let patched = scene.config.solver.smoother == Smoother::Patches;
     // The work vector after every coarse level's two.
-    let work_at = 2 * (total - levels[0].nodes() as u32);
+    let work_at = 2 * coarse_total;
+    let last = levels.len() - 1;
     levels
         .iter()
         .enumerate()
@@ -283,25 +291,51 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
                 rhs_at: if coarse { vectors } else { 0 },
                 correction_at: if coarse { vectors + n } else { 0 },
                 work_at,
+                patches_at: match patched && k < last {
+                    true => patches,
+                    false => NO_PATCHES,
+                },
             };
             smoothers += n;
             if coarse {
                 stencils += n * STORED_STENCIL;
                 vectors += 2 * n;
             }
+            if g.patches_at != NO_PATCHES {
+                let (px, py) = multigrid::patch_grid(*l);
+                patches += px * py * PATCH_BLOCKS;
+            }
             g
         })
         .collect()
 }
 
-/// Each level's `Hop`: it and the next coarser one.
+/// Each level's `Hop`: it and the next coarser one (colour 0).
 pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
     (0..grids.len())
         .map(|l| Hop {
             fine: grids[l],
             coarse: grids.get(l + 1).copied().unwrap_or_default(),
+            colour: 0,
         })
         .collect()
+}
+
+/// The operators' elements (blocks) of `grids`: up to the last patch
+/// inverse, or the last stencil block; 1 with no levels (Jacobi).
+pub(crate) fn operator_blocks(grids: &[Grid]) -> u64 {
+    let Some(last) = grids.last() else {
+        return 1;
+    };
+    let stencils = last.stencil_at as u64 + last.nodes() as u64 * STORED_STENCIL as u64;
+    let patches = grids
+        .iter()
+        .filter(|g| g.patches_at != NO_PATCHES)
+        .map(|g| {
+            let (px, py) = multigrid::patch_grid(g.shape());
+            g.patches_at as u64 + (px * py * PATCH_BLOCKS) as u64
+        });
+    patches.fold(stencils, u64::max)
 }
 
 /// Bytes of one near pair in stage "separate"'s list: four vertices.
@@ -381,15 +415,10 @@ impl Sizes {
         };
         let size = |n: u64, of: usize| n * of as u64;
         let grids = multigrid_grids(scene);
-        let (operators, vectors) = match grids.last() {
-            Some(last) => {
-                let n = last.nx as u64 * last.ny as u64;
-                (
-                    last.stencil_at as u64 + n * STORED_STENCIL as u64,
-                    last.work_at as u64 + grids[0].nx as u64 * grids[0].ny as u64,
-                )
-            }
-            None => (1, 1),
+        let operators = operator_blocks(&grids);
+        let vectors = match grids.last() {
+            Some(last) => last.work_at as u64 + grids[0].nodes() as u64,
+            None => 1,
         };
         Sizes {
             per_vertex: size(n, 16),
@@ -600,7 +629,15 @@ impl Buffers {
             vectors: zeroed("multigrid vectors", sizes.vectors),
             hops: level_hops
                 .iter()
-                .map(|hop| storage("multigrid hop", bytemuck::bytes_of(hop)))
+                .map(|&hop| {
+                    std::array::from_fn(|colour| {
+                        let hop = Hop {
+                            colour: colour as u32,
+                            ..hop
+                        };
+                        storage("multigrid hop", bytemuck::bytes_of(&hop))
+                    })
+                })
                 .collect(),
             hop_list: storage("multigrid hops", bytemuck::cast_slice(&level_hops)),
             state: zeroed("step state", size_of::<StepState>() as u64),

@@ -94,7 +94,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 32] = [
+pub const SHARED: [(&str, u32); 36] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -126,6 +126,10 @@ pub const SHARED: [(&str, u32); 32] = [
     ("COARSEST_NODES", multigrid::COARSEST_NODES),
     ("COARSE_SWEEPS", multigrid::COARSE_SWEEPS),
     ("MAX_LEVELS", multigrid::MAX_LEVELS),
+    ("PATCH", multigrid::PATCH),
+    ("PATCH_COLOURS", multigrid::PATCH_COLOURS as u32),
+    ("PATCH_BLOCKS", multigrid::PATCH_BLOCKS),
+    ("NO_PATCHES", multigrid::NO_PATCHES),
     // Set per device (`Kernels::new`); this is the declared default.
     ("MLP_THREADS", 16),
 ];

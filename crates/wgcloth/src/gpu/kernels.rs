@@ -76,6 +76,12 @@ pub enum Entry {
     MgGuess,
     /// Post-smoothing of the guess; z on the cloth (`multigrid::up`).
     MgUp,
+    /// A level's patch inverses, for the patch smoother (`multigrid::patches`).
+    MgPatches,
+    /// A forward sweep of one colour's patches (`multigrid::patch_down`).
+    MgPatchDown,
+    /// A backward sweep of one colour's patches (`multigrid::patch_up`).
+    MgPatchUp,
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
     Integrate,
     /// Penetration depth, the push-out and the contact total (`measure::main`).
@@ -125,7 +131,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 50] = [
+    pub const ALL: [Entry; 53] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -154,6 +160,9 @@ impl Entry {
         Entry::MgTail,
         Entry::MgGuess,
         Entry::MgUp,
+        Entry::MgPatches,
+        Entry::MgPatchDown,
+        Entry::MgPatchUp,
         Entry::Integrate,
         Entry::Measure,
         Entry::SeparatePrepare,
@@ -209,6 +218,9 @@ impl Entry {
             Entry::MgTail => ("multigrid", "tail"),
             Entry::MgGuess => ("multigrid", "guess_up"),
             Entry::MgUp => ("multigrid", "up"),
+            Entry::MgPatches => ("multigrid", "patches"),
+            Entry::MgPatchDown => ("multigrid", "patch_down"),
+            Entry::MgPatchUp => ("multigrid", "patch_up"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
             Entry::SeparatePrepare => ("separate", "prepare"),

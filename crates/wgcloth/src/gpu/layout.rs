@@ -328,6 +328,9 @@ pub struct Scalars {
     /// The next iteration's indirect dispatch, `[workgroups, 1, 1]` per
     /// multigrid level (level 0: the cloth); zero workgroups once done.
     pub groups: [u32; 3 * MAX_LEVELS as usize],
+    /// The same for a patch sweep of each level: four threads per patch
+    /// of a colour ([`colour_grid`](crate::multigrid::colour_grid)).
+    pub patch_groups: [u32; 3 * MAX_LEVELS as usize],
 }
 
 impl Scalars {
@@ -339,6 +342,11 @@ impl Scalars {
     /// Byte offset of level `l`'s indirect dispatch arguments.
     pub fn groups_offset(l: usize) -> u64 {
         (std::mem::offset_of!(Scalars, groups) + 12 * l) as u64
+    }
+
+    /// Byte offset of level `l`'s patch sweeps' indirect dispatch arguments.
+    pub fn patch_groups_offset(l: usize) -> u64 {
+        (std::mem::offset_of!(Scalars, patch_groups) + 12 * l) as u64
     }
 }
 
@@ -365,6 +373,26 @@ pub struct Grid {
     /// residual on the way down, its guess on the way up (one region, as
     /// large as the cloth, shared by every level).
     pub work_at: u32,
+    /// First of its patches' inverses in the operators buffer,
+    /// [`PATCH_BLOCKS`](crate::multigrid::PATCH_BLOCKS) blocks each, when
+    /// the patch smoother smooths it; else
+    /// [`NO_PATCHES`](crate::multigrid::NO_PATCHES).
+    pub patches_at: u32,
+}
+
+impl Grid {
+    /// Its nodes.
+    pub fn nodes(&self) -> usize {
+        self.shape().nodes()
+    }
+
+    /// Its grid's shape.
+    pub fn shape(&self) -> crate::multigrid::Level {
+        crate::multigrid::Level {
+            nx: self.nx,
+            ny: self.ny,
+        }
+    }
 }
 
 /// A pair of adjacent levels, what one multigrid dispatch works between
@@ -376,6 +404,8 @@ pub struct Hop {
     pub fine: Grid,
     /// The next coarser one (unused when `fine` is the coarsest).
     pub coarse: Grid,
+    /// The colour of patches a patch sweep of `fine` solves.
+    pub colour: u32,
 }
 
 /// The static connectivity of the cloth and the body as one `u32` buffer

@@ -1,18 +1,30 @@
 //! Stage "pcg"'s multigrid preconditioner (wgsl/multigrid.wgsl; CPU twin
-//! cpu/multigrid.rs): the coarse operators rebuilt once a step, then one
-//! V-cycle per PCG iteration, each dispatch bound to its pair of levels down
-//! to the tail: the levels of at most [`tail_nodes`] nodes, in one dispatch
-//! of one workgroup.
+//! cpu/multigrid.rs): the coarse operators (and the patch smoother's
+//! inverses) rebuilt once a step, then one V-cycle per PCG iteration, each
+//! dispatch bound to its pair of levels down to the tail: the levels of at
+//! most [`tail_nodes`] nodes, in one dispatch of one workgroup.
 
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::{Grid, Scalars};
-use crate::multigrid::{tail_from, tail_nodes};
+use crate::multigrid::{
+    NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
+};
+
+/// The patch smoother's kernels, per level above the tail.
+struct Patches {
+    /// Per level but the coarsest: its patches' inverses.
+    inverses: Vec<Bound>,
+    /// Per level above the tail and colour: the forward sweep, down.
+    down: Vec<[Bound; PATCH_COLOURS]>,
+    /// The same, backward, up.
+    up: Vec<[Bound; PATCH_COLOURS]>,
+}
 
 pub(crate) struct Multigrid {
-    /// Nodes per level, the cloth first.
-    nodes: Vec<u32>,
+    /// The levels, the cloth first.
+    grids: Vec<Grid>,
     /// Per level l < L: level l + 1's operator and smoother.
     galerkin: Vec<Bound>,
     /// Per level l above the tail: level l's residual after pre-smoothing.
@@ -23,8 +35,11 @@ pub(crate) struct Multigrid {
     tail: Bound,
     /// Per level l above the tail: level l's guess.
     guess: Vec<Bound>,
-    /// Per level l above the tail: level l's correction (z on the cloth).
+    /// Per level l above the tail: level l's correction (z on the cloth);
+    /// with patches, the cloth's rᵀz alone.
     up: Vec<Bound>,
+    /// With the patch smoother.
+    patches: Option<Patches>,
 }
 
 impl Multigrid {
@@ -36,11 +51,11 @@ impl Multigrid {
         grids: &[Grid],
     ) -> Option<Multigrid> {
         let last = grids.len().checked_sub(1).filter(|&l| l > 0)?;
-        let bind = |entry, l: usize| {
+        let bind = |entry, l: usize, colour: usize| {
             kernels.kernel(entry).bind_parts(
                 device,
                 &[
-                    ("bound_hop", &b.hops[l]),
+                    ("bound_hop", &b.hops[l][colour]),
                     ("hop_list", &b.hop_list),
                     ("vectors", &b.vectors),
                     ("r", &b.r),
@@ -50,27 +65,49 @@ impl Multigrid {
                 &[&b.topology, &b.matrix, &b.operators],
             )
         };
-        let nodes: Vec<u32> = grids.iter().map(|g| g.nx * g.ny).collect();
+        let nodes: Vec<u32> = grids.iter().map(|g| g.nodes() as u32).collect();
         let cpu_adapter = device.adapter_info().device_type == wgpu::DeviceType::Cpu;
         let tail = tail_from(&nodes, tail_nodes(cpu_adapter));
-        let hops = |entry, end| (0..end).map(|l| bind(entry, l)).collect();
+        let hops = |entry, end| (0..end).map(|l| bind(entry, l, 0)).collect();
+        let colours = |entry, end| {
+            (0..end)
+                .map(|l| std::array::from_fn(|c| bind(entry, l, c)))
+                .collect()
+        };
+        let patches = (grids[0].patches_at != NO_PATCHES).then(|| Patches {
+            inverses: hops(Entry::MgPatches, last),
+            down: colours(Entry::MgPatchDown, tail),
+            up: colours(Entry::MgPatchUp, tail),
+        });
+        // With patches only the cloth's `up` runs (its rᵀz).
+        let ups = if patches.is_some() { 1 } else { tail };
         Some(Multigrid {
             galerkin: hops(Entry::MgGalerkin, last),
             residual: hops(Entry::MgResidual, tail),
             down: hops(Entry::MgDown, tail),
-            tail: bind(Entry::MgTail, tail),
+            tail: bind(Entry::MgTail, tail, 0),
             guess: hops(Entry::MgGuess, tail),
-            up: hops(Entry::MgUp, tail),
-            nodes,
+            up: hops(Entry::MgUp, ups),
+            patches,
+            grids: grids.to_vec(),
         })
     }
 
-    /// Every coarse level's operator from this step's A, finest first.
+    /// Every coarse level's operator from this step's A, finest first, then
+    /// every level's patch inverses.
     pub(crate) fn encode_setup(&self, pass: &mut wgpu::ComputePass) -> u32 {
         for (l, galerkin) in self.galerkin.iter().enumerate() {
-            galerkin.dispatch(pass, self.nodes[l + 1], WORKGROUP);
+            galerkin.dispatch(pass, self.grids[l + 1].nodes() as u32, WORKGROUP);
         }
-        self.galerkin.len() as u32
+        let mut count = self.galerkin.len();
+        if let Some(p) = &self.patches {
+            for (l, inverses) in p.inverses.iter().enumerate() {
+                let (px, py) = patch_grid(self.grids[l].shape());
+                inverses.dispatch(pass, px * py, WORKGROUP);
+            }
+            count += p.inverses.len();
+        }
+        count as u32
     }
 
     /// One V-cycle on the PCG residual, leaving z and partial rᵀz: sized
@@ -81,24 +118,57 @@ impl Multigrid {
         pass: &mut wgpu::ComputePass,
         scalars: Option<&wgpu::Buffer>,
     ) -> u32 {
-        let dispatch = |pass: &mut wgpu::ComputePass, kernel: &Bound, level: usize| match scalars {
-            Some(args) => kernel.dispatch_indirect(pass, args, Scalars::groups_offset(level)),
-            None => {
-                kernel.set(pass);
-                pass.dispatch_workgroups(groups(self.nodes[level]), 1, 1);
-            }
-        };
+        // A kernel over level l's nodes, or over its patch sweep's threads.
+        let dispatch =
+            |pass: &mut wgpu::ComputePass, kernel: &Bound, level: usize, sweep: bool| match scalars
+            {
+                Some(args) => {
+                    let offset = match sweep {
+                        true => Scalars::patch_groups_offset(level),
+                        false => Scalars::groups_offset(level),
+                    };
+                    kernel.dispatch_indirect(pass, args, offset);
+                }
+                None => {
+                    let shape = self.grids[level].shape();
+                    let threads = match sweep {
+                        true => patch_threads(shape),
+                        false => shape.nodes() as u32,
+                    };
+                    kernel.set(pass);
+                    pass.dispatch_workgroups(groups(threads), 1, 1);
+                }
+            };
         let above = self.down.len();
+        let mut count = 0;
         for l in 0..above {
-            dispatch(pass, &self.residual[l], l);
-            dispatch(pass, &self.down[l], l + 1);
+            if let Some(p) = &self.patches {
+                for sweep in &p.down[l] {
+                    dispatch(pass, sweep, l, true);
+                }
+                count += PATCH_COLOURS;
+            }
+            dispatch(pass, &self.residual[l], l, false);
+            dispatch(pass, &self.down[l], l + 1, false);
+            count += 2;
         }
         // One workgroup while the solve goes on: the coarsest level's size.
-        dispatch(pass, &self.tail, self.nodes.len() - 1);
+        dispatch(pass, &self.tail, self.grids.len() - 1, false);
+        count += 1;
         for l in (0..above).rev() {
-            dispatch(pass, &self.guess[l], l);
-            dispatch(pass, &self.up[l], l);
+            dispatch(pass, &self.guess[l], l, false);
+            count += 1;
+            if let Some(p) = &self.patches {
+                for sweep in p.up[l].iter().rev() {
+                    dispatch(pass, sweep, l, true);
+                }
+                count += PATCH_COLOURS;
+            }
+            if let Some(up) = self.up.get(l) {
+                dispatch(pass, up, l, false);
+                count += 1;
+            }
         }
-        4 * above as u32 + 1
+        count as u32
     }
 }
