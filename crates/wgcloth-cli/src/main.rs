@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Shape};
+use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Shape, Smoother};
 use wgcloth::gpu::GpuContext;
 use wgcloth::nn::weights::NetKind;
 use wgcloth::{Config, Error, Result, Scene};
@@ -237,6 +237,9 @@ struct SceneArgs {
     /// PCG preconditioner [default: multigrid; the thesis's: jacobi].
     #[arg(long, value_parser = choice(&Preconditioner::ALL, Preconditioner::name))]
     preconditioner: Option<Preconditioner>,
+    /// Multigrid's smoother [default: patches].
+    #[arg(long, value_parser = choice(&Smoother::ALL, Smoother::name))]
+    smoother: Option<Smoother>,
     /// Speed (m/s) beyond which a vertex stops the run as diverging.
     #[arg(long, value_name = "M", allow_negative_numbers = true)]
     max_speed: Option<f32>,
@@ -282,6 +285,9 @@ impl SceneArgs {
         }
         if let Some(p) = self.preconditioner {
             c.solver.preconditioner = p;
+        }
+        if let Some(s) = self.smoother {
+            c.solver.smoother = s;
         }
         if let Some(m) = self.max_speed {
             c.solver.max_speed = m;

@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::frames::Recording;
 use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
-use wgcloth::config::{ModelKind, Preconditioner, SceneKind};
+use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
@@ -137,8 +137,10 @@ pub struct Report {
     /// A GPU fault the run survived by finishing on the CPU (`auto`); the
     /// statistics then cover the CPU's steps.
     pub device_fault: Option<DeviceFault>,
-    /// The PCG preconditioner, and the iterations per step.
+    /// The PCG preconditioner (with multigrid, its smoother), and the
+    /// iterations per step.
     pub preconditioner: Preconditioner,
+    pub smoother: Option<Smoother>,
     pub cg_iterations_mean: f64,
     /// The most iterations one step's solve took.
     pub cg_iterations_max: u32,
@@ -186,6 +188,11 @@ pub struct SelfContactReport {
 pub const RESIDUAL_GOAL: f32 = 1e-3;
 
 /// Each step's end-of-solve relative residual: a bounded sample for the
+/// Multigrid's smoother, when multigrid preconditions.
+fn smoother_of(config: &Config) -> Option<Smoother> {
+    (config.solver.preconditioner == Preconditioner::Multigrid).then_some(config.solver.smoother)
+}
+
 /// median, the worst, and the steps above [`RESIDUAL_GOAL`].
 #[derive(Default)]
 struct Residuals {
@@ -498,6 +505,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         divergence,
         device_fault: None,
         preconditioner: config.solver.preconditioner,
+        smoother: smoother_of(&config),
         cg_iterations_mean: cg_iters as f64 / done,
         cg_iterations_max: residuals.most_iterations,
         cg_residual_max: residuals.max,
@@ -715,6 +723,7 @@ fn run_gpu(
         last_good,
         device_fault: None,
         preconditioner: config.solver.preconditioner,
+        smoother: smoother_of(config),
         cg_iterations_mean: cg_iterations as f64 / done,
         cg_iterations_max: residuals.most_iterations,
         cg_residual_max: last.cg_residual_max,
@@ -877,7 +886,10 @@ impl Report {
             } else {
                 stages.join(", ")
             },
-            self.preconditioner.name(),
+            match self.smoother {
+                Some(smoother) => format!("{} ({})", self.preconditioner.name(), smoother.name()),
+                None => self.preconditioner.name().to_string(),
+            },
             self.cg_iterations_mean,
             self.cg_iterations_max,
             self.cg_residual_median,
