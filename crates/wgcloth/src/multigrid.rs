@@ -94,6 +94,11 @@ pub fn colour_grid(level: Level) -> (u32, u32) {
     (px.div_ceil(2), py.div_ceil(2))
 }
 
+/// The patch colour of node (c, r) (see [`colour_grid`]).
+pub fn node_colour(c: u32, r: u32) -> u32 {
+    (c / 2) % 2 + 2 * ((r / 2) % 2)
+}
+
 /// Threads of a patch sweep of `level`: four per patch of a colour.
 pub fn patch_threads(level: Level) -> u32 {
     let (cx, cy) = colour_grid(level);

@@ -231,30 +231,36 @@ fn guess(j: u32, up: bool) -> vec3<f32> {
     return pre(j);
 }
 
-// The patch colour of the node at `c` (multigrid::colour_grid).
+// The patch colour of the node at `c` (multigrid::node_colour).
 fn colour_of(c: vec2<u32>) -> u32 {
     return (c.x / 2u) % 2u + 2u * ((c.y / 2u) % 2u);
 }
 
-// Whether node j of the fine level is one a row product over the colours
-// below `below` takes (PATCH_COLOURS: every node).
-fn counted(j: u32, below: u32) -> bool {
-    return below == PATCH_COLOURS || colour_of(coords(hop.fine, j)) < below;
+// Every patch colour, as a range for `counted`.
+const ALL_COLOURS = vec2<u32>(0u, PATCH_COLOURS);
+
+// Whether node j of the fine level is of the colours `colours.x` up to
+// `colours.y` (not included), which a row product takes.
+fn counted(j: u32, colours: vec2<u32>) -> bool {
+    if all(colours == ALL_COLOURS) {
+        return true;
+    }
+    let c = colour_of(coords(hop.fine, j));
+    return c >= colours.x && c < colours.y;
 }
 
 // Row i of the fine level's operator times its guess, over the nodes of
-// the colours below `below` (a forward patch sweep's later colours are
-// still zero).
-fn row_guess(i: u32, up: bool, below: u32) -> vec3<f32> {
+// `colours` (a forward patch sweep's later colours are still zero).
+fn row_guess(i: u32, up: bool, colours: vec2<u32>) -> vec3<f32> {
     let g = hop.fine;
     if g.level == 0u {
         var acc = vec3<f32>(0.0);
-        if counted(i, below) {
+        if counted(i, colours) {
             acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
         }
         for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
             let j = adjacent_vertex(k);
-            if counted(j, below) {
+            if counted(j, colours) {
                 acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), guess(j, up));
             }
         }
@@ -265,7 +271,7 @@ fn row_guess(i: u32, up: bool, below: u32) -> vec3<f32> {
     for (var dy = -2; dy <= 2; dy++) {
         for (var dx = -2; dx <= 2; dx++) {
             let j = neighbour(g, c, dx, dy);
-            if j >= 0 && counted(u32(j), below) {
+            if j >= 0 && counted(u32(j), colours) {
                 acc += sym_mul(stencil_block(g, i, u32(j), dx, dy), guess(u32(j), up));
             }
         }
@@ -375,7 +381,8 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // The fine level's residual after its pre-smoothing, r − A ω D⁻¹ r (with
-// patches r − A s, s the forward sweeps' result), into the work vector.
+// patches r − A s, s the forward sweeps' result, from the later colours
+// alone), into the work vector.
 @compute @workgroup_size(WORKGROUP)
 fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
     hop = bound_hop;
@@ -385,7 +392,17 @@ fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 fn residual_at(i: u32) {
-    vectors[hop.fine.work_at + i] = vec4<f32>(fine_rhs(i) - row_guess(i, false, PATCH_COLOURS), 0.0);
+    var res: vec3<f32>;
+    if patched() {
+        // The forward sweep solved each patch exactly for the colours
+        // before it, the later ones zero: what is left at a node is the
+        // later colours' part (none at the last colour's).
+        let later = vec2<u32>(colour_of(coords(hop.fine, i)) + 1u, PATCH_COLOURS);
+        res = -row_guess(i, false, later);
+    } else {
+        res = fine_rhs(i) - row_guess(i, false, ALL_COLOURS);
+    }
+    vectors[hop.fine.work_at + i] = vec4<f32>(res, 0.0);
 }
 
 // Down one level: the coarse right-hand side is the restricted residual,
@@ -556,7 +573,7 @@ fn up_at(i: u32) -> f32 {
     if patched() {
         return dot(ri, smoothed(i));
     }
-    let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true, PATCH_COLOURS));
+    let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true, ALL_COLOURS));
     if g.level == 0u {
         zq[i] = vec4<f32>(zi, 0.0);
         return dot(ri, zi);
@@ -670,10 +687,31 @@ fn patch_factor() -> bool {
     return true;
 }
 
+// Node i's diagonal block of the fine level's operator.
+fn diagonal(i: u32) -> Sym3 {
+    if hop.fine.level == 0u {
+        return sym_unpack(matrix_at(i));
+    }
+    return stencil_block(hop.fine, i, i, 0, 0);
+}
+
+// Whether the node at `c` of the fine level is held at zero in its patch:
+// past the grid, a pinned vertex, or a coarse node of pinned vertices
+// alone (a zero row).
+fn held(c: vec2<u32>) -> bool {
+    let g = hop.fine;
+    if c.x >= g.nx || c.y >= g.ny {
+        return true;
+    }
+    let i = c.y * g.nx + c.x;
+    let d = diagonal(i);
+    return filtered(i) || (all(d.a == vec4<f32>(0.0)) && all(d.b == vec4<f32>(0.0)));
+}
+
 // Each patch's inverse of the fine level's operator among its unknowns,
-// one thread per patch (pinned vertices' and missing nodes' unknowns held
-// at zero: identity rows). A patch that is not positive definite (only
-// when A is not) gets a zero inverse and is left alone.
+// one thread per patch (held nodes' unknowns at zero: identity rows). A
+// patch that is not positive definite (only when A is not) gets a zero
+// inverse and is left alone.
 @compute @workgroup_size(WORKGROUP)
 fn patches(@builtin(global_invocation_id) id: vec3<u32>) {
     hop = bound_hop;
@@ -692,32 +730,22 @@ fn patches(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var k = 0u; k < PATCH; k++) {
         let c = first + vec2<u32>(k % 2u, k / 2u);
         let i = c.y * g.nx + c.x;
-        if c.x >= g.nx || c.y >= g.ny || filtered(i) {
+        if held(c) {
             set_patch_block(k, k, Sym3(vec4<f32>(1.0, 1.0, 1.0, 0.0), vec4<f32>(0.0)));
             continue;
         }
+        set_patch_block(k, k, diagonal(i));
         for (var b = 0u; b < PATCH; b++) {
             let cb = first + vec2<u32>(b % 2u, b / 2u);
-            let j = cb.y * g.nx + cb.x;
-            if cb.x >= g.nx || cb.y >= g.ny || filtered(j) {
-                continue;
-            }
-            if b == k {
-                if g.level == 0u {
-                    set_patch_block(k, k, sym_unpack(matrix_at(i)));
-                } else {
-                    set_patch_block(k, k, stencil_block(g, i, i, 0, 0));
-                }
-            } else if g.level > 0u {
+            if b != k && g.level > 0u && !held(cb) {
                 let d = vec2<i32>(cb) - vec2<i32>(c);
-                set_patch_block(k, b, stencil_block(g, i, j, d.x, d.y));
+                set_patch_block(k, b, stencil_block(g, i, cb.y * g.nx + cb.x, d.x, d.y));
             }
         }
         if g.level == 0u {
             for (var a = adjacency_begin(i); a < adjacency_begin(i + 1u); a++) {
-                let j = adjacent_vertex(a);
-                let cj = coords(g, j);
-                if cj.x >= first.x && cj.x < first.x + 2u && cj.y >= first.y && cj.y < first.y + 2u && !filtered(j) {
+                let cj = coords(g, adjacent_vertex(a));
+                if cj.x >= first.x && cj.x < first.x + 2u && cj.y >= first.y && cj.y < first.y + 2u && !held(cj) {
                     let b = (cj.x - first.x) + 2u * (cj.y - first.y);
                     set_patch_block(k, b, sym_unpack(matrix_at(params.n_vertices + adjacent_spring(a))));
                 }
@@ -785,7 +813,8 @@ fn patch_sweep_at(t: u32, lid: u32, colour: u32, forward: bool) {
     let n = patch_node(t, colour);
     var res = vec3<f32>(0.0);
     if n.free {
-        res = fine_rhs(n.node) - row_guess(n.node, !forward, select(PATCH_COLOURS, colour, forward));
+        let earlier = vec2<u32>(0u, select(PATCH_COLOURS, colour, forward));
+        res = fine_rhs(n.node) - row_guess(n.node, !forward, earlier);
     }
     patch_residual[lid] = vec4<f32>(res, 0.0);
     workgroupBarrier();

@@ -17,8 +17,9 @@ use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
 use crate::math::RowSum;
 use crate::multigrid::{
-    COARSE_SWEEPS, Level, PATCH, PATCH_UNKNOWNS, PatchMatrix, STENCIL, STORED_STENCIL, levels,
-    parents, patch_grid, patch_inverse, row_weight, stencil_slot, stored_at, weight,
+    COARSE_SWEEPS, Level, PATCH, PATCH_COLOURS, PATCH_UNKNOWNS, PatchMatrix, STENCIL,
+    STORED_STENCIL, levels, node_colour, parents, patch_grid, patch_inverse, row_weight,
+    stencil_slot, stored_at, weight,
 };
 use crate::scene::Cloth;
 
@@ -43,6 +44,9 @@ pub struct Multigrid {
     /// Per level but the coarsest, with the patch smoother: each 2 × 2
     /// patch's inverse, patch (pc, pr) at pr · px + pc.
     patch_inverses: Vec<Vec<PatchMatrix>>,
+    /// Per level but the coarsest, with the patch smoother: each node's
+    /// patch colour ([`node_colour`]).
+    colours: Vec<Vec<u8>>,
     smoother: Smoother,
 }
 
@@ -121,6 +125,20 @@ impl Multigrid {
             pre: upper().collect(),
             work: upper().collect(),
             patch_inverses: Vec::new(),
+            colours: match smoother {
+                Smoother::Patches => levels[..levels.len() - 1]
+                    .iter()
+                    .map(|&level| {
+                        (0..level.nodes())
+                            .map(|i| {
+                                let (c, r) = coords(level, i);
+                                node_colour(c, r) as u8
+                            })
+                            .collect()
+                    })
+                    .collect(),
+                Smoother::BlockJacobi => Vec::new(),
+            },
             smoother,
             levels,
         }
@@ -163,14 +181,33 @@ impl Multigrid {
         a: &BlockMatrix,
         cloth: &Cloth,
         l: usize,
+        node: Node,
+        f: impl FnMut(usize, Mat3),
+    ) {
+        self.row_entries_where(a, cloth, l, node, |_| true, f);
+    }
+
+    /// [`row_entries`](Self::row_entries) for the j that `keep`, the others'
+    /// blocks not read.
+    fn row_entries_where(
+        &self,
+        a: &BlockMatrix,
+        cloth: &Cloth,
+        l: usize,
         (i, c, r): Node,
+        keep: impl Fn(usize) -> bool,
         mut f: impl FnMut(usize, Mat3),
     ) {
         if l == 0 {
-            f(i, a.diag[i]);
+            if keep(i) {
+                f(i, a.diag[i]);
+            }
             let adj = &cloth.adjacency;
             for k in adj.range(i) {
-                f(adj.other[k] as usize, a.off[adj.spring[k] as usize]);
+                let j = adj.other[k] as usize;
+                if keep(j) {
+                    f(j, a.off[adj.spring[k] as usize]);
+                }
             }
             return;
         }
@@ -180,7 +217,9 @@ impl Multigrid {
                 let (cj, rj) = (c as i32 + dx, r as i32 + dy);
                 if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
                     let j = rj as usize * level.nx as usize + cj as usize;
-                    f(j, self.stored_block(l, i, j, dx, dy));
+                    if keep(j) {
+                        f(j, self.stored_block(l, i, j, dx, dy));
+                    }
                 }
             }
         }
@@ -195,8 +234,26 @@ impl Multigrid {
         node: Node,
         x: impl Fn(usize) -> Vec3,
     ) -> Vec3 {
+        self.row_where(a, cloth, l, node, |_| true, x)
+    }
+
+    /// Row `node` of level `l`'s operator times `x(j)` over the j that `keep`.
+    fn row_where(
+        &self,
+        a: &BlockMatrix,
+        cloth: &Cloth,
+        l: usize,
+        node: Node,
+        keep: impl Fn(usize) -> bool,
+        x: impl Fn(usize) -> Vec3,
+    ) -> Vec3 {
+        // Every block, the others' times zero: a branch on each neighbour's
+        // colour mispredicts more than the loads it saves cost.
         let mut acc = RowSum::default();
-        self.row_entries(a, cloth, l, node, |j, block| acc.add(block, x(j)));
+        self.row_entries(a, cloth, l, node, |j, block| {
+            let v = x(j);
+            acc.add(block, if keep(j) { v } else { Vec3::ZERO })
+        });
         acc.total()
     }
 
@@ -240,9 +297,15 @@ impl Multigrid {
         let level = self.levels[l];
         let (px, py) = patch_grid(level);
         let (px, py) = (px as usize, py as usize);
+        let diagonal = |i: usize| match l {
+            0 => a.diag[i],
+            _ => self.stored_block(l, i, i, 0, 0),
+        };
+        // Past the grid, a pinned vertex, or a coarse node of pinned
+        // vertices alone (a zero row).
         let held = |node: Option<Node>| match node {
             None => true,
-            Some((i, ..)) => l == 0 && cloth.pinned[i],
+            Some((i, ..)) => (l == 0 && cloth.pinned[i]) || diagonal(i) == Mat3::ZERO,
         };
         (0..px * py)
             .into_par_iter()
@@ -277,9 +340,12 @@ impl Multigrid {
     }
 
     /// One block Gauss-Seidel pass over level `l`'s patches on `z` for
-    /// A z = `rhs`, the colours in `colours`' order. Patches of a colour
-    /// share no spring (those within two nodes are of other colours), so
-    /// each colour's are solved from the same z.
+    /// A z = `rhs` (kernels `patch_down`, `patch_up`): `forward`, colours
+    /// 0 to 3 from zero, each patch's residual from the colours before it
+    /// (the rest are still zero, whatever `z` holds there) and its nodes
+    /// set; else 3 to 0 from the guess in `z`, each node corrected.
+    /// Patches of a colour share no spring (those within two nodes are of
+    /// other colours), so each colour's are solved from the same z.
     fn patch_sweep(
         &self,
         a: &BlockMatrix,
@@ -287,40 +353,43 @@ impl Multigrid {
         l: usize,
         rhs: &[Vec3],
         z: &mut [Vec3],
-        colours: impl Iterator<Item = usize>,
+        forward: bool,
     ) {
         let level = self.levels[l];
         let (px, py) = patch_grid(level);
         let (px, py) = (px as usize, py as usize);
-        let inverses = &self.patch_inverses[l];
+        let (inverses, colours) = (&self.patch_inverses[l], &self.colours[l]);
         // Each colour in turn over the whole grid would stream the level's
         // operator four times. The same sums, a few patch rows at a time:
         // the colour at place q in the order runs q rows behind the first,
         // so a patch's neighbours of earlier colours are done and those of
         // later ones not yet begun.
-        let order: Vec<usize> = colours.collect();
+        let order: [u8; PATCH_COLOURS] = match forward {
+            true => [0, 1, 2, 3],
+            false => [3, 2, 1, 0],
+        };
         const ROWS: usize = 32;
         for start in (0..py + order.len()).step_by(ROWS) {
             for (q, &colour) in order.iter().enumerate() {
-                let (cx, cy) = (colour % 2, colour / 2);
+                let (cx, cy) = (colour as usize % 2, colour as usize / 2);
                 let rows = start.saturating_sub(q)..(start + ROWS).saturating_sub(q).min(py);
                 let patches: Vec<(usize, usize)> = rows
                     .filter(|pr| pr % 2 == cy)
                     .flat_map(|pr| (cx..px).step_by(2).map(move |pc| (pc, pr)))
                     .collect();
                 let z_now: &[Vec3] = z;
-                let updates: Vec<[(usize, Vec3); PATCH as usize]> = patches
+                let earlier = |j: usize| !forward || colours[j] < colour;
+                let updates: Vec<[Option<(usize, Vec3)>; PATCH as usize]> = patches
                     .par_iter()
                     .with_min_len(GRAIN / (16 * PATCH as usize))
                     .map(|&(pc, pr)| {
                         let nodes = patch_nodes(level, (pc, pr));
                         let mut res = [0f32; PATCH_UNKNOWNS];
-                        // A pinned vertex stays at zero (P̃ = S P).
-                        let free =
-                            |node: &Option<Node>| node.filter(|n| l > 0 || !cloth.pinned[n.0]);
                         for (k, node) in nodes.iter().enumerate() {
-                            if let Some(node) = free(node) {
-                                let r = rhs[node.0] - self.row(a, cloth, l, node, |j| z_now[j]);
+                            // A pinned vertex stays at zero (P̃ = S P).
+                            if let Some(node) = node.filter(|n| l > 0 || !cloth.pinned[n.0]) {
+                                let r = rhs[node.0]
+                                    - self.row_where(a, cloth, l, node, earlier, |j| z_now[j]);
                                 res[3 * k..3 * k + 3].copy_from_slice(&r.to_array());
                             }
                         }
@@ -333,16 +402,13 @@ impl Multigrid {
                                 *d += m * r;
                             }
                         }
-                        std::array::from_fn(|k| match free(&nodes[k]) {
-                            Some((i, ..)) => (i, Vec3::from_slice(&d[3 * k..3 * k + 3])),
-                            None => (usize::MAX, Vec3::ZERO),
+                        std::array::from_fn(|k| {
+                            nodes[k].map(|(i, ..)| (i, Vec3::from_slice(&d[3 * k..3 * k + 3])))
                         })
                     })
                     .collect();
-                for (i, d) in updates.into_iter().flatten() {
-                    if i != usize::MAX {
-                        z[i] += d;
-                    }
+                for (i, d) in updates.into_iter().flatten().flatten() {
+                    z[i] = if forward { d } else { z[i] + d };
                 }
             }
         }
@@ -430,10 +496,7 @@ impl Multigrid {
             let fine_rhs: &[Vec3] = if l == 0 { r } else { &self.rhs[l - 1] };
             let smooth = &self.smoothers[l];
             match self.smoother {
-                Smoother::Patches => {
-                    pre.iter_mut().for_each(|p| *p = Vec3::ZERO);
-                    self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, 0..4);
-                }
+                Smoother::Patches => self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, true),
                 Smoother::BlockJacobi => pre
                     .par_iter_mut()
                     .with_min_len(GRAIN)
@@ -441,8 +504,16 @@ impl Multigrid {
                     .for_each(|(i, a_i)| *a_i = smooth[i] * fine_rhs[i]),
             }
             let (from, to) = (self.levels[l], self.levels[l + 1]);
-            for_each_node(from, &mut residual, |node| {
-                fine_rhs[node.0] - self.row(a, cloth, l, node, |j| pre[j])
+            for_each_node(from, &mut residual, |node| match self.smoother {
+                // Each patch was solved for the colours before it, the
+                // later ones zero: the later colours' part is what is left
+                // (none at the last colour's).
+                Smoother::Patches => {
+                    let colours = &self.colours[l];
+                    let later = |j: usize| colours[j] > colours[node.0];
+                    -self.row_where(a, cloth, l, node, later, |j| pre[j])
+                }
+                Smoother::BlockJacobi => fine_rhs[node.0] - self.row(a, cloth, l, node, |j| pre[j]),
             });
             for_each_node(to, &mut out, |(_, cc, rc)| {
                 Self::children(from, (cc, rc))
@@ -488,7 +559,7 @@ impl Multigrid {
             };
             match self.smoother {
                 Smoother::Patches => {
-                    self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, (0..4).rev());
+                    self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, false);
                     target.copy_from_slice(&guess);
                 }
                 Smoother::BlockJacobi => for_each_node(level, target, |node: Node| {
