@@ -189,8 +189,16 @@ pub const RESIDUAL_GOAL: f32 = 1e-3;
 
 /// Each step's end-of-solve relative residual: a bounded sample for the
 /// Multigrid's smoother, when multigrid preconditions.
-fn smoother_of(config: &Config) -> Option<Smoother> {
+pub fn smoother_of(config: &Config) -> Option<Smoother> {
     (config.solver.preconditioner == Preconditioner::Multigrid).then_some(config.solver.smoother)
+}
+
+/// A preconditioner's name, with multigrid's smoother: "multigrid (patches)".
+pub fn solver_name(preconditioner: Preconditioner, smoother: Option<Smoother>) -> String {
+    match smoother {
+        Some(smoother) => format!("{} ({})", preconditioner.name(), smoother.name()),
+        None => preconditioner.name().to_string(),
+    }
 }
 
 /// median, the worst, and the steps above [`RESIDUAL_GOAL`].
@@ -886,10 +894,7 @@ impl Report {
             } else {
                 stages.join(", ")
             },
-            match self.smoother {
-                Some(smoother) => format!("{} ({})", self.preconditioner.name(), smoother.name()),
-                None => self.preconditioner.name().to_string(),
-            },
+            solver_name(self.preconditioner, self.smoother),
             self.cg_iterations_mean,
             self.cg_iterations_max,
             self.cg_residual_median,

@@ -120,8 +120,8 @@ pub fn patch_inverse(m: &PatchMatrix) -> Option<PatchMatrix> {
     let mut l = [[0f32; N]; N];
     for j in 0..N {
         let mut d = m[j][j];
-        for k in 0..j {
-            d -= l[j][k] * l[j][k];
+        for v in &l[j][..j] {
+            d -= v * v;
         }
         if !(d > 0.0 && d.is_finite()) {
             return None;
@@ -129,8 +129,8 @@ pub fn patch_inverse(m: &PatchMatrix) -> Option<PatchMatrix> {
         l[j][j] = d.sqrt();
         for i in j + 1..N {
             let mut s = m[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
+            for (a, b) in l[i][..j].iter().zip(&l[j][..j]) {
+                s -= a * b;
             }
             l[i][j] = s / l[j][j];
         }
@@ -151,8 +151,8 @@ pub fn patch_inverse(m: &PatchMatrix) -> Option<PatchMatrix> {
     for i in 0..N {
         for j in 0..=i {
             let mut s = 0.0;
-            for k in i..N {
-                s += w[k][i] * w[k][j];
+            for row in &w[i..] {
+                s += row[i] * row[j];
             }
             (out[i][j], out[j][i]) = (s, s);
         }
@@ -278,6 +278,52 @@ mod tests {
             }
         }
         assert_eq!(seen, [1; STORED_STENCIL as usize]);
+    }
+
+    #[test]
+    fn a_patch_inverse_times_its_matrix_is_the_identity() {
+        // A stiff SPD matrix, as a patch's: a mass on the diagonal and
+        // springs 10⁴ times stiffer coupling the unknowns.
+        let n = PATCH_UNKNOWNS;
+        let mut m = [[0f32; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
+        for (i, row) in m.iter_mut().enumerate() {
+            for (j, e) in row.iter_mut().enumerate() {
+                let spring = ((i * 7 + j * 7) % 5) as f32 - 2.0;
+                *e = 1e4 * spring / (1.0 + i.abs_diff(j) as f32);
+            }
+        }
+        // Mᵀ M + I: symmetric positive definite.
+        let mut spd = [[0f32; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
+        for i in 0..n {
+            for j in 0..n {
+                spd[i][j] = (0..n).map(|k| m[k][i] * m[k][j]).sum::<f32>() * 1e-4
+                    + if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        let inverse = patch_inverse(&spd).expect("positive definite");
+        for i in 0..n {
+            for j in 0..n {
+                assert_eq!(inverse[i][j], inverse[j][i], "symmetric");
+                let e: f64 = (0..n)
+                    .map(|k| inverse[i][k] as f64 * spd[k][j] as f64)
+                    .sum();
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((e - want).abs() < 1e-2, "({i}, {j}): {e}");
+            }
+        }
+        let mut indefinite = spd;
+        indefinite[5][5] = -1.0;
+        assert!(patch_inverse(&indefinite).is_none());
+    }
+
+    #[test]
+    fn upper_blocks_are_numbered_row_by_row() {
+        let pairs: Vec<(u32, u32)> = (0..4u32)
+            .flat_map(|k| (k + 1..4).map(move |b| (k, b)))
+            .collect();
+        for (m, &(k, b)) in pairs.iter().enumerate() {
+            assert_eq!(upper_block(k, b), m as u32);
+        }
     }
 
     #[test]

@@ -371,6 +371,8 @@ pub struct TrafficRow {
 pub struct IterationRow {
     pub grid: u32,
     pub preconditioner: Preconditioner,
+    /// Multigrid's smoother.
+    pub smoother: Option<Smoother>,
     /// [`traffic::Layout::iteration_bytes`] or
     /// [`traffic::Layout::multigrid_iteration_bytes`] for the CPU layout.
     pub bytes_per_iteration: u64,
@@ -730,8 +732,13 @@ fn solver_iterations(
         let (a, b) = sim.system();
         let (a, b, cloth) = (a.clone(), b.to_vec(), &sim.scene.cloth);
         let springs = cloth.springs.len() as u64;
-        for preconditioner in [Preconditioner::Multigrid, Preconditioner::Jacobi] {
-            progress(&format!("solver iteration cpu {preconditioner:?} {grid}²"));
+        let solvers = Smoother::ALL
+            .map(|s| (Preconditioner::Multigrid, Some(s)))
+            .into_iter()
+            .chain([(Preconditioner::Jacobi, None)]);
+        for (preconditioner, smoother) in solvers {
+            let name = run::solver_name(preconditioner, smoother);
+            progress(&format!("solver iteration cpu {name} {grid}²"));
             let mut scratch = PcgScratch::default();
             let k = timed_iterations(preconditioner);
             let mut solve_ms = |iterations: u32| {
@@ -739,7 +746,7 @@ fn solver_iterations(
                     max_iters: iterations,
                     tol: 0.0,
                     preconditioner,
-                    smoother: Smoother::default(),
+                    smoother: smoother.unwrap_or_default(),
                 };
                 let mut x = sim.state.v.clone();
                 let start = Instant::now();
@@ -775,7 +782,7 @@ fn solver_iterations(
                 Preconditioner::Multigrid => traffic::CPU.multigrid_iteration_bytes(
                     &multigrid::levels(cloth.nx, cloth.ny),
                     springs,
-                    Smoother::default(),
+                    smoother.unwrap_or_default(),
                 ),
                 Preconditioner::Jacobi => {
                     traffic::CPU.iteration_bytes(cloth.vertex_count() as u64, springs)
@@ -785,6 +792,7 @@ fn solver_iterations(
             out.push(IterationRow {
                 grid,
                 preconditioner,
+                smoother,
                 bytes_per_iteration: bytes,
                 floor_ms,
                 measured_ms,
@@ -1109,7 +1117,7 @@ impl BenchReport {
             &mut out,
             &self.iterations,
             format!(
-                "\nCPU solver iteration against its memory-traffic floor (hanging cloth, after one step)\n{:<16}{:>6}{:>12}{:>12}{:>13}{:>9}{:>11}\n",
+                "\nCPU solver iteration against its memory-traffic floor (hanging cloth, after one step)\n{:<28}{:>6}{:>12}{:>12}{:>13}{:>9}{:>11}\n",
                 "preconditioner",
                 "grid",
                 "MB/iter",
@@ -1120,8 +1128,8 @@ impl BenchReport {
             ),
             |t| {
                 format!(
-                    "{:<16}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.2}{:>11.3}\n",
-                    format!("{:?}", t.preconditioner).to_lowercase(),
+                    "{:<28}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.2}{:>11.3}\n",
+                    run::solver_name(t.preconditioner, t.smoother),
                     t.grid,
                     t.bytes_per_iteration as f64 * 1e-6,
                     t.floor_ms,

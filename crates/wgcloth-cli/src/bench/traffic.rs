@@ -121,10 +121,12 @@ impl Layout {
     /// coarse stencils) crosses twice, once for the residual after
     /// pre-smoothing and once for the post-smoothing sweep, and the
     /// smoother blocks twice; the pre, residual, restriction, guess and post
-    /// passes move ten vectors per node and two per coarse node. The
-    /// patch smoother's forward sweeps take the operator once more (their
-    /// four colours read each row once) and its sweeps the patch inverses
-    /// once each, and move eleven vectors per node. The coarsest level
+    /// passes move ten vectors per node and two per coarse node. With the
+    /// patch smoother the forward sweeps and the residual after them
+    /// together need each block of the operator once (a node's sweep the
+    /// colours before its own, its residual the ones after), the backward
+    /// sweeps once more, each sweep the patch inverses once, and eleven
+    /// vectors per node. The coarsest level
     /// runs its sweeps over its stencils. A V-cycle cannot fuse below two
     /// operator passes per level: each sweep needs its neighbours' result
     /// of the one before.
@@ -148,7 +150,7 @@ impl Layout {
                     Smoother::BlockJacobi => 2 * operator(l) + n * (2 * self.diag_block + 10 * v),
                     Smoother::Patches => {
                         let (px, py) = patch_grid(levels[l]);
-                        3 * operator(l) + 2 * (px * py) as u64 * self.patch_inverse + n * 11 * v
+                        2 * operator(l) + 2 * (px * py) as u64 * self.patch_inverse + n * 11 * v
                     }
                 };
                 smoothing + coarse * 2 * v

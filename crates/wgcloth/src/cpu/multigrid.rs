@@ -181,33 +181,14 @@ impl Multigrid {
         a: &BlockMatrix,
         cloth: &Cloth,
         l: usize,
-        node: Node,
-        f: impl FnMut(usize, Mat3),
-    ) {
-        self.row_entries_where(a, cloth, l, node, |_| true, f);
-    }
-
-    /// [`row_entries`](Self::row_entries) for the j that `keep`, the others'
-    /// blocks not read.
-    fn row_entries_where(
-        &self,
-        a: &BlockMatrix,
-        cloth: &Cloth,
-        l: usize,
         (i, c, r): Node,
-        keep: impl Fn(usize) -> bool,
         mut f: impl FnMut(usize, Mat3),
     ) {
         if l == 0 {
-            if keep(i) {
-                f(i, a.diag[i]);
-            }
+            f(i, a.diag[i]);
             let adj = &cloth.adjacency;
             for k in adj.range(i) {
-                let j = adj.other[k] as usize;
-                if keep(j) {
-                    f(j, a.off[adj.spring[k] as usize]);
-                }
+                f(adj.other[k] as usize, a.off[adj.spring[k] as usize]);
             }
             return;
         }
@@ -217,9 +198,7 @@ impl Multigrid {
                 let (cj, rj) = (c as i32 + dx, r as i32 + dy);
                 if (0..level.nx as i32).contains(&cj) && (0..level.ny as i32).contains(&rj) {
                     let j = rj as usize * level.nx as usize + cj as usize;
-                    if keep(j) {
-                        f(j, self.stored_block(l, i, j, dx, dy));
-                    }
+                    f(j, self.stored_block(l, i, j, dx, dy));
                 }
             }
         }
