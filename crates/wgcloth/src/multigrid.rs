@@ -301,12 +301,10 @@ mod tests {
             }
         }
         let inverse = patch_inverse(&spd).expect("positive definite");
-        for i in 0..n {
+        for (i, row) in inverse.iter().enumerate() {
             for j in 0..n {
-                assert_eq!(inverse[i][j], inverse[j][i], "symmetric");
-                let e: f64 = (0..n)
-                    .map(|k| inverse[i][k] as f64 * spd[k][j] as f64)
-                    .sum();
+                assert_eq!(row[j], inverse[j][i], "symmetric");
+                let e: f64 = (0..n).map(|k| row[k] as f64 * spd[k][j] as f64).sum();
                 let want = if i == j { 1.0 } else { 0.0 };
                 assert!((e - want).abs() < 1e-2, "({i}, {j}): {e}");
             }
