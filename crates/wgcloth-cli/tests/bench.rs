@@ -5,7 +5,7 @@
 //! does, and the plot draws every series and stage. Speed itself is never
 //! asserted.
 
-use wgcloth::config::{ModelKind, Preconditioner};
+use wgcloth::config::{ModelKind, Preconditioner, Smoother};
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::stage::{SelfContactStages, Stage};
 use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
@@ -171,19 +171,20 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
         );
     }
 
-    // Each preconditioner's CPU iteration, its floor counting at least A
-    // once and every vector it touches; multigrid's more (A three times,
-    // and the coarse levels).
+    // Each preconditioner's CPU iteration (multigrid with each smoother),
+    // its floor counting at least A once and every vector it touches;
+    // multigrid's more (A three times, and the coarse levels).
     let floors: Vec<_> = report
         .iterations
         .iter()
-        .map(|t| (t.grid, t.preconditioner))
+        .map(|t| (t.grid, t.preconditioner, t.smoother))
         .collect();
     assert_eq!(
         floors,
         [
-            (16, Preconditioner::Multigrid),
-            (16, Preconditioner::Jacobi)
+            (16, Preconditioner::Multigrid, Some(Smoother::Patches)),
+            (16, Preconditioner::Multigrid, Some(Smoother::BlockJacobi)),
+            (16, Preconditioner::Jacobi, None)
         ]
     );
     for t in &report.iterations {
@@ -194,11 +195,13 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             "{t:?}"
         );
     }
-    let (multigrid, jacobi) = (&report.iterations[0], &report.iterations[1]);
-    assert!(
-        multigrid.bytes_per_iteration > 3 * jacobi.bytes_per_iteration,
-        "{multigrid:?} {jacobi:?}"
-    );
+    let jacobi = &report.iterations[2];
+    for multigrid in &report.iterations[..2] {
+        assert!(
+            multigrid.bytes_per_iteration > 3 * jacobi.bytes_per_iteration,
+            "{multigrid:?} {jacobi:?}"
+        );
+    }
 
     // Every converged row reached the goal at every step (the run loop
     // solves again the steps its budget cut), and is set against its

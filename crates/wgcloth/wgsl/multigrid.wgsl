@@ -308,8 +308,9 @@ fn add_entry(cc: vec2<u32>, wi: f32, j: u32, block: Sym3) {
 }
 
 // The coarse level's stencil and smoother, per coarse node: the Galerkin
-// product gathered over its children's rows. On the first hop it also
-// writes the smoothers of the cloth vertices it owns, (2 cc + {0, 1}).
+// product gathered over its children's rows. On the first hop, with block
+// Jacobi, it also writes the smoothers of the cloth vertices it owns,
+// (2 cc + {0, 1}).
 @compute @workgroup_size(WORKGROUP)
 fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
     hop = bound_hop;
@@ -361,7 +362,8 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     operators_set(hop.coarse.smoothers_at + I, sym_pack(smoother(centre, spread)));
-    if g.level == 0u {
+    // The patch smoother needs no cloth smoother: a pass over A saved.
+    if g.level == 0u && !patched() {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
             for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
                 let i = y * g.nx + x;
@@ -392,13 +394,15 @@ fn residual(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 fn residual_at(i: u32) {
-    var res: vec3<f32>;
+    var res = vec3<f32>(0.0);
     if patched() {
         // The forward sweep solved each patch exactly for the colours
         // before it, the later ones zero: what is left at a node is the
         // later colours' part (none at the last colour's).
         let later = vec2<u32>(colour_of(coords(hop.fine, i)) + 1u, PATCH_COLOURS);
-        res = -row_guess(i, false, later);
+        if later.x < PATCH_COLOURS {
+            res = -row_guess(i, false, later);
+        }
     } else {
         res = fine_rhs(i) - row_guess(i, false, ALL_COLOURS);
     }
