@@ -93,6 +93,12 @@ struct PackedSym3 {
     xz_yz: vec2<f32>,
 }
 
+// Threads of a multigrid patch sweep of an nx × ny level: four per patch of
+// one colour, ⌈nx / 4⌉ × ⌈ny / 4⌉ patches (multigrid::patch_threads).
+fn patch_threads(nx: u32, ny: u32) -> u32 {
+    return PATCH * ((nx + 3u) / 4u) * ((ny + 3u) / 4u);
+}
+
 fn sym_pack(m: Sym3) -> PackedSym3 {
     return PackedSym3(m.a.xy, m.a.zw, m.b.xy);
 }

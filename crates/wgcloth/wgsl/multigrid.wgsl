@@ -487,7 +487,7 @@ fn tail(@builtin(local_invocation_index) lid: u32) {
 // at a time.
 fn tail_sweeps(lid: u32, l: u32, forward: bool) {
     let g = hop_list[l].fine;
-    let threads = PATCH * ((g.nx + 3u) / 4u) * ((g.ny + 3u) / 4u);
+    let threads = patch_threads(g.nx, g.ny);
     for (var k = 0u; k < PATCH_COLOURS; k++) {
         let colour = select(PATCH_COLOURS - 1u - k, k, forward);
         for (var t = 0u; t < threads; t += WORKGROUP) {

@@ -178,7 +178,7 @@ fn init_scalars(@builtin(local_invocation_index) lid: u32) {
             s.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
             s.groups[3u * l + 1u] = 1u;
             s.groups[3u * l + 2u] = 1u;
-            let threads = PATCH * ((nx + 3u) / 4u) * ((ny + 3u) / 4u);
+            let threads = patch_threads(nx, ny);
             s.patch_groups[3u * l] = select(0u, (threads + WORKGROUP - 1u) / WORKGROUP, on);
             s.patch_groups[3u * l + 1u] = 1u;
             s.patch_groups[3u * l + 2u] = 1u;
