@@ -33,7 +33,8 @@ pub struct Multigrid {
     /// the upper half of its stencil (`multigrid::stored_at`).
     stencils: Vec<Vec<Mat3>>,
     /// Per level: ω D⁻¹, zero where D is singular (a pinned node, or a coarse
-    /// node whose fine nodes are all pinned).
+    /// node whose fine nodes are all pinned) and on levels the patch
+    /// smoother smooths (all but the coarsest), which need none.
     smoothers: Vec<Vec<Mat3>>,
     /// Per coarse level: its right-hand side (the restricted residual).
     rhs: Vec<Vec<Vec3>>,
@@ -229,12 +230,11 @@ impl Multigrid {
         keep: impl Fn(usize) -> bool,
         x: impl Fn(usize) -> Vec3,
     ) -> Vec3 {
-        // Every block, the others' times zero: the same sums as skipping
-        // them, and no slower here (a probe at 256²).
         let mut acc = RowSum::default();
         self.row_entries(a, cloth, l, node, |j, block| {
-            let v = x(j);
-            acc.add(block, if keep(j) { v } else { Vec3::ZERO })
+            if keep(j) {
+                acc.add(block, x(j))
+            }
         });
         acc.total()
     }
@@ -351,46 +351,82 @@ impl Multigrid {
             false => [3, 2, 1, 0],
         };
         const ROWS: usize = 32;
+        // Node (c, r)'s residual among the colours a sweep reads.
+        let residual = |z: &[Vec3], colour: u8, (c, r): (usize, usize)| {
+            let i = r * level.nx as usize + c;
+            // A pinned vertex stays at zero (P̃ = S P).
+            if l == 0 && cloth.pinned[i] {
+                return Vec3::ZERO;
+            }
+            let node = (i, c as u32, r as u32);
+            rhs[i]
+                - match forward {
+                    // Colour 0 has no colour before it.
+                    true if colour == 0 => Vec3::ZERO,
+                    true => self.row_where(a, cloth, l, node, |j| colours[j] < colour, |j| z[j]),
+                    false => self.row(a, cloth, l, node, |j| z[j]),
+                }
+        };
+        // d = M⁻¹ res, a column at a time (M⁻¹ is symmetric, so its rows
+        // are its columns): twelve sums side by side.
+        let solve = |(pc, pr): (usize, usize), d: &mut [Vec3; PATCH as usize]| {
+            let res: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| d[u / 3][u % 3]);
+            let mut out = [0f32; PATCH_UNKNOWNS];
+            for (column, &r) in inverses[pr * px + pc].iter().zip(&res) {
+                for (o, m) in out.iter_mut().zip(column) {
+                    *o += m * r;
+                }
+            }
+            *d = std::array::from_fn(|k| Vec3::from_slice(&out[3 * k..3 * k + 3]));
+        };
+        // A colour's patches of one window, solved a patch row to a task
+        // from the same z, then set.
+        let mut solved = vec![[Vec3::ZERO; PATCH as usize]; ROWS.div_ceil(2) * px.div_ceil(2)];
         for start in (0..py + order.len()).step_by(ROWS) {
             for (q, &colour) in order.iter().enumerate() {
                 let (cx, cy) = (colour as usize % 2, colour as usize / 2);
                 let rows = start.saturating_sub(q)..(start + ROWS).saturating_sub(q).min(py);
-                let patches: Vec<(usize, usize)> = rows
-                    .filter(|pr| pr % 2 == cy)
-                    .flat_map(|pr| (cx..px).step_by(2).map(move |pc| (pc, pr)))
-                    .collect();
+                // The colour's patch rows among them, two apart, and its
+                // patches in each.
+                let first = rows.start + usize::from(rows.start % 2 != cy);
+                let per_row = (px - cx).div_ceil(2);
+                if first >= rows.end || per_row == 0 {
+                    continue;
+                }
+                let solved = &mut solved[..(rows.end - first).div_ceil(2) * per_row];
                 let z_now: &[Vec3] = z;
-                let earlier = |j: usize| !forward || colours[j] < colour;
-                let updates: Vec<[Option<(usize, Vec3)>; PATCH as usize]> = patches
-                    .par_iter()
-                    .with_min_len(GRAIN / (16 * PATCH as usize))
-                    .map(|&(pc, pr)| {
-                        let nodes = patch_nodes(level, (pc, pr));
-                        let mut res = [0f32; PATCH_UNKNOWNS];
-                        for (k, node) in nodes.iter().enumerate() {
-                            // A pinned vertex stays at zero (P̃ = S P).
-                            if let Some(node) = node.filter(|n| l > 0 || !cloth.pinned[n.0]) {
-                                let r = rhs[node.0]
-                                    - self.row_where(a, cloth, l, node, earlier, |j| z_now[j]);
-                                res[3 * k..3 * k + 3].copy_from_slice(&r.to_array());
+                solved
+                    .par_chunks_mut(per_row)
+                    .with_min_len((GRAIN / (16 * PATCH as usize)).div_ceil(per_row))
+                    .enumerate()
+                    .for_each(|(k, row)| {
+                        let pr = first + 2 * k;
+                        // The residuals a grid row at a time, in memory order.
+                        for (half, r) in [(0, 2 * pr), (2, 2 * pr + 1)] {
+                            for (m, d) in row.iter_mut().enumerate() {
+                                for side in 0..2 {
+                                    let c = 4 * m + 2 * cx + side;
+                                    let inside = c < level.nx as usize && r < level.ny as usize;
+                                    d[half + side] = match inside {
+                                        true => residual(z_now, colour, (c, r)),
+                                        false => Vec3::ZERO,
+                                    };
+                                }
                             }
                         }
-                        // d = M⁻¹ res, a column at a time (M⁻¹ is symmetric, so
-                        // its rows are its columns): twelve sums side by side.
-                        let inverse = &inverses[pr * px + pc];
-                        let mut d = [0f32; PATCH_UNKNOWNS];
-                        for (column, &r) in inverse.iter().zip(&res) {
-                            for (d, m) in d.iter_mut().zip(column) {
-                                *d += m * r;
+                        for (m, d) in row.iter_mut().enumerate() {
+                            solve((cx + 2 * m, pr), d);
+                        }
+                    });
+                for (k, row) in solved.chunks(per_row).enumerate() {
+                    for (m, d) in row.iter().enumerate() {
+                        let nodes = patch_nodes(level, (cx + 2 * m, first + 2 * k));
+                        for (node, d) in nodes.iter().zip(d) {
+                            if let Some((i, ..)) = *node {
+                                z[i] = if forward { *d } else { z[i] + *d };
                             }
                         }
-                        std::array::from_fn(|k| {
-                            nodes[k].map(|(i, ..)| (i, Vec3::from_slice(&d[3 * k..3 * k + 3])))
-                        })
-                    })
-                    .collect();
-                for (i, d) in updates.into_iter().flatten().flatten() {
-                    z[i] = if forward { d } else { z[i] + d };
+                    }
                 }
             }
         }
@@ -417,8 +453,13 @@ impl Multigrid {
                 .collect();
             self.smoothers[0] = fine;
         }
-        for l in 0..self.levels.len() - 1 {
+        let last = self.levels.len() - 1;
+        let centre = stencil_slot(0, 0);
+        for l in 0..last {
             let (from, to) = (self.levels[l], self.levels[l + 1]);
+            // Block Jacobi's smoother needs the whole row; a patch-smoothed
+            // level (all but the coarsest) only the half that is kept.
+            let whole_rows = l + 1 == last || self.smoother == Smoother::BlockJacobi;
             let mut stencil = std::mem::take(&mut self.stencils[l]);
             let mut smoothers = std::mem::take(&mut self.smoothers[l + 1]);
             stencil
@@ -442,19 +483,20 @@ impl Multigrid {
                             for (pr, wr) in parents(r, to.ny) {
                                 for (pc, wc) in parents(c, to.nx) {
                                     let w = wi * wr * wc;
-                                    if w != 0.0 {
-                                        let (dx, dy) =
-                                            (pc as i32 - cc as i32, pr as i32 - rc as i32);
-                                        out[stencil_slot(dx, dy)] += w * block;
+                                    let (dx, dy) = (pc as i32 - cc as i32, pr as i32 - rc as i32);
+                                    let slot = stencil_slot(dx, dy);
+                                    if w != 0.0 && (whole_rows || slot >= centre) {
+                                        out[slot] += w * block;
                                     }
                                 }
                             }
                         });
                     }
-                    // The full row gives the smoother; the upper half is kept.
-                    let centre = stencil_slot(0, 0);
-                    let off = out.iter().enumerate().filter(|&(k, _)| k != centre);
-                    *smoother_block = smoother(out[centre], off.map(|(_, block)| *block));
+                    // The whole row gives the smoother; the upper half is kept.
+                    if whole_rows {
+                        let off = out.iter().enumerate().filter(|&(k, _)| k != centre);
+                        *smoother_block = smoother(out[centre], off.map(|(_, block)| *block));
+                    }
                     stored.copy_from_slice(&out[centre..]);
                 });
             (self.stencils[l], self.smoothers[l + 1]) = (stencil, smoothers);
