@@ -657,6 +657,7 @@ fn inverse_float(f: u32) -> f32 {
 
 // The inverse of `patch_m` (SPD) into `patch_w`'s W = L⁻¹, by Cholesky, as
 // multigrid::patch_inverse does it; false if it is not positive definite.
+// `patch_m` keeps L below its diagonal and 1 / L_jj on it.
 fn patch_factor() -> bool {
     for (var j = 0u; j < 12u; j++) {
         var d = patch_m[j][j];
@@ -666,26 +667,26 @@ fn patch_factor() -> bool {
         if !(d > 0.0 && d < 3.0e38) {
             return false;
         }
-        patch_m[j][j] = sqrt(d);
+        patch_m[j][j] = 1.0 / sqrt(d);
         for (var i = j + 1u; i < 12u; i++) {
             var s = patch_m[i][j];
             for (var k = 0u; k < j; k++) {
                 s -= patch_m[i][k] * patch_m[j][k];
             }
-            patch_m[i][j] = s / patch_m[j][j];
+            patch_m[i][j] = s * patch_m[j][j];
         }
     }
     for (var c = 0u; c < 12u; c++) {
         for (var i = 0u; i < 12u; i++) {
             patch_w[i][c] = 0.0;
         }
-        patch_w[c][c] = 1.0 / patch_m[c][c];
+        patch_w[c][c] = patch_m[c][c];
         for (var i = c + 1u; i < 12u; i++) {
             var s = 0.0;
             for (var k = c; k < i; k++) {
                 s += patch_m[i][k] * patch_w[k][c];
             }
-            patch_w[i][c] = -s / patch_m[i][i];
+            patch_w[i][c] = -s * patch_m[i][i];
         }
     }
     return true;
