@@ -287,6 +287,12 @@ fn children(cc: u32, n_fine: u32) -> vec2<u32> {
 
 var<private> acc: array<Sym3, STENCIL>;
 
+// Whether `galerkin` sums each coarse row whole, for its block-Jacobi
+// smoother; a level the patch smoother smooths needs only the stored half.
+fn whole_rows() -> bool {
+    return hop.coarse.patches_at == NO_PATCHES;
+}
+
 // Adds w_i A_ij w_j to the coarse stencil of node cc for every parent of
 // fine node j.
 fn add_entry(cc: vec2<u32>, wi: f32, j: u32, block: Sym3) {
@@ -299,8 +305,8 @@ fn add_entry(cc: vec2<u32>, wi: f32, j: u32, block: Sym3) {
     for (var b = 0u; b < 2u; b++) {
         for (var a = 0u; a < 2u; a++) {
             let w = wi * px.w[a] * py.w[b];
-            if w != 0.0 {
-                let slot = stencil_slot(i32(px.at[a]) - i32(cc.x), i32(py.at[b]) - i32(cc.y));
+            let slot = stencil_slot(i32(px.at[a]) - i32(cc.x), i32(py.at[b]) - i32(cc.y));
+            if w != 0.0 && (whole_rows() || slot >= STENCIL / 2u) {
                 acc[slot] = sym_add(acc[slot], sym_scale(block, w));
             }
         }
@@ -350,18 +356,20 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    // The full row gives the smoother; the upper half is kept.
+    // The whole row gives the smoother; the upper half is kept.
     for (var k = 0u; k < STORED_STENCIL; k++) {
         operators_set(hop.coarse.stencil_at + I * STORED_STENCIL + k, sym_pack(acc[STENCIL / 2u + k]));
     }
-    let centre = inverse(acc[stencil_slot(0, 0)]);
-    var spread = 0.0;
-    for (var k = 0u; k < STENCIL; k++) {
-        if k != stencil_slot(0, 0) {
-            spread += scaled_norm(centre, acc[k]);
+    if whole_rows() {
+        let centre = inverse(acc[stencil_slot(0, 0)]);
+        var spread = 0.0;
+        for (var k = 0u; k < STENCIL; k++) {
+            if k != stencil_slot(0, 0) {
+                spread += scaled_norm(centre, acc[k]);
+            }
         }
+        operators_set(hop.coarse.smoothers_at + I, sym_pack(smoother(centre, spread)));
     }
-    operators_set(hop.coarse.smoothers_at + I, sym_pack(smoother(centre, spread)));
     // The patch smoother needs no cloth smoother: a pass over A saved.
     if g.level == 0u && !patched() {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
