@@ -112,7 +112,8 @@ pub struct Report {
     /// absent where the adapter has none).
     pub stage_ms: BTreeMap<String, f64>,
     /// Compute dispatches a step records, the median over the timed steps
-    /// (GPU only; the iteration budget varies them from step to step).
+    /// (GPU only, and none if no step was timed; the iteration budget
+    /// varies them from step to step).
     pub dispatches_per_step: Option<u32>,
     /// GPU memory of the scene's state, bytes (`GpuSim::state_bytes`; GPU
     /// only), and per cloth vertex.
@@ -716,7 +717,8 @@ fn run_gpu(
         ms_per_step,
         ms_per_step_mean,
         stage_ms,
-        dispatches_per_step: Some(median(&mut dispatches.values).round() as u32),
+        dispatches_per_step: (!dispatches.values.is_empty())
+            .then(|| median(&mut dispatches.values).round() as u32),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
         gpu_split_arrays: sim
