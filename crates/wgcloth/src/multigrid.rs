@@ -113,8 +113,9 @@ pub fn upper_block(k: u32, b: u32) -> u32 {
 
 /// The inverse of a symmetric positive definite patch matrix (its lower
 /// half read), by Cholesky M = L Lᵀ and M⁻¹ = L⁻ᵀ L⁻¹, so it is exactly
-/// symmetric; None if M is not positive definite. In f32, operation for
-/// operation as `patch_inverse` in wgsl/multigrid.wgsl.
+/// symmetric; None if M is not positive definite. In f32, the same sums in
+/// the same order as `patch_factor` and `inverse_float` in
+/// wgsl/multigrid.wgsl.
 pub fn patch_inverse(m: &PatchMatrix) -> Option<PatchMatrix> {
     const N: usize = PATCH_UNKNOWNS;
     // L below its diagonal; on it 1 / L_jj, which is all either product
