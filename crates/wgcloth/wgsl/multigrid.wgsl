@@ -23,7 +23,8 @@ struct Grid {
     level: u32,
     nx: u32,
     ny: u32,
-    // ω D⁻¹ blocks, one per node, in `operators`.
+    // ω D⁻¹ blocks, one per node, in `operators`; none on a level the patch
+    // smoother smooths (`patches_at` set).
     smoothers_at: u32,
     // STORED_STENCIL blocks per node (coarse levels), in `operators`: the
     // upper half of its stencil (`stencil_block`).

@@ -33,7 +33,7 @@ pub struct Multigrid {
     /// the upper half of its stencil (`multigrid::stored_at`).
     stencils: Vec<Vec<Mat3>>,
     /// Per level: ω D⁻¹, zero where D is singular (a pinned node, or a coarse
-    /// node whose fine nodes are all pinned) and on levels the patch
+    /// node whose fine nodes are all pinned); empty on the levels the patch
     /// smoother smooths (all but the coarsest), which need none.
     smoothers: Vec<Vec<Mat3>>,
     /// Per coarse level: its right-hand side (the restricted residual).
@@ -123,7 +123,7 @@ impl Multigrid {
                 .iter()
                 .map(|l| vec![Mat3::ZERO; l.nodes() * STORED_STENCIL as usize])
                 .collect(),
-            smoothers: levels.iter().map(|l| vec![Mat3::ZERO; l.nodes()]).collect(),
+            smoothers: vec![Vec::new(); levels.len()],
             rhs: coarse().collect(),
             correction: coarse().collect(),
             pre: upper().collect(),
@@ -289,31 +289,37 @@ impl Multigrid {
             None => true,
             Some((i, ..)) => (l == 0 && cloth.pinned[i]) || diagonal(i) == Mat3::ZERO,
         };
+        // Block (i, j) of the operator, j in i's patch.
+        let block = |(i, c, r): Node, (j, cj, rj): Node| match l {
+            0 if i == j => a.diag[i],
+            0 => {
+                let adj = &cloth.adjacency;
+                let k = adj.range(i).find(|&k| adj.other[k] as usize == j);
+                k.map_or(Mat3::ZERO, |k| a.off[adj.spring[k] as usize])
+            }
+            _ => self.stored_block(l, i, j, cj as i32 - c as i32, rj as i32 - r as i32),
+        };
         (0..px * py)
             .into_par_iter()
             .map(|p| {
-                let nodes = patch_nodes(level, (p % px, p / px));
+                let nodes = patch_nodes(level, (p % px, p / px)).map(|n| n.filter(|_| !held(n)));
                 let mut m = [[0f32; PATCH_UNKNOWNS]; PATCH_UNKNOWNS];
                 for (k, &node) in nodes.iter().enumerate() {
-                    let Some(node) = node.filter(|_| !held(node)) else {
+                    let Some(node) = node else {
                         for t in 0..3 {
                             m[3 * k + t][3 * k + t] = 1.0;
                         }
                         continue;
                     };
-                    self.row_entries(a, cloth, l, node, |j, block| {
-                        let local = nodes.iter().position(|n| n.is_some_and(|n| n.0 == j));
-                        if let Some(b) = local.filter(|&b| !held(nodes[b])) {
-                            for (c, column) in [block.x_axis, block.y_axis, block.z_axis]
-                                .iter()
-                                .enumerate()
-                            {
-                                for r in 0..3 {
-                                    m[3 * k + r][3 * b + c] = column[r];
-                                }
+                    for (b, &other) in nodes.iter().enumerate() {
+                        let Some(other) = other else { continue };
+                        let columns = block(node, other).to_cols_array_2d();
+                        for (c, column) in columns.iter().enumerate() {
+                            for (r, &e) in column.iter().enumerate() {
+                                m[3 * k + r][3 * b + c] = e;
                             }
                         }
-                    });
+                    }
                 }
                 // Not positive definite only if A is not: leave the patch alone.
                 patch_inverse(&m).unwrap_or([[0.0; PATCH_UNKNOWNS]; PATCH_UNKNOWNS])
@@ -462,12 +468,11 @@ impl Multigrid {
             let whole_rows = l + 1 == last || self.smoother == Smoother::BlockJacobi;
             let mut stencil = std::mem::take(&mut self.stencils[l]);
             let mut smoothers = std::mem::take(&mut self.smoothers[l + 1]);
-            stencil
+            let rows = stencil
                 .par_chunks_mut(STORED_STENCIL as usize)
-                .zip(smoothers.par_iter_mut())
                 .with_min_len(GRAIN / STENCIL as usize)
                 .enumerate()
-                .for_each(|(coarse, (stored, smoother_block))| {
+                .filter_map(|(coarse, stored)| {
                     let (cc, rc) = coords(to, coarse);
                     let mut out = [Mat3::ZERO; STENCIL as usize];
                     for node in Self::children(from, (cc, rc)) {
@@ -492,13 +497,15 @@ impl Multigrid {
                             }
                         });
                     }
-                    // The whole row gives the smoother; the upper half is kept.
-                    if whole_rows {
-                        let off = out.iter().enumerate().filter(|&(k, _)| k != centre);
-                        *smoother_block = smoother(out[centre], off.map(|(_, block)| *block));
-                    }
                     stored.copy_from_slice(&out[centre..]);
+                    // The whole row gives the smoother; the upper half is kept.
+                    whole_rows.then(|| {
+                        let off = out.iter().enumerate().filter(|&(k, _)| k != centre);
+                        smoother(out[centre], off.map(|(_, block)| *block))
+                    })
                 });
+            smoothers.clear();
+            smoothers.par_extend(rows);
             (self.stencils[l], self.smoothers[l + 1]) = (stencil, smoothers);
         }
         self.patch_inverses = match self.smoother {

@@ -123,8 +123,10 @@ pub struct PcgScratch {
 /// most `tol`.
 ///
 /// Each iteration is fused passes, as on the GPU: q = S A p with pᵀq; the
-/// x and r updates with rᵀr; z = P⁻¹ r with rᵀz (fused into the update for
-/// Jacobi, a V-cycle for multigrid); and the p update. Dot products sum in
+/// x and r updates with rᵀr and, for Jacobi, z = P⁻¹ r with rᵀz
+/// (multigrid's z is a V-cycle); and the p update. The GPU's `next` forms
+/// the new p where the product reads it; here that recomputation cost
+/// more than the pass it saves (`wgcloth bench --iterations`). Dot products sum in
 /// f64 so a 10⁶-term sum keeps the digits the convergence test reads.
 pub fn solve(
     a: &BlockMatrix,
@@ -191,6 +193,7 @@ pub fn solve(
                 .sum::<f64>();
         let mut delta = precondition(a, cloth, settings.preconditioner, s);
         s.p.copy_from_slice(&s.z);
+        let jacobi = settings.preconditioner == Preconditioner::Jacobi;
 
         let mut out = PcgOutcome::default();
         let threshold = (settings.tol as f64).powi(2) * bb;
@@ -201,18 +204,31 @@ pub fn solve(
                 break;
             }
             let alpha = (delta / pq) as f32;
-            rr = x
+            // x += α p and r −= α q with rᵀr; Jacobi's z = P⁻¹ r and rᵀz
+            // in the same pass.
+            let (rr_new, rz) = x
                 .par_iter_mut()
                 .with_min_len(GRAIN)
                 .zip(s.r.par_iter_mut())
+                .zip(s.z.par_iter_mut())
                 .enumerate()
-                .map(|(i, (x, r))| {
+                .map(|(i, ((x, r), z))| {
                     *x += alpha * s.p[i];
                     *r -= alpha * s.q[i];
-                    r.length_squared() as f64
+                    let rz = if jacobi {
+                        *z = *r * s.inv_diag[i];
+                        r.dot(*z) as f64
+                    } else {
+                        0.0
+                    };
+                    (r.length_squared() as f64, rz)
                 })
-                .sum::<f64>();
-            let delta_new = precondition(a, cloth, settings.preconditioner, s);
+                .reduce(|| (0.0, 0.0), |(a, b), (c, d)| (a + c, b + d));
+            rr = rr_new;
+            let delta_new = match jacobi {
+                true => rz,
+                false => precondition(a, cloth, settings.preconditioner, s),
+            };
             let beta = (delta_new / delta) as f32;
             s.p.par_iter_mut()
                 .with_min_len(GRAIN)

@@ -63,15 +63,17 @@ pub(crate) struct Buffers {
     /// PCG's scalars, ping-ponged; they also hold the next iteration's
     /// indirect dispatch sizes.
     pub(crate) scalars: [wgpu::Buffer; 2],
-    /// Multigrid: every level's smoother blocks, then every coarse level's
+    /// Multigrid: the smoother blocks of the levels block Jacobi smooths
+    /// (with patches, the coarsest alone), then every coarse level's
     /// stencils, then the patch smoother's inverses (one element when
     /// Jacobi preconditions).
     pub(crate) operators: Parts,
     /// Multigrid: every coarse level's right-hand side and correction.
     pub(crate) vectors: wgpu::Buffer,
-    /// Multigrid: per level, its `Hop` with each patch colour, what its
-    /// dispatches work between (colour 0's but for the patch sweeps).
-    pub(crate) hops: Vec<[wgpu::Buffer; PATCH_COLOURS]>,
+    /// Multigrid: per level, its `Hop`, what its dispatches work between:
+    /// one per patch colour where the patch smoother smooths it (colour
+    /// 0's but for the sweeps), else colour 0's alone.
+    pub(crate) hops: Vec<Vec<wgpu::Buffer>>,
     /// Multigrid: the same hops in one array, for the coarse levels' tail.
     pub(crate) hop_list: wgpu::Buffer,
     pub(crate) state: wgpu::Buffer,
@@ -262,52 +264,60 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
 /// their offsets into the operators and vectors buffers; empty when the
 /// scene is preconditioned by Jacobi.
 pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
+    multigrid_layout(scene).0
+}
+
+/// [`multigrid_grids`], and the operators' elements (blocks) they use: up to
+/// the last patch inverse, or the last stencil block; 1 with no levels.
+fn multigrid_layout(scene: &Scene) -> (Vec<Grid>, u64) {
     if scene.config.solver.preconditioner != Preconditioner::Multigrid {
-        return vec![];
+        return (vec![], 1);
     }
     let levels = multigrid::levels(scene.cloth.nx, scene.cloth.ny);
-    let total: u32 = levels.iter().map(|l| l.nodes() as u32).sum();
-    let coarse_total = total - levels[0].nodes() as u32;
-    // Operators: every level's smoother blocks, every coarse level's
-    // stencils, then the patches' inverses of every level but the coarsest.
-    let (mut smoothers, mut stencils, mut vectors) = (0, total, 0);
-    let mut patches = total + coarse_total * STORED_STENCIL;
-    let patched = scene.config.solver.smoother == Smoother::Patches;
+    let last = levels.len() - 1;
+    // Each level has smoother blocks (block Jacobi, and the coarsest level
+    // always) or patch inverses, never both.
+    let patched = |k: usize| scene.config.solver.smoother == Smoother::Patches && k < last;
+    let nodes = |k: usize| levels[k].nodes() as u32;
+    let smoother_total: u32 = (0..=last).filter(|&k| !patched(k)).map(nodes).sum();
+    let coarse_total: u32 = (1..=last).map(nodes).sum();
+    // Operators: the smoother blocks, every coarse level's stencils, then
+    // the patches' inverses.
+    let (mut smoothers, mut stencils, mut vectors) = (0, smoother_total, 0);
+    let mut patches = smoother_total + coarse_total * STORED_STENCIL;
     // The work vector after every coarse level's two.
     let work_at = 2 * coarse_total;
-    let last = levels.len() - 1;
-    levels
+    let grids = levels
         .iter()
         .enumerate()
         .map(|(k, l)| {
-            let n = l.nodes() as u32;
+            let n = nodes(k);
             let coarse = k > 0;
             let g = Grid {
                 level: k as u32,
                 nx: l.nx,
                 ny: l.ny,
-                smoothers_at: smoothers,
+                smoothers_at: if patched(k) { 0 } else { smoothers },
                 stencil_at: if coarse { stencils } else { 0 },
                 rhs_at: if coarse { vectors } else { 0 },
                 correction_at: if coarse { vectors + n } else { 0 },
                 work_at,
-                patches_at: match patched && k < last {
-                    true => patches,
-                    false => NO_PATCHES,
-                },
+                patches_at: if patched(k) { patches } else { NO_PATCHES },
             };
-            smoothers += n;
             if coarse {
                 stencils += n * STORED_STENCIL;
                 vectors += 2 * n;
             }
-            if g.patches_at != NO_PATCHES {
+            if patched(k) {
                 let (px, py) = multigrid::patch_grid(*l);
                 patches += px * py * PATCH_BLOCKS;
+            } else {
+                smoothers += n;
             }
             g
         })
-        .collect()
+        .collect();
+    (grids, patches.into())
 }
 
 /// Each level's `Hop`: it and the next coarser one (colour 0).
@@ -319,23 +329,6 @@ pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
             colour: 0,
         })
         .collect()
-}
-
-/// The operators' elements (blocks) of `grids`: up to the last patch
-/// inverse, or the last stencil block; 1 with no levels (Jacobi).
-pub(crate) fn operator_blocks(grids: &[Grid]) -> u64 {
-    let Some(last) = grids.last() else {
-        return 1;
-    };
-    let stencils = last.stencil_at as u64 + last.nodes() as u64 * STORED_STENCIL as u64;
-    let patches = grids
-        .iter()
-        .filter(|g| g.patches_at != NO_PATCHES)
-        .map(|g| {
-            let (px, py) = multigrid::patch_grid(g.shape());
-            g.patches_at as u64 + (px * py * PATCH_BLOCKS) as u64
-        });
-    patches.fold(stencils, u64::max)
 }
 
 /// Bytes of one near pair in stage "separate"'s list: four vertices.
@@ -414,8 +407,7 @@ impl Sizes {
             0
         };
         let size = |n: u64, of: usize| n * of as u64;
-        let grids = multigrid_grids(scene);
-        let operators = operator_blocks(&grids);
+        let (grids, operators) = multigrid_layout(scene);
         let vectors = match grids.last() {
             Some(last) => last.work_at as u64 + grids[0].nodes() as u64,
             None => 1,
@@ -630,13 +622,16 @@ impl Buffers {
             hops: level_hops
                 .iter()
                 .map(|&hop| {
-                    std::array::from_fn(|colour| {
-                        let hop = Hop {
-                            colour: colour as u32,
-                            ..hop
-                        };
-                        storage("multigrid hop", bytemuck::bytes_of(&hop))
-                    })
+                    let colours = match hop.fine.patches_at {
+                        NO_PATCHES => 1,
+                        _ => PATCH_COLOURS as u32,
+                    };
+                    (0..colours)
+                        .map(|colour| {
+                            let hop = Hop { colour, ..hop };
+                            storage("multigrid hop", bytemuck::bytes_of(&hop))
+                        })
+                        .collect()
                 })
                 .collect(),
             hop_list: storage("multigrid hops", bytemuck::cast_slice(&level_hops)),

@@ -361,7 +361,8 @@ pub struct Grid {
     pub nx: u32,
     /// Nodes per column.
     pub ny: u32,
-    /// First of its ω D⁻¹ blocks in the operators buffer.
+    /// First of its ω D⁻¹ blocks in the operators buffer; 0, and none
+    /// kept, on a level the patch smoother smooths.
     pub smoothers_at: u32,
     /// First of its stencil blocks in the operators buffer (coarse levels).
     pub stencil_at: u32,
