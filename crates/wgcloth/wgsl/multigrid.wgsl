@@ -240,39 +240,50 @@ fn colour_of(c: vec2<u32>) -> u32 {
 // Every patch colour, as a range for `counted`.
 const ALL_COLOURS = vec2<u32>(0u, PATCH_COLOURS);
 
-// Whether node j of the fine level is of the colours `colours.x` up to
-// `colours.y` (not included), which a row product takes.
-fn counted(j: u32, colours: vec2<u32>) -> bool {
-    if all(colours == ALL_COLOURS) {
-        return true;
+// Whether the fine level's node at `c` is of the colours `colours.x` up
+// to `colours.y` (not included), which a row product takes.
+fn counted(c: vec2<i32>, colours: vec2<u32>) -> bool {
+    let k = colour_of(vec2<u32>(c));
+    return k >= colours.x && k < colours.y;
+}
+
+// Grid offset (dx, dy) of cloth vertex j from vertex i, a spring apart: a
+// spring reaches at most two nodes along each axis, so j − i = dy nx + dx
+// falls in one of five ranges that do not overlap on a grid at least five
+// wide, told apart by comparisons; no division per neighbour.
+fn spring_offset(g: Grid, i: u32, j: u32) -> vec2<i32> {
+    if g.nx < 5u {
+        return vec2<i32>(coords(g, j)) - vec2<i32>(coords(g, i));
     }
-    let c = colour_of(coords(hop.fine, j));
-    return c >= colours.x && c < colours.y;
+    let d = i32(j) - i32(i);
+    let n = i32(g.nx);
+    let dy = i32(d > 2 - 2 * n) + i32(d > 2 - n) + i32(d > 2) + i32(d > n + 2) - 2;
+    return vec2<i32>(d - dy * n, dy);
 }
 
 // Row i of the fine level's operator times its guess, over the nodes of
 // `colours` (a forward patch sweep's later colours are still zero).
 fn row_guess(i: u32, up: bool, colours: vec2<u32>) -> vec3<f32> {
     let g = hop.fine;
+    let every = all(colours == ALL_COLOURS);
+    let c = coords(g, i);
+    var acc = vec3<f32>(0.0);
     if g.level == 0u {
-        var acc = vec3<f32>(0.0);
-        if counted(i, colours) {
+        if every || counted(vec2<i32>(c), colours) {
             acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
         }
         for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
             let j = adjacent_vertex(k);
-            if counted(j, colours) {
+            if every || counted(vec2<i32>(c) + spring_offset(g, i, j), colours) {
                 acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))), guess(j, up));
             }
         }
         return acc;
     }
-    let c = coords(g, i);
-    var acc = vec3<f32>(0.0);
     for (var dy = -2; dy <= 2; dy++) {
         for (var dx = -2; dx <= 2; dx++) {
             let j = neighbour(g, c, dx, dy);
-            if j >= 0 && counted(u32(j), colours) {
+            if j >= 0 && (every || counted(vec2<i32>(c) + vec2<i32>(dx, dy), colours)) {
                 acc += sym_mul(stencil_block(g, i, u32(j), dx, dy), guess(u32(j), up));
             }
         }
@@ -758,7 +769,7 @@ fn patches(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         if g.level == 0u {
             for (var a = adjacency_begin(i); a < adjacency_begin(i + 1u); a++) {
-                let cj = coords(g, adjacent_vertex(a));
+                let cj = vec2<u32>(vec2<i32>(c) + spring_offset(g, i, adjacent_vertex(a)));
                 if cj.x >= first.x && cj.x < first.x + 2u && cj.y >= first.y && cj.y < first.y + 2u && !held(cj) {
                     let b = (cj.x - first.x) + 2u * (cj.y - first.y);
                     set_patch_block(k, b, sym_unpack(matrix_at(params.n_vertices + adjacent_spring(a))));
