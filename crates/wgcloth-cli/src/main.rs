@@ -64,6 +64,10 @@ struct BenchArgs {
     /// scripts/bench-gpu.sh runs); an error where there is no adapter.
     #[arg(long, conflicts_with = "iterations")]
     gpu_only: bool,
+    /// Only the CPU's rows, 32² to 256² (a few minutes); no GPU adapter is
+    /// opened.
+    #[arg(long, conflicts_with_all = ["iterations", "gpu_only"])]
+    cpu_only: bool,
     /// Write the table as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -451,9 +455,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
         (_, true) => wgcloth_cli::bench::BenchOptions::iterations(),
         _ => wgcloth_cli::bench::BenchOptions::full(),
     };
-    let options = match args.gpu_only {
-        true => options.gpu_only(),
-        false => options,
+    let options = match (args.gpu_only, args.cpu_only) {
+        (true, _) => options.gpu_only(),
+        (_, true) => options.cpu_only(),
+        _ => options,
     };
     let spinner = ProgressBar::new_spinner();
     spinner.enable_steady_tick(std::time::Duration::from_millis(200));

@@ -9,7 +9,7 @@ use wgcloth::config::{ModelKind, Preconditioner, Smoother};
 use wgcloth::nn::weights::SHIPPED;
 use wgcloth::stage::{SelfContactStages, Stage};
 use wgcloth_cli::bench::plot::{STAGE_COLORS, VARIANT_COLORS, figure};
-use wgcloth_cli::bench::{BenchOptions, Solve, VARIANTS, bench};
+use wgcloth_cli::bench::{Backends, BenchOptions, Solve, VARIANTS, bench};
 use wgcloth_cli::run::Steps;
 
 fn tiny() -> BenchOptions {
@@ -27,7 +27,7 @@ fn tiny() -> BenchOptions {
         batch_sizes: vec![7, 40],
         repeats: 2,
         iteration_grids: vec![16],
-        gpu_only: false,
+        backends: Backends::Both,
     }
 }
 
@@ -58,6 +58,30 @@ fn a_gpu_only_bench_has_no_cpu_row() {
     assert!(report.periods.iter().all(|p| p.backend == "gpu") && !report.periods.is_empty());
     assert!(report.networks.iter().all(|n| n.backend == "gpu"));
     assert!(report.iterations.is_empty());
+}
+
+/// `--cpu-only`: the CPU's rows (steps, periods, networks, solver
+/// iterations, the CPU's floors) and nothing of the GPU's, with or without
+/// an adapter.
+#[test]
+fn a_cpu_only_bench_has_no_gpu_row() {
+    let opts = BenchOptions {
+        grids: vec![6],
+        period_steps: 2,
+        batch_sizes: vec![7],
+        repeats: 1,
+        ..tiny()
+    }
+    .cpu_only();
+    let report = bench(&opts, |_| {}).unwrap();
+    assert_eq!(report.rows.len(), VARIANTS.len());
+    assert!(report.rows.iter().all(|r| r.report.backend == "cpu"));
+    assert!(report.periods.iter().all(|p| p.backend == "cpu") && !report.periods.is_empty());
+    assert!(report.networks.iter().all(|n| n.backend == "cpu") && !report.networks.is_empty());
+    assert!(!report.iterations.is_empty());
+    assert!(report.bandwidth.iter().all(|b| b.backend == "cpu"));
+    assert!(report.stage_traffic.iter().all(|t| t.backend == "cpu"));
+    assert!(report.gpu.contains("CPU rows alone"), "{}", report.gpu);
 }
 
 #[test]

@@ -184,10 +184,23 @@ pub struct BenchOptions {
     pub repeats: usize,
     /// Grids of the CPU solver-iteration rows.
     pub iteration_grids: Vec<u32>,
+    /// The backends whose rows it measures.
+    pub backends: Backends,
+}
+
+/// Which backends a bench measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backends {
+    /// The CPU, and the GPU where an adapter exists.
+    Both,
+    /// The CPU's rows alone, no adapter opened: a machine without a GPU,
+    /// or one where a software adapter's rows would take most of the time.
+    Cpu,
     /// The GPU's rows alone: no CPU step, period, network or
     /// solver-iteration row (a hardware GPU's run, where the CPU's rows
-    /// would take most of the time and are measured elsewhere).
-    pub gpu_only: bool,
+    /// would take most of the time and are measured elsewhere); an error
+    /// where there is no adapter.
+    Gpu,
 }
 
 impl BenchOptions {
@@ -207,15 +220,23 @@ impl BenchOptions {
             batch_sizes: vec![1_000, 4_000, 16_000, 64_000, 256_000, 1_000_000],
             repeats: 3,
             iteration_grids: vec![128, 256, 512],
-            gpu_only: false,
+            backends: Backends::Both,
         }
     }
 
     /// These options' GPU rows alone.
     pub fn gpu_only(self) -> BenchOptions {
         BenchOptions {
-            gpu_only: true,
+            backends: Backends::Gpu,
             iteration_grids: Vec::new(),
+            ..self
+        }
+    }
+
+    /// These options' CPU rows alone.
+    pub fn cpu_only(self) -> BenchOptions {
+        BenchOptions {
+            backends: Backends::Cpu,
             ..self
         }
     }
@@ -460,16 +481,20 @@ pub struct BenchReport {
     pub periods: Vec<PeriodRow>,
 }
 
-/// The CPU (unless `gpu_only`), and the GPU where an adapter exists; the
-/// adapter, or why there is none. GPU rows alone with no adapter is an error.
-fn backends(gpu_only: bool) -> Result<(Vec<Chosen>, String)> {
+/// The backends of `which`: the CPU's unless GPU rows alone, the GPU's
+/// where an adapter exists unless CPU rows alone; the adapter, or why there
+/// is none. GPU rows alone with no adapter is an error.
+fn backends(which: Backends) -> Result<(Vec<Chosen>, String)> {
+    if which == Backends::Cpu {
+        return Ok((vec![Chosen::Cpu], "no GPU rows: CPU rows alone".into()));
+    }
     match GpuContext::headless() {
         Ok(ctx) => {
             let note = describe(&ctx.adapter);
-            let cpu = (!gpu_only).then_some(Chosen::Cpu);
+            let cpu = (which == Backends::Both).then_some(Chosen::Cpu);
             Ok((cpu.into_iter().chain([Chosen::gpu(ctx)]).collect(), note))
         }
-        Err(e) if gpu_only => Err(e),
+        Err(e) if which == Backends::Gpu => Err(e),
         Err(e) => Ok((vec![Chosen::Cpu], format!("no GPU rows: {e}"))),
     }
 }
@@ -505,7 +530,7 @@ fn step_row(backend: &Chosen, v: Variant, grid: u32, steps: Steps) -> Result<Ste
 
 /// Runs the whole table; `progress` hears what is being measured.
 pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<BenchReport> {
-    let (chosen, gpu_note) = backends(opts.gpu_only)?;
+    let (chosen, gpu_note) = backends(opts.backends)?;
     let mut rows = Vec::new();
     for backend in &chosen {
         for grid in grids(opts, backend) {
@@ -910,7 +935,7 @@ fn network_rows(
             let rows_n = n * evaluations;
             let batch = &inputs[..rows_n * net.inputs()];
             let flop = 2 * network.jacobian_multiply_adds();
-            if !opts.gpu_only && (n * flop) as f64 <= CPU_BUDGET {
+            if opts.backends != Backends::Gpu && (n * flop) as f64 <= CPU_BUDGET {
                 progress(&format!("network {} cpu {n}", shipped.path));
                 let ms = timed(opts.repeats, || {
                     net.forward_jacobian_parallel(batch, wrt.clone());
