@@ -31,18 +31,22 @@ fn tiny() -> BenchOptions {
     }
 }
 
-/// `--gpu-only`: the GPU's rows and nothing of the CPU's, or an error
-/// where there is no adapter.
-#[test]
-fn a_gpu_only_bench_has_no_cpu_row() {
-    let opts = BenchOptions {
+/// [`tiny`] on one grid, one repeat, one batch.
+fn one_grid() -> BenchOptions {
+    BenchOptions {
         grids: vec![6],
         period_steps: 2,
         batch_sizes: vec![7],
         repeats: 1,
         ..tiny()
     }
-    .gpu_only();
+}
+
+/// `--gpu-only`: the GPU's rows and nothing of the CPU's, or an error
+/// where there is no adapter.
+#[test]
+fn a_gpu_only_bench_has_no_cpu_row() {
+    let opts = one_grid().gpu_only();
     let report = match bench(&opts, |_| {}) {
         Ok(report) => report,
         Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
@@ -65,14 +69,7 @@ fn a_gpu_only_bench_has_no_cpu_row() {
 /// an adapter.
 #[test]
 fn a_cpu_only_bench_has_no_gpu_row() {
-    let opts = BenchOptions {
-        grids: vec![6],
-        period_steps: 2,
-        batch_sizes: vec![7],
-        repeats: 1,
-        ..tiny()
-    }
-    .cpu_only();
+    let opts = one_grid().cpu_only();
     let report = bench(&opts, |_| {}).unwrap();
     assert_eq!(report.rows.len(), VARIANTS.len());
     assert!(report.rows.iter().all(|r| r.report.backend == "cpu"));
