@@ -64,8 +64,8 @@ struct BenchArgs {
     /// scripts/bench-gpu.sh runs); an error where there is no adapter.
     #[arg(long, conflicts_with = "iterations")]
     gpu_only: bool,
-    /// Only the CPU's rows, 32² to 256² (a few minutes); no GPU adapter is
-    /// opened.
+    /// Only the CPU's rows, 32² to 256² (11 minutes on 2 cores, most of it
+    /// the self-contact row at 256²); no GPU adapter is opened.
     #[arg(long, conflicts_with_all = ["iterations", "gpu_only"])]
     cpu_only: bool,
     /// Write the table as JSON.
