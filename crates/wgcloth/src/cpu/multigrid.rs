@@ -3,8 +3,9 @@
 //! coarsest smoothed by the patch smoother (four-colour block Gauss-Seidel
 //! over 2 × 2-node patches, forward down and backward up) or damped block
 //! Jacobi ([`Smoother`]), Galerkin coarse operators rebuilt every step, the
-//! coarsest level solved by a fixed number of block-Jacobi sweeps. A fixed symmetric positive definite linear
-//! operator, so CG stays CG. Mirrors wgsl/multigrid.wgsl kernel by kernel.
+//! coarsest level solved by a fixed number of block-Jacobi sweeps. A fixed
+//! symmetric positive definite linear operator, so CG stays CG. Mirrors
+//! wgsl/multigrid.wgsl kernel by kernel.
 //!
 //! Pinned vertices are filtered as in the fine solve: the interpolation
 //! P̃ = S P never reaches them, so every level solves for free motion only.

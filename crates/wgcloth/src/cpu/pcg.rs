@@ -126,8 +126,9 @@ pub struct PcgScratch {
 /// x and r updates with rᵀr and, for Jacobi, z = P⁻¹ r with rᵀz
 /// (multigrid's z is a V-cycle); and the p update. The GPU's `next` forms
 /// the new p where the product reads it; here that recomputation cost
-/// more than the pass it saves (`wgcloth bench --iterations`). Dot products sum in
-/// f64 so a 10⁶-term sum keeps the digits the convergence test reads.
+/// more than the pass it saves (`wgcloth bench --iterations`). Dot
+/// products sum in f64 so a 10⁶-term sum keeps the digits the convergence
+/// test reads.
 pub fn solve(
     a: &BlockMatrix,
     cloth: &Cloth,
