@@ -68,10 +68,34 @@ fn symmetric_part(m: mat3x3<f32>) -> mat3x3<f32> {
     return 0.5 * (m + transpose(m));
 }
 
-// Nearest symmetric NSD matrix: cyclic Jacobi eigen-decomposition, positive
-// eigenvalues clamped to zero (mirrors math::project_nsd).
+// Whether symmetric m is NSD: every principal minor of −m is nonnegative
+// (mirrors math::is_nsd).
+fn is_nsd(m: mat3x3<f32>) -> bool {
+    let n = -1.0 * m;
+    return n[0][0] >= 0.0 && n[1][1] >= 0.0 && n[2][2] >= 0.0
+        && n[0][0] * n[1][1] >= n[1][0] * n[1][0]
+        && n[0][0] * n[2][2] >= n[2][0] * n[2][0]
+        && n[1][1] * n[2][2] >= n[2][1] * n[2][1]
+        && determinant(n) >= 0.0;
+}
+
+// Nearest symmetric NSD matrix (mirrors math::project_nsd): a block that is
+// NSD already, nearly every one, is its own projection; any other has its
+// positive eigenvalues clamped to zero.
 fn project_nsd(m: mat3x3<f32>) -> Sym3 {
-    var a = symmetric_part(m);
+    let s = symmetric_part(m);
+    var out = s;
+    if !is_nsd(s) {
+        out = clamp_eigenvalues(s);
+    }
+    return Sym3(vec4<f32>(out[0][0], out[1][1], out[2][2], 0.5 * (out[0][1] + out[1][0])),
+                vec4<f32>(0.5 * (out[0][2] + out[2][0]), 0.5 * (out[1][2] + out[2][1]), 0.0, 0.0));
+}
+
+// Symmetric s with its positive eigenvalues clamped to zero: cyclic Jacobi
+// eigen-decomposition (math::symmetric_eigen).
+fn clamp_eigenvalues(s: mat3x3<f32>) -> mat3x3<f32> {
+    var a = s;
     var q = IDENTITY;
     for (var sweep = 0u; sweep < 8u; sweep++) {
         let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
@@ -117,8 +141,7 @@ fn project_nsd(m: mat3x3<f32>) -> Sym3 {
     for (var j = 0u; j < 3u; j++) {
         out += min(a[j][j], 0.0) * outer(q[j], q[j]);
     }
-    return Sym3(vec4<f32>(out[0][0], out[1][1], out[2][2], 0.5 * (out[0][1] + out[1][0])),
-                vec4<f32>(0.5 * (out[0][2] + out[2][0]), 0.5 * (out[1][2] + out[2][1]), 0.0, 0.0));
+    return out;
 }
 
 // The chain rule into the system with the three safety moves of

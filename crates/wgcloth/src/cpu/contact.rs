@@ -285,17 +285,26 @@ impl ContactFrame {
     /// k_n, k_d, k_t, μ) with c = depth ĉ and v_rel = approach ĉ + slide t̂,
     /// the same contact turned to the frame's directions.
     pub fn inputs(&self, kind: NetKind, k: &Coefficients) -> Vec<f32> {
-        let (r, a, coefficients) = (self.depth, self.approach, [k.kn, k.kd, k.kt, k.mu]);
-        let c = r * self.c_hat;
-        self.slides(kind)
-            .flat_map(|s| match kind {
-                NetKind::FrictionContact => [&[r, a, s][..], &coefficients].concat(),
+        let mut rows = Vec::new();
+        self.push_inputs(kind, k, &mut rows);
+        rows
+    }
+
+    /// [`inputs`](ContactFrame::inputs) appended to `rows`: a block's rows
+    /// are gathered without a vector per contact.
+    pub fn push_inputs(&self, kind: NetKind, k: &Coefficients, rows: &mut Vec<f32>) {
+        let (r, a) = (self.depth, self.approach);
+        for s in self.slides(kind) {
+            match kind {
+                NetKind::FrictionContact => rows.extend_from_slice(&[r, a, s]),
                 _ => {
                     let v = a * self.c_hat + s * self.t_hat;
-                    [&c.to_array()[..], &v.to_array(), &coefficients].concat()
+                    rows.extend_from_slice(&(r * self.c_hat).to_array());
+                    rows.extend_from_slice(&v.to_array());
                 }
-            })
-            .collect()
+            }
+            rows.extend_from_slice(&[k.kn, k.kd, k.kt, k.mu]);
+        }
     }
 
     /// A friction network's outputs y and input Jacobians j at the rows of
@@ -490,11 +499,11 @@ impl Model {
                     .iter()
                     .map(|(c, v)| ContactFrame::new(*c, *v))
                     .collect();
-                let inputs: Vec<f32> = frames
-                    .iter()
-                    .flatten()
-                    .flat_map(|f| f.inputs(net.kind, coefficients))
-                    .collect();
+                let width = net.kind.evaluations() * net.mlp.inputs();
+                let mut inputs = Vec::with_capacity(frames.len() * width);
+                for frame in frames.iter().flatten() {
+                    frame.push_inputs(net.kind, coefficients, &mut inputs);
+                }
                 let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
                 // Per contact: `evaluations` rows of outputs and of Jacobians.
                 let rows = net.kind.evaluations() * net.mlp.outputs();

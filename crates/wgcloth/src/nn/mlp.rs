@@ -74,19 +74,20 @@ impl Mlp {
     /// Reverse mode: one forward pass keeps each hidden unit's slope σ'(z),
     /// then the rows of ∂y/∂a are carried back through the layers,
     /// Δ ← (Δ diag(σ'(z))) W. That costs one forward pass plus one per
-    /// output (4 for the friction network) where forward mode costs one
-    /// plus one per input (7). The batch runs in blocks of `LANES` inputs
+    /// output (2 for the contact-frame friction network) where forward mode
+    /// costs one plus one per input of `wrt` (3). The batch runs in blocks of `LANES` inputs
     /// side by side, so each weight is read once per block and every
     /// multiply-add is vectorised across the block.
     pub fn forward_jacobian_batch(&self, xs: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
         let (n_in, outs, t) = (self.inputs(), self.outputs(), wrt.len());
         let n = xs.len() / n_in;
         let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * outs * t]);
+        let mut scratch = Scratch::default();
         for (b, block) in xs.chunks(LANES * n_in).enumerate() {
             let lanes = block.len() / n_in;
             let y = &mut values[b * LANES * outs..(b * LANES + lanes) * outs];
             let j = &mut jacobians[b * LANES * outs * t..(b * LANES + lanes) * outs * t];
-            self.block(block, wrt.clone(), y, j);
+            self.block(block, wrt.clone(), y, j, &mut scratch);
         }
         (values, jacobians)
     }
@@ -104,7 +105,9 @@ impl Mlp {
             .par_chunks(LANES * n_in)
             .zip(values.par_chunks_mut(LANES * outs))
             .zip(jacobians.par_chunks_mut(LANES * per_jacobian))
-            .for_each(|((x, y), j)| self.block(x, wrt.clone(), y, j));
+            .for_each_init(Scratch::default, |scratch, ((x, y), j)| {
+                self.block(x, wrt.clone(), y, j, scratch)
+            });
         jacobians.truncate(n * outs * t);
         (values, jacobians)
     }
@@ -113,13 +116,20 @@ impl Mlp {
     /// 8-wide vectors where the CPU has them (AVX2 and FMA). The build's
     /// baseline (x86-64: SSE2) has neither, and the multiply-adds are nearly
     /// all of the block's work.
-    fn block(&self, xs: &[f32], wrt: Range<usize>, values: &mut [f32], jacobians: &mut [f32]) {
+    fn block(
+        &self,
+        xs: &[f32],
+        wrt: Range<usize>,
+        values: &mut [f32],
+        jacobians: &mut [f32],
+        scratch: &mut Scratch,
+    ) {
         #[cfg(target_arch = "x86_64")]
         if has_avx2_fma() {
             // SAFETY: the CPU has both features, checked just above.
-            return unsafe { self.block_avx2_fma(xs, wrt, values, jacobians) };
+            return unsafe { self.block_avx2_fma(xs, wrt, values, jacobians, scratch) };
         }
-        self.block_with::<false>(xs, wrt, values, jacobians)
+        self.block_with::<false>(xs, wrt, values, jacobians, scratch)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -130,8 +140,9 @@ impl Mlp {
         wrt: Range<usize>,
         values: &mut [f32],
         jacobians: &mut [f32],
+        scratch: &mut Scratch,
     ) {
-        self.block_with::<true>(xs, wrt, values, jacobians)
+        self.block_with::<true>(xs, wrt, values, jacobians, scratch)
     }
 
     /// `block`, each multiply-add fused where `FUSED`; activations are
@@ -143,49 +154,61 @@ impl Mlp {
         wrt: Range<usize>,
         values: &mut [f32],
         jacobians: &mut [f32],
+        scratch: &mut Scratch,
     ) {
         let n_in = self.inputs();
         let lanes = xs.len() / n_in;
-        let mut a: Vec<Lanes> = (0..n_in)
-            .map(|k| std::array::from_fn(|l| if l < lanes { xs[l * n_in + k] } else { 0.0 }))
-            .collect();
+        let Scratch {
+            a,
+            z,
+            slopes,
+            delta,
+            next,
+        } = scratch;
+        a.clear();
+        a.extend(
+            (0..n_in)
+                .map(|k| std::array::from_fn(|l| if l < lanes { xs[l * n_in + k] } else { 0.0 })),
+        );
         // σ'(z) of every unit, layer after layer (1 on the linear output).
-        let mut slopes: Vec<Lanes> =
-            Vec::with_capacity(self.layers.iter().map(|l| l.outputs).sum());
-        let mut z: Vec<Lanes> = Vec::new();
+        slopes.clear();
         for (k, layer) in self.layers.iter().enumerate() {
             z.clear();
             let hidden = self.is_hidden(k);
             let n = layer.inputs;
-            let mut emit = |mut acc: Lanes| {
-                let mut slope = [1.0; LANES];
-                if hidden {
-                    for l in 0..LANES {
-                        if acc[l] < 0.0 {
-                            slope[l] = self.negative_slope;
-                            acc[l] *= self.negative_slope;
-                        }
-                    }
-                }
-                z.push(acc);
+            // Selects, not branches: a lane's sign is a coin toss, and a
+            // branch per lane mispredicted more time than the layer's
+            // multiply-adds took.
+            let mut emit = |acc: Lanes| {
+                let slope = match hidden {
+                    true => acc.map(|z| if z < 0.0 { self.negative_slope } else { 1.0 }),
+                    false => [1.0; LANES],
+                };
+                z.push(std::array::from_fn(|l| acc[l] * slope[l]));
                 slopes.push(slope);
             };
             let mut o = 0;
             while o < layer.outputs {
-                let weight = |t: usize, k: usize| layer.weight[(o + t) * n + k];
+                let a = &a[..n];
                 if layer.outputs - o >= TILE {
+                    let rows: [&[f32]; TILE] =
+                        std::array::from_fn(|t| &layer.weight[(o + t) * n..][..n]);
                     let bias = std::array::from_fn(|t| layer.bias[o + t]);
-                    dot_tile::<TILE, FUSED>(n, bias, weight, |k| &a[k])
+                    let terms = a.iter().enumerate();
+                    let terms = terms.map(|(k, ak)| (std::array::from_fn(|t| rows[t][k]), ak));
+                    dot_tile::<TILE, FUSED>(bias, terms)
                         .into_iter()
                         .for_each(&mut emit);
                     o += TILE;
                 } else {
-                    let [acc] = dot_tile::<1, FUSED>(n, [layer.bias[o]], weight, |k| &a[k]);
+                    let row = &layer.weight[o * n..][..n];
+                    let terms = row.iter().zip(a).map(|(w, ak)| ([*w], ak));
+                    let [acc] = dot_tile::<1, FUSED>([layer.bias[o]], terms);
                     emit(acc);
                     o += 1;
                 }
             }
-            std::mem::swap(&mut a, &mut z);
+            std::mem::swap(a, z);
         }
         let outs = a.len();
         for l in 0..lanes {
@@ -197,44 +220,48 @@ impl Mlp {
             return;
         }
         // Δ[u · outs + r] = ∂y_r/∂a_u, starting from the identity.
-        let mut delta: Vec<Lanes> = (0..outs * outs)
-            .map(|e| [if e / outs == e % outs { 1.0 } else { 0.0 }; LANES])
-            .collect();
-        let mut next: Vec<Lanes> = Vec::new();
+        delta.clear();
+        delta.extend(
+            (0..outs * outs).map(|e| [if e / outs == e % outs { 1.0 } else { 0.0 }; LANES]),
+        );
         let mut end = slopes.len();
         for layer in self.layers.iter().rev() {
             let slope = &slopes[end - layer.outputs..end];
             end -= layer.outputs;
             for (o, s) in slope.iter().enumerate() {
                 for d in &mut delta[o * outs..(o + 1) * outs] {
-                    for l in 0..LANES {
-                        d[l] *= s[l];
-                    }
+                    // A new array, not a lane loop in place: the loop
+                    // compiled to scalar multiplies.
+                    *d = std::array::from_fn(|l| d[l] * s[l]);
                 }
             }
             next.clear();
             next.resize(layer.inputs * outs, [0.0; LANES]);
             let mut i = 0;
             while i < layer.inputs {
-                // Column i + t of W: its weight on output o.
-                let weight = |t: usize, o: usize| layer.weight[o * layer.inputs + i + t];
                 let tile = if layer.inputs - i >= TILE { TILE } else { 1 };
                 for r in 0..outs {
-                    let delta_r = |o: usize| &delta[o * outs + r];
+                    // Over the layer's outputs o: W's columns i.. on row o,
+                    // and ∂y_r/∂z_o.
+                    let terms = || {
+                        let rows = layer.weight.chunks_exact(layer.inputs);
+                        rows.map(|w| &w[i..i + tile])
+                            .zip(delta.chunks_exact(outs).map(|d| &d[r]))
+                    };
                     if tile == TILE {
-                        let acc =
-                            dot_tile::<TILE, FUSED>(layer.outputs, [0.0; TILE], weight, delta_r);
+                        let terms = terms().map(|(w, d)| (w.try_into().unwrap(), d));
+                        let acc = dot_tile::<TILE, FUSED>([0.0; TILE], terms);
                         for (t, acc) in acc.into_iter().enumerate() {
                             next[(i + t) * outs + r] = acc;
                         }
                     } else {
-                        [next[i * outs + r]] =
-                            dot_tile::<1, FUSED>(layer.outputs, [0.0], weight, delta_r);
+                        let terms = terms().map(|(w, d)| ([w[0]], d));
+                        [next[i * outs + r]] = dot_tile::<1, FUSED>([0.0], terms);
                     }
                 }
                 i += tile;
             }
-            std::mem::swap(&mut delta, &mut next);
+            std::mem::swap(delta, next);
         }
         let t = wrt.len();
         for l in 0..lanes {
@@ -265,20 +292,17 @@ pub fn has_avx2_fma() -> bool {
 /// `TILE` of them keep both FMA pipes busy.
 const TILE: usize = 4;
 
-/// For T outputs at once, over every lane: init[t] + Σ_k w(t, k) a(k), the
-/// sum in k order whatever T.
+/// For T outputs at once, over every lane: init[t] + Σ_k w_k[t] a_k over
+/// the terms (w_k, a_k), the sum in their order whatever T.
 #[inline(always)]
 fn dot_tile<'a, const T: usize, const FUSED: bool>(
-    n: usize,
     init: [f32; T],
-    w: impl Fn(usize, usize) -> f32,
-    a: impl Fn(usize) -> &'a Lanes,
+    terms: impl Iterator<Item = ([f32; T], &'a Lanes)>,
 ) -> [Lanes; T] {
     let mut acc = init.map(|b| [b; LANES]);
-    for k in 0..n {
-        let ak = a(k);
+    for (wk, ak) in terms {
         for (t, acc) in acc.iter_mut().enumerate() {
-            let wk = w(t, k);
+            let wk = wk[t];
             for l in 0..LANES {
                 acc[l] = multiply_add::<FUSED>(wk, ak[l], acc[l]);
             }
@@ -292,6 +316,17 @@ fn dot_tile<'a, const T: usize, const FUSED: bool>(
 #[inline(always)]
 fn multiply_add<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
     if FUSED { a.mul_add(b, c) } else { a * b + c }
+}
+
+/// A block's activations, slopes and reverse-mode rows, kept from one block
+/// to the next so that a batch allocates them once.
+#[derive(Default)]
+struct Scratch {
+    a: Vec<Lanes>,
+    z: Vec<Lanes>,
+    slopes: Vec<Lanes>,
+    delta: Vec<Lanes>,
+    next: Vec<Lanes>,
 }
 
 /// Inputs evaluated side by side in `Mlp::forward_jacobian_batch`.
@@ -363,9 +398,9 @@ mod tests {
         let run = |fused: bool| {
             let (mut y, mut j) = (vec![0.0; LANES * 2], vec![0.0; LANES * 2 * 3]);
             if fused {
-                net.block_with::<true>(&xs, 0..3, &mut y, &mut j);
+                net.block_with::<true>(&xs, 0..3, &mut y, &mut j, &mut Scratch::default());
             } else {
-                net.block_with::<false>(&xs, 0..3, &mut y, &mut j);
+                net.block_with::<false>(&xs, 0..3, &mut y, &mut j, &mut Scratch::default());
             }
             (y, j)
         };
