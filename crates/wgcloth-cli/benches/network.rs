@@ -47,9 +47,10 @@ fn network(c: &mut Criterion) {
         .is_some_and(|(ctx, _)| ctx.adapter.device_type == wgpu::DeviceType::Cpu);
     for (name, network) in networks() {
         let (net, wrt) = (&network.mlp, network.kind.wrt());
-        // A contact is one row of the network, or two for the contact frame's.
+        // A contact is one row of the network per evaluation, each timed
+        // with its whole Jacobian.
         let evaluations = network.kind.evaluations();
-        let flop = 2 * network.jacobian_multiply_adds();
+        let flop = 2 * net.jacobian_multiply_adds() * evaluations;
         eprintln!("network {name}: {flop} floating-point operations per contact on the CPU");
         let mut rng = Rng::new(5);
         let inputs: Vec<f32> = (0..SIZES[SIZES.len() - 1])

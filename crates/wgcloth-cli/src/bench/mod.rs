@@ -929,12 +929,13 @@ fn network_rows(
         let inputs: Vec<f32> = (0..largest)
             .flat_map(|_| uniform_inputs(kind, &mut rng))
             .collect();
-        // A contact is one row of the network, or two for the contact frame's.
+        // A contact is one row of the network per evaluation, each timed
+        // with its whole Jacobian.
         let evaluations = kind.evaluations();
+        let flop = 2 * net.jacobian_multiply_adds() * evaluations;
         for &n in &opts.batch_sizes {
             let rows_n = n * evaluations;
             let batch = &inputs[..rows_n * net.inputs()];
-            let flop = 2 * network.jacobian_multiply_adds();
             if opts.backends != Backends::Gpu && (n * flop) as f64 <= CPU_BUDGET {
                 progress(&format!("network {} cpu {n}", shipped.path));
                 let ms = timed(opts.repeats, || {

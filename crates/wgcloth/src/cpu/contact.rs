@@ -285,16 +285,31 @@ impl ContactFrame {
     /// k_n, k_d, k_t, μ) with c = depth ĉ and v_rel = approach ĉ + slide t̂,
     /// the same contact turned to the frame's directions.
     pub fn inputs(&self, kind: NetKind, k: &Coefficients) -> Vec<f32> {
-        let mut rows = Vec::new();
-        self.push_inputs(kind, k, &mut rows);
+        let (mut rows, mut still) = (Vec::new(), Vec::new());
+        self.push_inputs(kind, k, &mut rows, &mut still);
+        rows.extend(still);
         rows
     }
 
-    /// [`inputs`](ContactFrame::inputs) appended to `rows`: a block's rows
-    /// are gathered without a vector per contact.
-    pub fn push_inputs(&self, kind: NetKind, k: &Coefficients, rows: &mut Vec<f32>) {
+    /// [`inputs`](ContactFrame::inputs) appended, the rows at ±slide to
+    /// `moving` and the row at slide 0 to `still`: a block's rows are
+    /// gathered without a vector per contact, and the still rows, of which
+    /// only g_n is read, can be carried back for g_n alone.
+    pub fn push_inputs(
+        &self,
+        kind: NetKind,
+        k: &Coefficients,
+        moving: &mut Vec<f32>,
+        still: &mut Vec<f32>,
+    ) {
         let (r, a) = (self.depth, self.approach);
-        for s in self.slides(kind) {
+        for (row, s) in self.slides(kind).enumerate() {
+            let moving_rows = kind.evaluations() - kind.still_rows();
+            let rows = if row < moving_rows {
+                &mut *moving
+            } else {
+                &mut *still
+            };
             match kind {
                 NetKind::FrictionContact => rows.extend_from_slice(&[r, a, s]),
                 _ => {
@@ -312,8 +327,24 @@ impl ContactFrame {
     /// contact-frame network's: (g_n, g_t) a row, and row-major [2 × (depth,
     /// approach, slide)]) and held to the friction cone.
     pub fn network_force(&self, kind: NetKind, y: &[f32], j: &[f32], mu: f32) -> ForceJacobian {
+        let still = (kind == NetKind::FrictionContact).then(|| (y[4], &j[12..15]));
+        self.moving_force(kind, y, j, still, mu)
+    }
+
+    /// [`network_force`](ContactFrame::network_force) from the rows at
+    /// ±slide, with the still row's g_n and ∂g_n/∂(depth, approach, slide)
+    /// given apart (the contact-frame network's; None for the world-frame
+    /// one's, which has no still row).
+    fn moving_force(
+        &self,
+        kind: NetKind,
+        y: &[f32],
+        j: &[f32],
+        still: Option<(f32, &[f32])>,
+        mu: f32,
+    ) -> ForceJacobian {
         match kind {
-            NetKind::FrictionContact => self.force(y, j, Some((y[4], &j[12..15])), mu),
+            NetKind::FrictionContact => self.force(y, j, still, mu),
             _ => {
                 let (y, j) = self.read_world_rows(y, j);
                 self.force(&y, &j, None, mu)
@@ -499,22 +530,27 @@ impl Model {
                     .iter()
                     .map(|(c, v)| ContactFrame::new(*c, *v))
                     .collect();
-                let width = net.kind.evaluations() * net.mlp.inputs();
-                let mut inputs = Vec::with_capacity(frames.len() * width);
+                let (kind, mlp) = (net.kind, &net.mlp);
+                let moving_rows = kind.evaluations() - kind.still_rows();
+                let mut moving = Vec::with_capacity(frames.len() * moving_rows * mlp.inputs());
+                let mut still = Vec::new();
                 for frame in frames.iter().flatten() {
-                    frame.push_inputs(net.kind, coefficients, &mut inputs);
+                    frame.push_inputs(kind, coefficients, &mut moving, &mut still);
                 }
-                let (y, j) = net.mlp.forward_jacobian_batch(&inputs, net.kind.wrt());
-                // Per contact: `evaluations` rows of outputs and of Jacobians.
-                let rows = net.kind.evaluations() * net.mlp.outputs();
-                let jacobians = rows * net.kind.wrt().len();
+                let (y, j) = mlp.forward_jacobian_batch(&moving, kind.wrt());
+                // Only g_n is read at slide 0: one reverse pass, not one per
+                // output.
+                let (y0, j0) = mlp.forward_jacobian_rows(&still, kind.wrt(), 0..1);
+                // Per contact: two rows of outputs and of Jacobians, and
+                // (the contact-frame network) g_n's value and gradient.
+                let (outs, t) = (mlp.outputs(), kind.wrt().len());
                 let forces = each_framed(&frames, |f, i| {
-                    f.network_force(
-                        net.kind,
-                        &y[rows * i..],
-                        &j[jacobians * i..],
-                        coefficients.mu,
-                    )
+                    let g_n = (!still.is_empty()).then(|| (y0[outs * i], &j0[t * i..t * (i + 1)]));
+                    let (y, j) = (
+                        &y[moving_rows * outs * i..],
+                        &j[moving_rows * outs * t * i..],
+                    );
+                    f.moving_force(kind, y, j, g_n, coefficients.mu)
                 });
                 forces.into_iter().map(|f| f.scaled(*scale)).collect()
             }

@@ -79,15 +79,29 @@ impl Mlp {
     /// side by side, so each weight is read once per block and every
     /// multiply-add is vectorised across the block.
     pub fn forward_jacobian_batch(&self, xs: &[f32], wrt: Range<usize>) -> (Vec<f32>, Vec<f32>) {
-        let (n_in, outs, t) = (self.inputs(), self.outputs(), wrt.len());
+        self.forward_jacobian_rows(xs, wrt, 0..self.outputs())
+    }
+
+    /// `forward_jacobian_batch` with only the Jacobian's rows `rows` (of
+    /// the outputs), [n × |rows| × |wrt|]: each row is one reverse pass, so
+    /// a caller that needs one output's gradient pays for one.
+    pub fn forward_jacobian_rows(
+        &self,
+        xs: &[f32],
+        wrt: Range<usize>,
+        rows: Range<usize>,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let (n_in, outs) = (self.inputs(), self.outputs());
+        let per_jacobian = rows.len() * wrt.len();
         let n = xs.len() / n_in;
-        let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * outs * t]);
-        let mut scratch = Scratch::default();
+        let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * per_jacobian]);
+        let mut scratch = Scratch::new(self);
+        let wanted = Wanted { wrt, rows };
         for (b, block) in xs.chunks(LANES * n_in).enumerate() {
             let lanes = block.len() / n_in;
             let y = &mut values[b * LANES * outs..(b * LANES + lanes) * outs];
-            let j = &mut jacobians[b * LANES * outs * t..(b * LANES + lanes) * outs * t];
-            self.block(block, wrt.clone(), y, j, &mut scratch);
+            let j = &mut jacobians[b * LANES * per_jacobian..(b * LANES + lanes) * per_jacobian];
+            self.block(block, &wanted, y, j, &mut scratch);
         }
         (values, jacobians)
     }
@@ -105,9 +119,16 @@ impl Mlp {
             .par_chunks(LANES * n_in)
             .zip(values.par_chunks_mut(LANES * outs))
             .zip(jacobians.par_chunks_mut(LANES * per_jacobian))
-            .for_each_init(Scratch::default, |scratch, ((x, y), j)| {
-                self.block(x, wrt.clone(), y, j, scratch)
-            });
+            .for_each_init(
+                || Scratch::new(self),
+                |scratch, ((x, y), j)| {
+                    let wanted = Wanted {
+                        wrt: wrt.clone(),
+                        rows: 0..outs,
+                    };
+                    self.block(x, &wanted, y, j, scratch)
+                },
+            );
         jacobians.truncate(n * outs * t);
         (values, jacobians)
     }
@@ -119,7 +140,7 @@ impl Mlp {
     fn block(
         &self,
         xs: &[f32],
-        wrt: Range<usize>,
+        wanted: &Wanted,
         values: &mut [f32],
         jacobians: &mut [f32],
         scratch: &mut Scratch,
@@ -127,9 +148,9 @@ impl Mlp {
         #[cfg(target_arch = "x86_64")]
         if has_avx2_fma() {
             // SAFETY: the CPU has both features, checked just above.
-            return unsafe { self.block_avx2_fma(xs, wrt, values, jacobians, scratch) };
+            return unsafe { self.block_avx2_fma(xs, wanted, values, jacobians, scratch) };
         }
-        self.block_with::<false>(xs, wrt, values, jacobians, scratch)
+        self.block_with::<false>(xs, wanted, values, jacobians, scratch)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -137,12 +158,12 @@ impl Mlp {
     fn block_avx2_fma(
         &self,
         xs: &[f32],
-        wrt: Range<usize>,
+        wanted: &Wanted,
         values: &mut [f32],
         jacobians: &mut [f32],
         scratch: &mut Scratch,
     ) {
-        self.block_with::<true>(xs, wrt, values, jacobians, scratch)
+        self.block_with::<true>(xs, wanted, values, jacobians, scratch)
     }
 
     /// `block`, each multiply-add fused where `FUSED`; activations are
@@ -151,7 +172,7 @@ impl Mlp {
     fn block_with<const FUSED: bool>(
         &self,
         xs: &[f32],
-        wrt: Range<usize>,
+        wanted: &Wanted,
         values: &mut [f32],
         jacobians: &mut [f32],
         scratch: &mut Scratch,
@@ -174,18 +195,10 @@ impl Mlp {
         slopes.clear();
         for (k, layer) in self.layers.iter().enumerate() {
             z.clear();
-            let hidden = self.is_hidden(k);
             let n = layer.inputs;
-            // Selects, not branches: a lane's sign is a coin toss, and a
-            // branch per lane mispredicted more time than the layer's
-            // multiply-adds took.
-            let mut emit = |acc: Lanes| {
-                let slope = match hidden {
-                    true => acc.map(|z| if z < 0.0 { self.negative_slope } else { 1.0 }),
-                    false => [1.0; LANES],
-                };
-                z.push(std::array::from_fn(|l| acc[l] * slope[l]));
-                slopes.push(slope);
+            let slope = match self.is_hidden(k) {
+                true => self.negative_slope,
+                false => 1.0,
             };
             let mut o = 0;
             while o < layer.outputs {
@@ -196,15 +209,15 @@ impl Mlp {
                     let bias = std::array::from_fn(|t| layer.bias[o + t]);
                     let terms = a.iter().enumerate();
                     let terms = terms.map(|(k, ak)| (std::array::from_fn(|t| rows[t][k]), ak));
-                    dot_tile::<TILE, FUSED>(bias, terms)
-                        .into_iter()
-                        .for_each(&mut emit);
+                    for acc in dot_tile::<TILE, FUSED>(bias, terms) {
+                        activate(acc, slope, z, slopes);
+                    }
                     o += TILE;
                 } else {
                     let row = &layer.weight[o * n..][..n];
                     let terms = row.iter().zip(a).map(|(w, ak)| ([*w], ak));
                     let [acc] = dot_tile::<1, FUSED>([layer.bias[o]], terms);
-                    emit(acc);
+                    activate(acc, slope, z, slopes);
                     o += 1;
                 }
             }
@@ -216,14 +229,21 @@ impl Mlp {
                 values[l * outs + o] = a[o][l];
             }
         }
+        let Wanted { wrt, rows } = wanted;
         if wrt.is_empty() {
             return;
         }
-        // Δ[u · outs + r] = ∂y_r/∂a_u, starting from the identity.
+        // Δ[u · outs + r] = ∂y_{rows.start + r}/∂a_u, from here on with
+        // outs = |rows|, starting from the identity's columns `rows`.
+        let outs = rows.len();
         delta.clear();
-        delta.extend(
-            (0..outs * outs).map(|e| [if e / outs == e % outs { 1.0 } else { 0.0 }; LANES]),
-        );
+        delta.extend((0..a.len() * outs).map(|e| {
+            [if e / outs == rows.start + e % outs {
+                1.0
+            } else {
+                0.0
+            }; LANES]
+        }));
         let mut end = slopes.len();
         for layer in self.layers.iter().rev() {
             let slope = &slopes[end - layer.outputs..end];
@@ -244,8 +264,9 @@ impl Mlp {
                     // Over the layer's outputs o: W's columns i.. on row o,
                     // and ∂y_r/∂z_o.
                     let terms = || {
-                        let rows = layer.weight.chunks_exact(layer.inputs);
-                        rows.map(|w| &w[i..i + tile])
+                        let w_rows = layer.weight.chunks_exact(layer.inputs);
+                        w_rows
+                            .map(|w| &w[i..i + tile])
                             .zip(delta.chunks_exact(outs).map(|d| &d[r]))
                     };
                     if tile == TILE {
@@ -272,6 +293,19 @@ impl Mlp {
             }
         }
     }
+}
+
+/// LeakyReLU of one unit's pre-activations `acc` (`negative_slope` 1 on
+/// the linear output layer), appended to `z`, with σ' to `slopes`. Selects,
+/// not branches: a lane's sign is a coin toss, and a branch per lane
+/// mispredicted more time than the layer's multiply-adds took. Inlined, so
+/// that it is compiled with the vector width of the block calling it (as
+/// a closure it was not, and took a sixth of the network's time).
+#[inline(always)]
+fn activate(acc: Lanes, negative_slope: f32, z: &mut Vec<Lanes>, slopes: &mut Vec<Lanes>) {
+    let slope = acc.map(|z| if z < 0.0 { negative_slope } else { 1.0 });
+    z.push(std::array::from_fn(|l| acc[l] * slope[l]));
+    slopes.push(slope);
 }
 
 /// Whether this CPU has AVX2 and FMA, which [`Mlp`] then uses (the x86-64
@@ -318,15 +352,41 @@ fn multiply_add<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
     if FUSED { a.mul_add(b, c) } else { a * b + c }
 }
 
+/// What a block computes the Jacobian of: the outputs `rows` with respect
+/// to the inputs `wrt`.
+struct Wanted {
+    wrt: Range<usize>,
+    rows: Range<usize>,
+}
+
 /// A block's activations, slopes and reverse-mode rows, kept from one block
 /// to the next so that a batch allocates them once.
-#[derive(Default)]
 struct Scratch {
     a: Vec<Lanes>,
     z: Vec<Lanes>,
     slopes: Vec<Lanes>,
     delta: Vec<Lanes>,
     next: Vec<Lanes>,
+}
+
+impl Scratch {
+    /// Room for `net`'s widest layer and all its rows carried back, so a
+    /// block never grows them: a contact block runs the network twice, and
+    /// growing five vectors from empty each time cost it a tenth of its
+    /// time in the allocator.
+    fn new(net: &Mlp) -> Scratch {
+        let widest = net.layers.iter().map(|l| l.inputs.max(l.outputs));
+        let widest = widest.max().unwrap_or(0);
+        let units = net.layers.iter().map(|l| l.outputs).sum();
+        let rows = || Vec::with_capacity(widest * net.outputs());
+        Scratch {
+            a: Vec::with_capacity(widest),
+            z: Vec::with_capacity(widest),
+            slopes: Vec::with_capacity(units),
+            delta: rows(),
+            next: rows(),
+        }
+    }
 }
 
 /// Inputs evaluated side by side in `Mlp::forward_jacobian_batch`.
@@ -377,6 +437,25 @@ mod tests {
     }
 
     #[test]
+    fn a_range_of_jacobian_rows_is_those_rows_of_the_full_one() {
+        // 21 inputs: a full block and a partial one, 4 outputs.
+        let net = random(&[6, 20, 9, 4], 5);
+        let xs: Vec<f32> = (0..21 * 6).map(|i| (i as f32 * 0.53).cos()).collect();
+        let (y, full) = net.forward_jacobian_batch(&xs, 1..5);
+        for rows in [0..1, 1..3, 3..4] {
+            let (yr, part) = net.forward_jacobian_rows(&xs, 1..5, rows.clone());
+            assert_eq!(y, yr, "outputs, rows {rows:?}");
+            for (i, (f, p)) in full.chunks(16).zip(part.chunks(rows.len() * 4)).enumerate() {
+                assert_eq!(
+                    &f[rows.start * 4..rows.end * 4],
+                    p,
+                    "input {i}, rows {rows:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn a_batch_is_each_input_on_its_own() {
         // 37 inputs: two full blocks and a partial one.
         let net = random(&[10, 24, 17, 3], 3);
@@ -397,10 +476,17 @@ mod tests {
         let xs: Vec<f32> = (0..LANES * 7).map(|i| (i as f32 * 0.61).sin()).collect();
         let run = |fused: bool| {
             let (mut y, mut j) = (vec![0.0; LANES * 2], vec![0.0; LANES * 2 * 3]);
+            let (wanted, scratch) = (
+                &Wanted {
+                    wrt: 0..3,
+                    rows: 0..2,
+                },
+                &mut Scratch::new(&net),
+            );
             if fused {
-                net.block_with::<true>(&xs, 0..3, &mut y, &mut j, &mut Scratch::default());
+                net.block_with::<true>(&xs, wanted, &mut y, &mut j, scratch);
             } else {
-                net.block_with::<false>(&xs, 0..3, &mut y, &mut j, &mut Scratch::default());
+                net.block_with::<false>(&xs, wanted, &mut y, &mut j, scratch);
             }
             (y, j)
         };

@@ -129,6 +129,16 @@ impl NetKind {
         }
     }
 
+    /// Of the [`evaluations`](NetKind::evaluations), those of which only
+    /// the first output (g_n) and its gradient are read: the
+    /// contact-frame network's row at slide 0. They come last.
+    pub fn still_rows(self) -> usize {
+        match self {
+            NetKind::FrictionContact => 1,
+            NetKind::Naive | NetKind::Friction => 0,
+        }
+    }
+
     /// The kind of data (and of `gen-data`) a network of this kind learns from.
     pub fn data(self) -> NetKind {
         match self {
@@ -171,9 +181,13 @@ impl Network {
         self.mlp.multiply_adds() * self.kind.evaluations()
     }
 
-    /// Multiply-adds of one contact's forces and Jacobians in reverse mode.
+    /// Multiply-adds of one contact's forces and Jacobians in reverse mode:
+    /// a forward pass per evaluation, and a reverse pass per output read,
+    /// which at a still row is g_n alone.
     pub fn jacobian_multiply_adds(&self) -> usize {
-        self.mlp.jacobian_multiply_adds() * self.kind.evaluations()
+        let (rows, still) = (self.kind.evaluations(), self.kind.still_rows());
+        let passes = rows + (rows - still) * self.mlp.outputs() + still;
+        self.mlp.multiply_adds() * passes
     }
 }
 
