@@ -533,7 +533,7 @@ impl Model {
                 let (kind, mlp) = (net.kind, &net.mlp);
                 let moving_rows = kind.evaluations() - kind.still_rows();
                 let mut moving = Vec::with_capacity(frames.len() * moving_rows * mlp.inputs());
-                let mut still = Vec::new();
+                let mut still = Vec::with_capacity(frames.len() * kind.still_rows() * mlp.inputs());
                 for frame in frames.iter().flatten() {
                     frame.push_inputs(kind, coefficients, &mut moving, &mut still);
                 }
@@ -544,15 +544,15 @@ impl Model {
                 // Per contact: two rows of outputs and of Jacobians, and
                 // (the contact-frame network) g_n's value and gradient.
                 let (outs, t) = (mlp.outputs(), kind.wrt().len());
-                let forces = each_framed(&frames, |f, i| {
+                each_framed(&frames, |f, i| {
                     let g_n = (!still.is_empty()).then(|| (y0[outs * i], &j0[t * i..t * (i + 1)]));
                     let (y, j) = (
                         &y[moving_rows * outs * i..],
                         &j[moving_rows * outs * t * i..],
                     );
                     f.moving_force(kind, y, j, g_n, coefficients.mu)
-                });
-                forces.into_iter().map(|f| f.scaled(*scale)).collect()
+                        .scaled(*scale)
+                })
             }
             Model::NaiveNet { net, stiffness } => {
                 let frames: Vec<Option<LocalFrame>> = (0..contacts.len())
