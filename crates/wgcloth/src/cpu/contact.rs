@@ -303,8 +303,8 @@ impl ContactFrame {
         still: &mut Vec<f32>,
     ) {
         let (r, a) = (self.depth, self.approach);
+        let moving_rows = kind.evaluations() - kind.still_rows();
         for (row, s) in self.slides(kind).enumerate() {
-            let moving_rows = kind.evaluations() - kind.still_rows();
             let rows = if row < moving_rows {
                 &mut *moving
             } else {

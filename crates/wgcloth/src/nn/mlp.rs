@@ -372,8 +372,8 @@ struct Scratch {
 impl Scratch {
     /// Room for `net`'s widest layer and all its rows carried back, so a
     /// block never grows them: a contact block runs the network twice, and
-    /// growing five vectors from empty each time cost it a tenth of its
-    /// time in the allocator.
+    /// growing five vectors from empty each time cost it about a tenth of
+    /// its time in the allocator.
     fn new(net: &Mlp) -> Scratch {
         let widest = net.layers.iter().map(|l| l.inputs.max(l.outputs));
         let widest = widest.max().unwrap_or(0);
