@@ -101,7 +101,12 @@ impl Mlp {
             let lanes = block.len() / n_in;
             let y = &mut values[b * LANES * outs..(b * LANES + lanes) * outs];
             let j = &mut jacobians[b * LANES * per_jacobian..(b * LANES + lanes) * per_jacobian];
-            self.block(block, &wanted, y, j, &mut scratch);
+            let io = Block {
+                xs: block,
+                values: y,
+                jacobians: j,
+            };
+            self.block(io, &wanted, &mut scratch);
         }
         (values, jacobians)
     }
@@ -126,7 +131,12 @@ impl Mlp {
                         wrt: wrt.clone(),
                         rows: 0..outs,
                     };
-                    self.block(x, &wanted, y, j, scratch)
+                    let io = Block {
+                        xs: x,
+                        values: y,
+                        jacobians: j,
+                    };
+                    self.block(io, &wanted, scratch)
                 },
             );
         jacobians.truncate(n * outs * t);
@@ -137,47 +147,31 @@ impl Mlp {
     /// 8-wide vectors where the CPU has them (AVX2 and FMA). The build's
     /// baseline (x86-64: SSE2) has neither, and the multiply-adds are nearly
     /// all of the block's work.
-    fn block(
-        &self,
-        xs: &[f32],
-        wanted: &Wanted,
-        values: &mut [f32],
-        jacobians: &mut [f32],
-        scratch: &mut Scratch,
-    ) {
+    fn block(&self, io: Block, wanted: &Wanted, scratch: &mut Scratch) {
         #[cfg(target_arch = "x86_64")]
         if has_avx2_fma() {
             // SAFETY: the CPU has both features, checked just above.
-            return unsafe { self.block_avx2_fma(xs, wanted, values, jacobians, scratch) };
+            return unsafe { self.block_avx2_fma(io, wanted, scratch) };
         }
-        self.block_with::<false>(xs, wanted, values, jacobians, scratch)
+        self.block_with::<false>(io, wanted, scratch)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn block_avx2_fma(
-        &self,
-        xs: &[f32],
-        wanted: &Wanted,
-        values: &mut [f32],
-        jacobians: &mut [f32],
-        scratch: &mut Scratch,
-    ) {
-        self.block_with::<true>(xs, wanted, values, jacobians, scratch)
+    fn block_avx2_fma(&self, io: Block, wanted: &Wanted, scratch: &mut Scratch) {
+        self.block_with::<true>(io, wanted, scratch)
     }
 
     /// `block`, each multiply-add fused where `FUSED`; activations are
     /// stored lane-minor (unit k of every input side by side).
     #[inline(always)]
-    fn block_with<const FUSED: bool>(
-        &self,
-        xs: &[f32],
-        wanted: &Wanted,
-        values: &mut [f32],
-        jacobians: &mut [f32],
-        scratch: &mut Scratch,
-    ) {
+    fn block_with<const FUSED: bool>(&self, io: Block, wanted: &Wanted, scratch: &mut Scratch) {
         let n_in = self.inputs();
+        let Block {
+            xs,
+            values,
+            jacobians,
+        } = io;
         let lanes = xs.len() / n_in;
         let Scratch {
             a,
@@ -352,6 +346,14 @@ fn multiply_add<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
     if FUSED { a.mul_add(b, c) } else { a * b + c }
 }
 
+/// A block's inputs, at most `LANES` rows, and where its outputs and
+/// Jacobians go.
+struct Block<'a> {
+    xs: &'a [f32],
+    values: &'a mut [f32],
+    jacobians: &'a mut [f32],
+}
+
 /// What a block computes the Jacobian of: the outputs `rows` with respect
 /// to the inputs `wrt`.
 struct Wanted {
@@ -483,10 +485,15 @@ mod tests {
                 },
                 &mut Scratch::new(&net),
             );
+            let io = Block {
+                xs: &xs,
+                values: &mut y,
+                jacobians: &mut j,
+            };
             if fused {
-                net.block_with::<true>(&xs, wanted, &mut y, &mut j, scratch);
+                net.block_with::<true>(io, wanted, scratch);
             } else {
-                net.block_with::<false>(&xs, wanted, &mut y, &mut j, scratch);
+                net.block_with::<false>(io, wanted, scratch);
             }
             (y, j)
         };
