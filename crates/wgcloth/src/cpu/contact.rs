@@ -303,9 +303,8 @@ impl ContactFrame {
         still: &mut Vec<f32>,
     ) {
         let (r, a) = (self.depth, self.approach);
-        let moving_rows = kind.evaluations() - kind.still_rows();
         for (row, s) in self.slides(kind).enumerate() {
-            let rows = if row < moving_rows {
+            let rows = if row < kind.moving_rows() {
                 &mut *moving
             } else {
                 &mut *still
@@ -531,7 +530,7 @@ impl Model {
                     .map(|(c, v)| ContactFrame::new(*c, *v))
                     .collect();
                 let (kind, mlp) = (net.kind, &net.mlp);
-                let moving_rows = kind.evaluations() - kind.still_rows();
+                let moving_rows = kind.moving_rows();
                 let mut moving = Vec::with_capacity(frames.len() * moving_rows * mlp.inputs());
                 let mut still = Vec::with_capacity(frames.len() * kind.still_rows() * mlp.inputs());
                 for frame in frames.iter().flatten() {
@@ -541,11 +540,13 @@ impl Model {
                 // Only g_n is read at slide 0: one reverse pass, not one per
                 // output.
                 let (y0, j0) = mlp.forward_jacobian_rows(&still, kind.wrt(), 0..1);
-                // Per contact: two rows of outputs and of Jacobians, and
-                // (the contact-frame network) g_n's value and gradient.
+                // Per contact: `moving_rows` rows of outputs and of
+                // Jacobians, and (the contact-frame network) g_n's value and
+                // gradient.
                 let (outs, t) = (mlp.outputs(), kind.wrt().len());
                 each_framed(&frames, |f, i| {
-                    let g_n = (!still.is_empty()).then(|| (y0[outs * i], &j0[t * i..t * (i + 1)]));
+                    let g_n =
+                        (kind.still_rows() > 0).then(|| (y0[outs * i], &j0[t * i..t * (i + 1)]));
                     let (y, j) = (
                         &y[moving_rows * outs * i..],
                         &j[moving_rows * outs * t * i..],

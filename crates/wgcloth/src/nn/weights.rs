@@ -139,6 +139,12 @@ impl NetKind {
         }
     }
 
+    /// The evaluations whose every output and gradient is read: all but
+    /// the [`still_rows`](NetKind::still_rows), and first.
+    pub fn moving_rows(self) -> usize {
+        self.evaluations() - self.still_rows()
+    }
+
     /// The kind of data (and of `gen-data`) a network of this kind learns from.
     pub fn data(self) -> NetKind {
         match self {
@@ -186,7 +192,7 @@ impl Network {
     /// which at a still row is g_n alone.
     pub fn jacobian_multiply_adds(&self) -> usize {
         let (rows, still) = (self.kind.evaluations(), self.kind.still_rows());
-        let passes = rows + (rows - still) * self.mlp.outputs() + still;
+        let passes = rows + self.kind.moving_rows() * self.mlp.outputs() + still;
         self.mlp.multiply_adds() * passes
     }
 }
