@@ -47,6 +47,7 @@ pub fn symmetric_part(m: Mat3) -> Mat3 {
 /// Barycentric coordinates (u, v, w) of the projection of `p` onto the plane
 /// of triangle (a, b, c), so that proj = u a + v b + w c. `None` for a
 /// degenerate triangle.
+#[inline]
 pub fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<Vec3> {
     let e0 = b - a;
     let e1 = c - a;

@@ -1,10 +1,12 @@
-//! The BVH broad phase finds exactly the contacts an all-pairs search finds.
+//! The broad phases (the body's grid, the cloth's BVH) find exactly the
+//! contacts an all-pairs search finds.
 
 mod common;
 
 use common::Rng;
 use glam::{Quat, Vec3};
 use wgcloth::bvh::{Bvh, triangle_boxes};
+use wgcloth::cpu::body_grid::BodyGrid;
 use wgcloth::cpu::collide::{self, Best, Tolerances, cloth_normal};
 use wgcloth::cpu::measure;
 use wgcloth::cpu::rigid::{RigidFrame, transform};
@@ -59,7 +61,8 @@ fn bvh_contacts_equal_all_pairs_contacts() {
         let mut bvh = Bvh::build(&triangle_boxes(&cloth.rest_positions, &cloth.triangles));
         collide::refit_cloth(&cloth, &mut bvh, &x); // refit, as in a step
 
-        let vf = collide::vertex_face(&body, &frame, &x, tol);
+        let grid = BodyGrid::new(&body, tol.reach());
+        let vf = collide::vertex_face(&body, &grid, &frame, &x, tol);
         let expect_vf: Vec<(u32, u32, f32)> = x
             .iter()
             .enumerate()

@@ -179,7 +179,8 @@ fn sphere_and_patch(
         thickness: 0.025,
         max_depth: 0.025,
     };
-    let vf = collide::vertex_face(&body, &frame, &cloth.rest_positions, tol);
+    let grid = wgcloth::cpu::body_grid::BodyGrid::new(&body, tol.reach());
+    let vf = collide::vertex_face(&body, &grid, &frame, &cloth.rest_positions, tol);
     let fv = collide::face_vertex(&cloth, &bvh, &cloth.rest_positions, &frame, tol);
     (cloth, body, frame, vf, fv)
 }

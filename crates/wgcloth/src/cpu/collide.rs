@@ -1,8 +1,11 @@
-//! Stage "collide": contact detection in both directions (thesis 2.2–2.3),
-//! with a BVH broad phase. Mirrors wgsl/collide.wgsl.
+//! Stage "collide": contact detection in both directions (thesis 2.2–2.3).
+//! Mirrors wgsl/collide.wgsl, which finds the same contacts by other broad
+//! phases.
 //!
-//! (a) vertex–face: each cloth vertex x against the rigid triangles.
-//! (b) face–vertex: each rigid vertex p against the cloth triangles.
+//! (a) vertex–face: each cloth vertex x against the rigid triangles its
+//!     body-space cell lists ([`BodyGrid`]; the GPU walks the body's BVH).
+//! (b) face–vertex: each rigid vertex p against the cloth triangles near it
+//!     in the cloth's BVH, refitted every step (the GPU walks tiles).
 //! The proximity test is the same: the projection onto the triangle's plane
 //! falls inside it and the signed distance d = (x − a)·n lies in
 //! (−max_depth, ε); of several candidates the one with the smallest
@@ -12,8 +15,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::bvh::{Bvh, triangle_boxes};
+use crate::bvh::{Aabb, Bvh};
 use crate::cpu::GRAIN;
+use crate::cpu::body_grid::BodyGrid;
 use crate::cpu::rigid::RigidFrame;
 use crate::math::{barycentric, inside_triangle};
 use crate::scene::{Cloth, RigidBody};
@@ -133,6 +137,7 @@ impl Tolerances {
 
 /// The narrow-phase test: `Some((d, barycentrics))` when `p` is in contact
 /// with triangle (a, b, c) of unit normal n.
+#[inline]
 pub fn point_triangle(p: Vec3, tri: [Vec3; 3], n: Vec3, tol: Tolerances) -> Option<(f32, Vec3)> {
     let d = (p - tri[0]).dot(n);
     if !(d > -tol.max_depth && d < tol.thickness) {
@@ -194,19 +199,21 @@ impl Best {
     }
 }
 
-/// The rigid triangle closest to cloth vertex `x` (body-space BVH query).
+/// The rigid triangle closest to cloth vertex `x`, of those `grid` lists
+/// near it in body space.
 pub fn best_rigid_triangle(
     body: &RigidBody,
+    grid: &BodyGrid,
     frame: &RigidFrame,
     x: Vec3,
     tol: Tolerances,
 ) -> Option<Best> {
     let p = frame.to_body(x);
     let mut best = None;
-    body.bvh.query(p, tol.reach(), |t| {
+    for &t in grid.candidates(p) {
         let tri = body.mesh.triangles[t as usize].map(|i| body.mesh.vertices[i as usize]);
         Best::consider(&mut best, t, p, tri, body.face_normals[t as usize], tol);
-    });
+    }
     best
 }
 
@@ -240,17 +247,25 @@ pub fn best_cloth_triangle(
 }
 
 /// (a) vertex–face contacts, one per cloth vertex at most, in vertex order.
+/// `grid` is `body`'s, built for a reach of at least `tol`'s.
 pub fn vertex_face(
     body: &RigidBody,
+    grid: &BodyGrid,
     frame: &RigidFrame,
     x: &[Vec3],
     tol: Tolerances,
 ) -> Vec<Contact> {
+    assert!(
+        grid.reach() >= tol.reach(),
+        "a body grid for reach {} queried within {}",
+        grid.reach(),
+        tol.reach()
+    );
     x.par_iter()
         .with_min_len(GRAIN / 8)
         .enumerate()
         .filter_map(|(i, &xi)| {
-            let b = best_rigid_triangle(body, frame, xi, tol)?;
+            let b = best_rigid_triangle(body, grid, frame, xi, tol)?;
             let i = i as u32;
             Some(Contact {
                 vertices: [i, i, i],
@@ -299,5 +314,5 @@ pub fn face_vertex(
 
 /// Broad phase for (b): the cloth hierarchy refitted to positions `x`.
 pub fn refit_cloth(cloth: &Cloth, bvh: &mut Bvh, x: &[Vec3]) {
-    bvh.refit(&triangle_boxes(x, &cloth.triangles));
+    bvh.refit(|t| Aabb::of_points(&cloth.triangles[t as usize].map(|i| x[i as usize])));
 }

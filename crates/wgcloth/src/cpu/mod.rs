@@ -3,6 +3,7 @@
 //! [`CpuSim`] holds the per-scene state and runs the stages in order.
 
 pub mod assemble;
+pub mod body_grid;
 pub mod collide;
 pub mod contact;
 pub mod integrate;
@@ -25,6 +26,7 @@ use crate::bvh::{Bvh, triangle_boxes};
 use crate::scene::Scene;
 use crate::stage::Stage;
 use assemble::StepParams;
+use body_grid::BodyGrid;
 use collide::{Contact, Tolerances};
 use contact::{Model, Response};
 use pcg::{BlockMatrix, PcgOutcome, PcgScratch};
@@ -93,6 +95,8 @@ pub struct CpuSim {
     params: StepParams,
     tolerances: Tolerances,
     cloth_bvh: Bvh,
+    /// The vertex–face broad phase; `None` without a rigid body.
+    body_grid: Option<BodyGrid>,
     frame: RigidFrame,
     contacts: Vec<Contact>,
     responses: Vec<Response>,
@@ -125,13 +129,15 @@ impl CpuSim {
             damping_mass: cfg.cloth.damping_mass,
             damping_stiffness: cfg.cloth.damping_stiffness,
         };
+        let tolerances = Tolerances {
+            thickness: cfg.contact.thickness,
+            max_depth: cfg.contact.max_depth,
+        };
         CpuSim {
             model: Model::new(cfg.model, &cfg.contact, scene.network.as_ref()),
-            tolerances: Tolerances {
-                thickness: cfg.contact.thickness,
-                max_depth: cfg.contact.max_depth,
-            },
+            tolerances,
             cloth_bvh: Bvh::build(&triangle_boxes(&cloth.rest_positions, &cloth.triangles)),
+            body_grid: (scene.rigid.as_ref()).map(|body| BodyGrid::new(body, tolerances.reach())),
             frame: RigidFrame::default(),
             contacts: Vec::new(),
             responses: Vec::new(),
@@ -226,9 +232,10 @@ impl CpuSim {
             }
             Stage::Collide => {
                 self.contacts.clear();
-                if let Some(body) = body {
+                if let (Some(body), Some(grid)) = (body, &self.body_grid) {
                     collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
-                    self.contacts = collide::vertex_face(body, &self.frame, x, self.tolerances);
+                    self.contacts =
+                        collide::vertex_face(body, grid, &self.frame, x, self.tolerances);
                     self.contacts.extend(collide::face_vertex(
                         cloth,
                         &self.cloth_bvh,
@@ -351,7 +358,7 @@ impl CpuSim {
                 if keep.enabled {
                     // Collide refits it to where the next step starts.
                     let swept = separate::swept_boxes(&self.x_start, x, &cloth.triangles);
-                    self.cloth_bvh.refit(&swept);
+                    self.cloth_bvh.refit(|t| swept[t as usize]);
                     let within = separate::Within {
                         triangles: &cloth.triangles,
                         edges: &self.edges,
