@@ -49,21 +49,55 @@ pub fn symmetric_part(m: Mat3) -> Mat3 {
 /// degenerate triangle.
 #[inline]
 pub fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<Vec3> {
-    let e0 = b - a;
-    let e1 = c - a;
-    let ep = p - a;
-    let d00 = e0.dot(e0);
-    let d01 = e0.dot(e1);
-    let d11 = e1.dot(e1);
-    let d20 = ep.dot(e0);
-    let d21 = ep.dot(e1);
-    let denom = d00 * d11 - d01 * d01;
-    if denom <= f32::EPSILON * d00 * d11 {
-        return None;
+    Some(Barycentric::new(a, b, c)?.weights(p))
+}
+
+/// What [`barycentric`] computes from a triangle's corners alone, kept to
+/// weigh many points against one triangle: the same operations in the same
+/// order, so the weights are the same to the bit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Barycentric {
+    /// Corner a.
+    pub a: Vec3,
+    e0: Vec3,
+    e1: Vec3,
+    d00: f32,
+    d01: f32,
+    d11: f32,
+    denom: f32,
+}
+
+impl Barycentric {
+    /// Triangle (a, b, c)'s; `None` when it is degenerate.
+    #[inline]
+    pub fn new(a: Vec3, b: Vec3, c: Vec3) -> Option<Barycentric> {
+        let e0 = b - a;
+        let e1 = c - a;
+        let d00 = e0.dot(e0);
+        let d01 = e0.dot(e1);
+        let d11 = e1.dot(e1);
+        let denom = d00 * d11 - d01 * d01;
+        (denom > f32::EPSILON * d00 * d11).then_some(Barycentric {
+            a,
+            e0,
+            e1,
+            d00,
+            d01,
+            d11,
+            denom,
+        })
     }
-    let v = (d11 * d20 - d01 * d21) / denom;
-    let w = (d00 * d21 - d01 * d20) / denom;
-    Some(Vec3::new(1.0 - v - w, v, w))
+
+    /// The barycentric coordinates of `p`'s projection (see [`barycentric`]).
+    #[inline]
+    pub fn weights(&self, p: Vec3) -> Vec3 {
+        let ep = p - self.a;
+        let d20 = ep.dot(self.e0);
+        let d21 = ep.dot(self.e1);
+        let v = (self.d11 * d20 - self.d01 * d21) / self.denom;
+        let w = (self.d00 * d21 - self.d01 * d20) / self.denom;
+        Vec3::new(1.0 - v - w, v, w)
+    }
 }
 
 /// True when all barycentric coordinates lie in [0, 1] (thesis 2.3).

@@ -62,7 +62,7 @@ fn bvh_contacts_equal_all_pairs_contacts() {
         collide::refit_cloth(&cloth, &mut bvh, &x); // refit, as in a step
 
         let grid = BodyGrid::new(&body, tol.reach());
-        let vf = collide::vertex_face(&body, &grid, &frame, &x, tol);
+        let vf = collide::vertex_face(&grid, &frame, &x, tol);
         let expect_vf: Vec<(u32, u32, f32)> = x
             .iter()
             .enumerate()

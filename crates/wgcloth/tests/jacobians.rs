@@ -180,7 +180,7 @@ fn sphere_and_patch(
         max_depth: 0.025,
     };
     let grid = wgcloth::cpu::body_grid::BodyGrid::new(&body, tol.reach());
-    let vf = collide::vertex_face(&body, &grid, &frame, &cloth.rest_positions, tol);
+    let vf = collide::vertex_face(&grid, &frame, &cloth.rest_positions, tol);
     let fv = collide::face_vertex(&cloth, &bvh, &cloth.rest_positions, &frame, tol);
     (cloth, body, frame, vf, fv)
 }

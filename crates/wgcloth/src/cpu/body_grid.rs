@@ -15,6 +15,8 @@
 use glam::{IVec3, UVec3, Vec3};
 
 use crate::bvh::Aabb;
+use crate::cpu::collide::Face;
+use crate::math::Barycentric;
 use crate::scene::RigidBody;
 
 /// The most cells a grid may have: 8 MiB of offsets. A body whose
@@ -41,6 +43,9 @@ pub struct BodyGrid {
     /// Cell c's triangles are `triangles[offsets[c]..offsets[c + 1]]`.
     offsets: Vec<u32>,
     triangles: Vec<u32>,
+    /// Each triangle as the narrow phase reads it; `None` for a degenerate
+    /// one, which no point touches and no cell lists.
+    faces: Vec<Option<Face>>,
     /// The reach the lists hold for.
     reach: f32,
 }
@@ -49,6 +54,15 @@ impl BodyGrid {
     /// The grid of `body`'s triangles for points within `reach` of a face.
     pub fn new(body: &RigidBody, reach: f32) -> BodyGrid {
         let corners = |t: &[u32; 3]| t.map(|i| body.mesh.vertices[i as usize]);
+        let faces: Vec<Option<Face>> = (body.mesh.triangles.iter().zip(&body.face_normals))
+            .map(|(t, &normal)| {
+                let [a, b, c] = corners(t);
+                Some(Face {
+                    frame: Barycentric::new(a, b, c)?,
+                    normal,
+                })
+            })
+            .collect();
         let prisms: Vec<Aabb> = (body.mesh.triangles.iter().zip(&body.face_normals))
             .map(|(t, &n)| {
                 let r = n * reach;
@@ -67,6 +81,7 @@ impl BodyGrid {
                 dims: [0; 3],
                 offsets: vec![0],
                 triangles: Vec::new(),
+                faces,
                 reach,
             };
         }
@@ -102,7 +117,7 @@ impl BodyGrid {
         // each one the triangle's prism and slab meet.
         let covered = |t: usize, visit: &mut dyn FnMut(usize)| {
             let prism = prisms[t].grown(margin);
-            if !finite(&prism) {
+            if faces[t].is_none() || !finite(&prism) {
                 return;
             }
             let n = body.face_normals[t];
@@ -148,8 +163,16 @@ impl BodyGrid {
             dims,
             offsets,
             triangles,
+            faces,
             reach,
         }
+    }
+
+    /// Triangle t as the narrow phase reads it; `None` when it is
+    /// degenerate (no cell lists it).
+    #[inline]
+    pub fn face(&self, t: u32) -> Option<&Face> {
+        self.faces[t as usize].as_ref()
     }
 
     /// The reach the lists were built for: a query within a larger one
@@ -160,6 +183,7 @@ impl BodyGrid {
 
     /// Every triangle body-space point `p` can touch within the reach, in
     /// increasing order (others may be among them); none outside the grid.
+    #[inline]
     pub fn candidates(&self, p: Vec3) -> &[u32] {
         let c = (p - self.origin) * self.inverse_cell;
         let dims = UVec3::from_array(self.dims).as_vec3();

@@ -19,7 +19,7 @@ use crate::bvh::{Aabb, Bvh};
 use crate::cpu::GRAIN;
 use crate::cpu::body_grid::BodyGrid;
 use crate::cpu::rigid::RigidFrame;
-use crate::math::{barycentric, inside_triangle};
+use crate::math::{Barycentric, barycentric, inside_triangle};
 use crate::scene::{Cloth, RigidBody};
 
 /// One contact, in the form every model and the assembly share.
@@ -133,6 +133,12 @@ impl Tolerances {
     pub fn reach(&self) -> f32 {
         self.thickness.max(self.max_depth)
     }
+
+    /// Whether signed distance `d` lies in the contact band (−max_depth, ε).
+    #[inline]
+    pub fn in_band(&self, d: f32) -> bool {
+        d > -self.max_depth && d < self.thickness
+    }
 }
 
 /// The narrow-phase test: `Some((d, barycentrics))` when `p` is in contact
@@ -140,11 +146,35 @@ impl Tolerances {
 #[inline]
 pub fn point_triangle(p: Vec3, tri: [Vec3; 3], n: Vec3, tol: Tolerances) -> Option<(f32, Vec3)> {
     let d = (p - tri[0]).dot(n);
-    if !(d > -tol.max_depth && d < tol.thickness) {
+    if !tol.in_band(d) {
         return None;
     }
     let w = barycentric(p, tri[0], tri[1], tri[2])?;
     inside_triangle(w).then_some((d, w))
+}
+
+/// A triangle that does not move (the rigid body's, in body space) as the
+/// narrow phase weighs points against it: what [`point_triangle`] computes
+/// from its corners alone, made once.
+#[derive(Clone, Copy, Debug)]
+pub struct Face {
+    /// Its barycentric frame.
+    pub frame: Barycentric,
+    /// Its unit normal.
+    pub normal: Vec3,
+}
+
+impl Face {
+    /// [`point_triangle`] of `p` against this face, the same to the bit.
+    #[inline]
+    pub fn touch(&self, p: Vec3, tol: Tolerances) -> Option<(f32, Vec3)> {
+        let d = (p - self.frame.a).dot(self.normal);
+        if !tol.in_band(d) {
+            return None;
+        }
+        let w = self.frame.weights(p);
+        inside_triangle(w).then_some((d, w))
+    }
 }
 
 /// The candidate that wins (larger d, then lower index).
@@ -202,7 +232,6 @@ impl Best {
 /// The rigid triangle closest to cloth vertex `x`, of those `grid` lists
 /// near it in body space.
 pub fn best_rigid_triangle(
-    body: &RigidBody,
     grid: &BodyGrid,
     frame: &RigidFrame,
     x: Vec3,
@@ -211,8 +240,19 @@ pub fn best_rigid_triangle(
     let p = frame.to_body(x);
     let mut best = None;
     for &t in grid.candidates(p) {
-        let tri = body.mesh.triangles[t as usize].map(|i| body.mesh.vertices[i as usize]);
-        Best::consider(&mut best, t, p, tri, body.face_normals[t as usize], tol);
+        let Some(face) = grid.face(t) else { continue };
+        if let Some((distance, weights)) = face.touch(p, tol) {
+            let normal = face.normal;
+            Best::keep(
+                &mut best,
+                Best {
+                    triangle: t,
+                    distance,
+                    weights,
+                    normal,
+                },
+            );
+        }
     }
     best
 }
@@ -247,9 +287,8 @@ pub fn best_cloth_triangle(
 }
 
 /// (a) vertex–face contacts, one per cloth vertex at most, in vertex order.
-/// `grid` is `body`'s, built for a reach of at least `tol`'s.
+/// `grid` is the body's, built for a reach of at least `tol`'s.
 pub fn vertex_face(
-    body: &RigidBody,
     grid: &BodyGrid,
     frame: &RigidFrame,
     x: &[Vec3],
@@ -265,7 +304,7 @@ pub fn vertex_face(
         .with_min_len(GRAIN / 8)
         .enumerate()
         .filter_map(|(i, &xi)| {
-            let b = best_rigid_triangle(body, grid, frame, xi, tol)?;
+            let b = best_rigid_triangle(grid, frame, xi, tol)?;
             let i = i as u32;
             Some(Contact {
                 vertices: [i, i, i],

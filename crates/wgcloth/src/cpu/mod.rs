@@ -232,10 +232,9 @@ impl CpuSim {
             }
             Stage::Collide => {
                 self.contacts.clear();
-                if let (Some(body), Some(grid)) = (body, &self.body_grid) {
+                if let Some(grid) = &self.body_grid {
                     collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
-                    self.contacts =
-                        collide::vertex_face(body, grid, &self.frame, x, self.tolerances);
+                    self.contacts = collide::vertex_face(grid, &self.frame, x, self.tolerances);
                     self.contacts.extend(collide::face_vertex(
                         cloth,
                         &self.cloth_bvh,

@@ -23,6 +23,7 @@ pub struct RigidFrame {
 
 impl RigidFrame {
     /// World → body space.
+    #[inline]
     pub fn to_body(&self, p: Vec3) -> Vec3 {
         self.rotation.inverse() * (p - self.translation)
     }
