@@ -23,8 +23,9 @@ use crate::scene::RigidBody;
 /// prisms would need more gets larger cells, and longer lists.
 const MAX_CELLS: u64 = 1 << 21;
 
-/// Cells per reach: half-reach cells keep a sphere's cell lists near four
-/// triangles; larger ones grow the lists, smaller ones the grid.
+/// Cells per reach: quarter-reach cells keep a sphere's lists near four
+/// triangles; half-reach ones listed six and were slower, eighth-reach ones
+/// three and were no faster (BENCHMARKS.md, "The CPU's collide stage").
 const CELLS_PER_REACH: f32 = 4.0;
 
 /// Each prism and slab is widened by this share of a cell, so that no
@@ -117,11 +118,13 @@ impl BodyGrid {
         // each one the triangle's prism and slab meet.
         let covered = |t: usize, visit: &mut dyn FnMut(usize)| {
             let prism = prisms[t].grown(margin);
-            if faces[t].is_none() || !finite(&prism) {
+            let Some(Face { frame, normal: n }) = faces[t] else {
+                return;
+            };
+            if !finite(&prism) {
                 return;
             }
-            let n = body.face_normals[t];
-            let a = corners(&body.mesh.triangles[t])[0];
+            let a = frame.a;
             // The slab |n·(p − a)| ≤ reach meets a cell of centre c when
             // |n·(c − a)| ≤ reach + the cell's half-extent along n.
             let half = 0.5 * side;
