@@ -6,7 +6,8 @@
 #     1e-3 with multigrid, 200 steps: the sphere's whole pass) at each grid
 #     of $GOAL_GRIDS (default 1024), report run_N.json: the issue's goal is
 #     60 steps a second at 1024² (each run cut at $RUN_TIMEOUT seconds,
-#     default 600);
+#     default 600); then the same run with --no-subgroups, the solver's
+#     sums through workgroup memory alone, into run_N_no_subgroups.json;
 #  2. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput and the sphere period, into bench.json,
 #     bench.png and bench.txt.
@@ -48,12 +49,15 @@ case "$adapter" in
 esac
 echo "adapter: $adapter"
 for n in $goal_grids; do
-  echo "== default run, ${n}²"
-  # A run that fails or outlasts $RUN_TIMEOUT seconds leaves the bench to run.
-  if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
-    --report "$out/run_$n.json"; then
-    echo "the ${n}² run failed or outlasted ${RUN_TIMEOUT:-600} s"
-  fi
+  for sums in "" --no-subgroups; do
+    echo "== default run, ${n}² ${sums}"
+    report=$out/run_$n${sums:+_no_subgroups}.json
+    # A run that fails or outlasts $RUN_TIMEOUT seconds leaves the bench to run.
+    if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
+      $sums --report "$report"; then
+      echo "the ${n}² run ${sums} failed or outlasted ${RUN_TIMEOUT:-600} s"
+    fi
+  done
 done
 echo "== wgcloth bench --gpu-only"
 "$bin" bench --gpu-only --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"

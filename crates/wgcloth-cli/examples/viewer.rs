@@ -113,7 +113,8 @@ impl App {
                 ..Default::default()
             }))
             .map_err(|e| format!("no GPU adapter for the window: {e}"))?;
-        let ctx = GpuContext::from_adapter(&adapter).map_err(|e| e.to_string())?;
+        let ctx = GpuContext::from_adapter(&adapter, wgcloth::gpu::OPTIONAL_FEATURES)
+            .map_err(|e| e.to_string())?;
         let size = window.inner_size();
         let mut config = surface
             .get_default_config(&adapter, size.width.max(1), size.height.max(1))

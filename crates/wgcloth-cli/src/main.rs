@@ -156,6 +156,10 @@ struct RunArgs {
     scene: SceneArgs,
     #[arg(long, default_value = "auto")]
     backend: Backend,
+    /// Open the GPU device without subgroup operations, so the solver's
+    /// workgroup sums go through workgroup memory alone (to compare).
+    #[arg(long)]
+    no_subgroups: bool,
     /// Write the run report as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -336,7 +340,11 @@ fn run(args: &RunArgs) -> Result<()> {
     let scene = Scene::new(&config)?;
     // Kept to write the last good state.
     let run_scene = scene.clone();
-    let (chosen, notice) = choose_backend(args.backend)?;
+    let mut optional = wgcloth::gpu::OPTIONAL_FEATURES;
+    if args.no_subgroups {
+        optional.remove(wgpu::Features::SUBGROUP);
+    }
+    let (chosen, notice) = choose_backend(args.backend, optional)?;
     if let Some(n) = notice {
         eprintln!("{n}");
     }

@@ -58,12 +58,16 @@ impl Chosen {
 }
 
 /// Resolves `auto`, and says why when it falls back to the CPU (no
-/// adapter, or only a software one).
-pub fn choose_backend(requested: Backend) -> Result<(Chosen, Option<String>)> {
+/// adapter, or only a software one). A GPU device gets what its adapter
+/// has of the `optional` features (`wgcloth::gpu::OPTIONAL_FEATURES`).
+pub fn choose_backend(
+    requested: Backend,
+    optional: wgpu::Features,
+) -> Result<(Chosen, Option<String>)> {
     match requested {
         Backend::Cpu => Ok((Chosen::Cpu, None)),
-        Backend::Gpu => Ok((Chosen::gpu(GpuContext::headless()?), None)),
-        Backend::Auto => Ok(match GpuContext::headless() {
+        Backend::Gpu => Ok((Chosen::gpu(GpuContext::headless_with(optional)?), None)),
+        Backend::Auto => Ok(match GpuContext::headless_with(optional) {
             // A software rasteriser (lavapipe) runs the kernels on the same
             // CPU cores, several times slower than the reference path.
             Ok(ctx) if ctx.adapter.device_type == wgpu::DeviceType::Cpu => (
@@ -122,6 +126,9 @@ pub struct Report {
     /// GPU arrays bound in parts because they pass a binding's limit, with
     /// the bindings each takes (`GpuSim::split_arrays`).
     pub gpu_split_arrays: Vec<(String, usize)>,
+    /// Whether the solver's workgroup sums ran through subgroup operations
+    /// (`Kernels::subgroups`; GPU only).
+    pub gpu_subgroup_sums: Option<bool>,
     /// The process's peak resident memory, bytes (Linux `VmHWM`; absent
     /// elsewhere): on the CPU path the simulation's memory plus the
     /// program's own.
@@ -507,6 +514,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         gpu_state_bytes: None,
         gpu_bytes_per_vertex: None,
         gpu_split_arrays: Vec::new(),
+        gpu_subgroup_sums: None,
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration,
         finite: sim.is_finite(),
@@ -726,6 +734,7 @@ fn run_gpu(
             .into_iter()
             .map(|(name, parts)| (name.to_string(), parts))
             .collect(),
+        gpu_subgroup_sums: Some(kernels.subgroups()),
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,
@@ -868,7 +877,7 @@ impl Report {
                 .unwrap_or_default();
         format!(
             "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
-             backend      {} — {}\n\
+             backend      {} — {}{}\n\
              {}\
              ms/step      {:.3} (median{dispatches}), {:.3} (mean)\n\
              {memory}\
@@ -885,6 +894,11 @@ impl Report {
             self.dt,
             self.backend,
             self.adapter,
+            match self.gpu_subgroup_sums {
+                Some(true) => ", solver sums through subgroups",
+                Some(false) => ", solver sums through workgroup memory",
+                None => "",
+            },
             self.network
                 .as_ref()
                 .map(|n| format!("network      {n}\n"))

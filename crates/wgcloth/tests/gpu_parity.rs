@@ -505,6 +505,66 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     }
 }
 
+/// The solver's workgroup sums through subgroup operations (the headless
+/// device asks for them, and lavapipe has them) against the same sums
+/// through workgroup memory alone, on a device opened without them: the
+/// same solves but for f32 rounding, with each preconditioner.
+#[test]
+fn subgroup_sums_solve_as_workgroup_memory_sums_do() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let adapter = GpuContext::pick_adapter().unwrap();
+    let has = adapter.features().contains(wgpu::Features::SUBGROUP);
+    assert_eq!(kernels.subgroups(), has);
+    if !has {
+        assert!(
+            std::env::var("CI").is_err(),
+            "CI's lavapipe offers subgroup operations: this test must run them"
+        );
+        eprintln!(
+            "skipping: {} has no subgroup operations",
+            adapter.get_info().name
+        );
+        return;
+    }
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .unwrap();
+    let plain = Kernels::new(&device).unwrap();
+    assert!(!plain.subgroups());
+    for solve in PRECONDITIONERS {
+        // 441 vertices: the second workgroup of each dispatch part full.
+        let scene = hang_solved(21, solve, 300, 1e-4);
+        let with = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        let without = GpuSim::with_kernels(&plain, &device, &queue, &scene).unwrap();
+        for _ in 0..20 {
+            with.step();
+            without.step();
+        }
+        let (a, b) = (with.read_state().unwrap(), without.read_state().unwrap());
+        let (pa, pb) = (
+            with.read_positions().unwrap(),
+            without.read_positions().unwrap(),
+        );
+        eprintln!(
+            "{solve:?}: iterations {} with subgroups, {} without; positions differ by {:.2e} m",
+            a.cg_iterations_total,
+            b.cg_iterations_total,
+            max_dev(&pa, &pb)
+        );
+        assert!(a.cg_residual_max <= 1e-4 && b.cg_residual_max <= 1e-4);
+        assert_eq!((a.cg_breakdowns, b.cg_breakdowns), (0, 0));
+        // Rounding moves a step's stop by an iteration or so either way.
+        let (ia, ib) = (a.cg_iterations_total as f64, b.cg_iterations_total as f64);
+        assert!(
+            ia > 20.0 && (ia - ib).abs() <= 0.02 * ib + 20.0,
+            "{solve:?}: {ia} against {ib}"
+        );
+        assert!(max_dev(&pa, &pb) <= 1e-5, "{solve:?}");
+    }
+}
+
 /// A random network with the given layer sizes (deterministic).
 fn random_mlp(sizes: &[usize], seed: u64) -> wgcloth::nn::Mlp {
     let mut s = seed;
@@ -710,12 +770,15 @@ fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
         max_storage_buffer_binding_size: 96 * 32 * 32,
         ..adapter.limits()
     };
+    // The same features as `ctx`'s device, so the same sums.
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_features: ctx.device.features(),
         required_limits: limits,
         ..Default::default()
     }))
     .unwrap();
     let narrow = Kernels::new(&device).unwrap();
+    assert_eq!(narrow.subgroups(), kernels.subgroups());
     assert!(
         narrow.splittable(),
         "lavapipe binds 32 storage buffers per stage"

@@ -140,40 +140,6 @@ fn sym_diag(m: Sym3) -> vec3<f32> {
     return m.a.xyz;
 }
 
-var<workgroup> scratch: array<f32, WORKGROUP>;
-
-// Sum of `value` over the workgroup, in a fixed order (deterministic), as
-// a uniform value the workgroup may branch on. Every invocation must call it.
-// SUM_LANES lanes each sum a stride of the values, then one sums theirs:
-// two rounds, not a tree's log₂ WORKGROUP. lavapipe runs each round's code
-// for every 8 lanes of the workgroup, active or not, so rounds cost more
-// than additions there (BENCHMARKS.md, "What an iteration costs on
-// lavapipe"); on a hardware GPU the two are alike.
-const SUM_LANES: u32 = 16u;
-
-fn workgroup_sum(lid: u32, value: f32) -> f32 {
-    scratch[lid] = value;
-    workgroupBarrier();
-    if lid < SUM_LANES {
-        var s = scratch[lid];
-        for (var k = lid + SUM_LANES; k < WORKGROUP; k += SUM_LANES) {
-            s += scratch[k];
-        }
-        scratch[lid] = s;
-    }
-    workgroupBarrier();
-    if lid == 0u {
-        var s = scratch[0];
-        for (var k = 1u; k < SUM_LANES; k++) {
-            s += scratch[k];
-        }
-        scratch[0] = s;
-    }
-    let total = workgroupUniformLoad(&scratch[0]);
-    workgroupBarrier();
-    return total;
-}
-
 // Contacts live in fixed slots: one per cloth vertex (vertex–face) and one
 // per rigid vertex (face–vertex). Mirrors `cpu::collide::Contact`: the
 // force on cloth vertex k is β_k f and v_rel = Σ β_k v_k + offset.

@@ -577,16 +577,20 @@ fn guess_at(i: u32) {
 // cloth this is z = P⁻¹ r, with its partial rᵀz for PCG; with patches, the
 // backward sweeps left z, and this is its rᵀz alone.
 @compute @workgroup_size(WORKGROUP)
-fn up(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
-          @builtin(workgroup_id) wg: vec3<u32>) {
+fn up(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
+      @builtin(workgroup_id) wg: vec3<u32>) {
     hop = bound_hop;
     var rz = 0.0;
     if id.x < nodes(hop.fine) {
         rz = up_at(id.x);
     }
-    let s = workgroup_sum(lid, rz);
-    if hop.fine.level == 0u && lid == 0u {
-        store_partial(RZ, wg.x, s);
+    // Only the cloth's rᵀz is PCG's: coarser levels sum nothing (the
+    // branch is uniform, read from the bound hop).
+    if bound_hop.fine.level == 0u {
+        let s = workgroup_sum(lane, rz);
+        if lane.index == 0u {
+            store_partial(RZ, wg.x, s);
+        }
     }
 }
 

@@ -104,7 +104,7 @@ fn row_next(i: u32, beta: f32) -> vec3<f32> {
 // r = S (b − A x), Jacobi's z = P⁻¹ r (the V-cycle overwrites it), with
 // partial rᵀz, |S b|² and rᵀr.
 @compute @workgroup_size(WORKGROUP)
-fn init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn init(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
         @builtin(workgroup_id) wg: vec3<u32>) {
     let i = id.x;
     var rz = 0.0;
@@ -122,13 +122,11 @@ fn init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         bb = select(0.0, dot(b[i].xyz, b[i].xyz), free);
         rr = dot(ri, ri);
     }
-    let s_rz = workgroup_sum(lid, rz);
-    let s_bb = workgroup_sum(lid, bb);
-    let s_rr = workgroup_sum(lid, rr);
-    if lid == 0u {
-        store_partial(RZ, wg.x, s_rz);
-        store_partial(BB, wg.x, s_bb);
-        store_partial(RR, wg.x, s_rr);
+    let sums = workgroup_sums(lane, vec4<f32>(rz, bb, rr, 0.0));
+    if lane.index == 0u {
+        store_partial(RZ, wg.x, sums.x);
+        store_partial(BB, wg.x, sums.y);
+        store_partial(RR, wg.x, sums.z);
     }
 }
 
@@ -158,11 +156,12 @@ fn stalled(rr: f32, delta: f32, threshold: f32) -> bool {
 // The starting scalars (one workgroup), and every level's dispatch size
 // (the levels of multigrid::levels, halving from the cloth's grid).
 @compute @workgroup_size(WORKGROUP)
-fn init_scalars(@builtin(local_invocation_index) lid: u32) {
-    let delta = total(lid, RZ);
-    let bb = total(lid, BB);
-    let rr = total(lid, RR);
-    if lid == 0u {
+fn init_scalars(lane: Lane) {
+    let sums = totals(lane, vec3<u32>(RZ, BB, RR));
+    let delta = sums.x;
+    let bb = sums.y;
+    let rr = sums.z;
+    if lane.index == 0u {
         var s: Scalars;
         s.delta = delta;
         s.bb = bb;
@@ -191,7 +190,7 @@ fn init_scalars(@builtin(local_invocation_index) lid: u32) {
 
 // The first iteration's direction p = z, q = S A p and partial pᵀq.
 @compute @workgroup_size(WORKGROUP)
-fn spmv(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn spmv(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
         @builtin(workgroup_id) wg: vec3<u32>) {
     if scalars_in.done != 0u {
         return;
@@ -205,8 +204,8 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         store_q(i, qi);
         pq = dot(pi, qi);
     }
-    let s = workgroup_sum(lid, pq);
-    if lid == 0u {
+    let s = workgroup_sum(lane, pq);
+    if lane.index == 0u {
         store_partial(pq_segment(scalars_in.iterations), wg.x, s);
     }
 }
@@ -220,8 +219,8 @@ fn usable(pq: f32) -> bool {
 }
 
 // α = δ / pᵀq, or 0 at a breakdown (which `next` or `conclude` records).
-fn step_length(lid: u32) -> f32 {
-    let pq = total(lid, pq_segment(scalars_in.iterations));
+fn step_length(lane: Lane) -> f32 {
+    let pq = total(lane, pq_segment(scalars_in.iterations));
     return select(0.0, scalars_in.delta / pq, usable(pq));
 }
 
@@ -235,15 +234,15 @@ fn advance_vertex(i: u32, alpha: f32) -> vec3<f32> {
 
 // Jacobi: x += α p; r −= α q; z = P⁻¹ r; partial rᵀz and rᵀr.
 @compute @workgroup_size(WORKGROUP)
-fn update(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn update(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
           @builtin(workgroup_id) wg: vec3<u32>) {
-    let alpha = step_length(lid);
+    let alpha = step_length(lane);
     let i = id.x;
     var sums = vec2<f32>(0.0);
     if i < params.n_vertices && alpha != 0.0 {
         sums = jacobi_z(i, advance_vertex(i, alpha));
     }
-    store_rz_rr(lid, wg.x, sums);
+    store_rz_rr(lane, wg.x, sums);
 }
 
 // Jacobi's z = P⁻¹ r at vertex i, returning (rᵀz, rᵀr) there.
@@ -254,28 +253,27 @@ fn jacobi_z(i: u32, ri: vec3<f32>) -> vec2<f32> {
 }
 
 // The workgroup's partial rᵀz and rᵀr.
-fn store_rz_rr(lid: u32, wg: u32, sums: vec2<f32>) {
-    let s_rz = workgroup_sum(lid, sums.x);
-    let s_rr = workgroup_sum(lid, sums.y);
-    if lid == 0u {
-        store_partial(RZ, wg, s_rz);
-        store_partial(RR, wg, s_rr);
+fn store_rz_rr(lane: Lane, wg: u32, sums: vec2<f32>) {
+    let s = workgroup_sums(lane, vec4<f32>(sums, 0.0, 0.0));
+    if lane.index == 0u {
+        store_partial(RZ, wg, s.x);
+        store_partial(RR, wg, s.y);
     }
 }
 
 // Multigrid: x += α p; r −= α q; partial rᵀr (the V-cycle follows).
 @compute @workgroup_size(WORKGROUP)
-fn advance(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn advance(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
            @builtin(workgroup_id) wg: vec3<u32>) {
-    let alpha = step_length(lid);
+    let alpha = step_length(lane);
     let i = id.x;
     var rr = 0.0;
     if i < params.n_vertices && alpha != 0.0 {
         let ri = advance_vertex(i, alpha);
         rr = dot(ri, ri);
     }
-    let s = workgroup_sum(lid, rr);
-    if lid == 0u {
+    let s = workgroup_sum(lane, rr);
+    if lane.index == 0u {
         store_partial(RR, wg.x, s);
     }
 }
@@ -287,15 +285,16 @@ struct Ending {
     beta: f32,
 }
 
-fn end_iteration(lid: u32, wg: u32) -> Ending {
-    let leader = lid == 0u && wg == 0u;
+fn end_iteration(lane: Lane, wg: u32) -> Ending {
+    let leader = lane.index == 0u && wg == 0u;
     if scalars_in.done != 0u {
         if leader {
             scalars_next = scalars_in;
         }
         return Ending(false, 0.0);
     }
-    let pq = total(lid, pq_segment(scalars_in.iterations));
+    let sums = totals(lane, vec3<u32>(pq_segment(scalars_in.iterations), RZ, RR));
+    let pq = sums.x;
     if !usable(pq) {
         if leader {
             var s = stopped(scalars_in);
@@ -304,8 +303,8 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
         }
         return Ending(false, 0.0);
     }
-    let delta = total(lid, RZ);
-    let rr = total(lid, RR);
+    let delta = sums.y;
+    let rr = sums.z;
     let on = going_on(rr, delta, scalars_in.threshold);
     if leader {
         var s = scalars_in;
@@ -325,9 +324,9 @@ fn end_iteration(lid: u32, wg: u32) -> Ending {
 // partial p'ᵀq (p' recomputed at the neighbours rather than read, as
 // every workgroup writes its own part of it in this dispatch).
 @compute @workgroup_size(WORKGROUP)
-fn next(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn next(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
         @builtin(workgroup_id) wg: vec3<u32>) {
-    let ending = end_iteration(lid, wg.x);
+    let ending = end_iteration(lane, wg.x);
     if !ending.going_on {
         return;
     }
@@ -340,8 +339,8 @@ fn next(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         store_q(i, qi);
         pq = dot(pi, qi);
     }
-    let s = workgroup_sum(lid, pq);
-    if lid == 0u {
+    let s = workgroup_sum(lane, pq);
+    if lane.index == 0u {
         store_partial(pq_segment(scalars_in.iterations + 1u), wg.x, s);
     }
 }
@@ -369,7 +368,7 @@ fn coupled(i: u32) -> vec3<f32> {
 // After `init`, with cloth–cloth contacts: r −= S C x (here `p` is bound
 // to x), Jacobi's z = P⁻¹ r, and the partial rᵀz and rᵀr again.
 @compute @workgroup_size(WORKGROUP)
-fn couple_init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn couple_init(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
                @builtin(workgroup_id) wg: vec3<u32>) {
     let i = id.x;
     var sums = vec2<f32>(0.0);
@@ -381,14 +380,14 @@ fn couple_init(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invo
         r[i] = vec4<f32>(ri, 0.0);
         sums = jacobi_z(i, ri);
     }
-    store_rz_rr(lid, wg.x, sums);
+    store_rz_rr(lane, wg.x, sums);
 }
 
 // After `spmv` or `next`, with cloth–cloth contacts: q += S C p for the
 // direction just written, and its partial pᵀq again (`scalars_in` bound
 // to the scalars of that iteration).
 @compute @workgroup_size(WORKGROUP)
-fn couple(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+fn couple(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
           @builtin(workgroup_id) wg: vec3<u32>) {
     if scalars_in.done != 0u {
         return;
@@ -403,16 +402,16 @@ fn couple(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocatio
         }
         pq = dot(p[i].xyz, qi);
     }
-    let s = workgroup_sum(lid, pq);
-    if lid == 0u {
+    let s = workgroup_sum(lane, pq);
+    if lane.index == 0u {
         store_partial(pq_segment(scalars_in.iterations), wg.x, s);
     }
 }
 
 // Ends the last iteration: its scalars alone (one workgroup).
 @compute @workgroup_size(WORKGROUP)
-fn conclude(@builtin(local_invocation_index) lid: u32) {
-    _ = end_iteration(lid, 0u);
+fn conclude(lane: Lane) {
+    _ = end_iteration(lane, 0u);
 }
 
 // Folds the solve's outcome into the run statistics (one invocation).

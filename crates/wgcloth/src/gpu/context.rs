@@ -31,11 +31,26 @@ pub fn describe(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
 }
 
+/// The features a headless device asks for where its adapter has them:
+/// timestamp queries (the stages' timings) and subgroup operations (the
+/// solver's workgroup sums, `wgsl/sums_subgroup.wgsl`).
+pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
+    .union(wgpu::Features::SUBGROUP);
+
 impl GpuContext {
     #[cfg(not(target_arch = "wasm32"))]
-    /// A device on [`GpuContext::pick_adapter`]'s adapter.
+    /// A device on [`GpuContext::pick_adapter`]'s adapter, with what it has
+    /// of [`OPTIONAL_FEATURES`].
     pub fn headless() -> Result<GpuContext> {
-        Self::from_adapter(&Self::pick_adapter()?)
+        Self::headless_with(OPTIONAL_FEATURES)
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// [`GpuContext::headless`] asking for what the adapter has of `optional`
+    /// (to compare a run without some of [`OPTIONAL_FEATURES`]).
+    pub fn headless_with(optional: wgpu::Features) -> Result<GpuContext> {
+        Self::from_adapter(&Self::pick_adapter()?, optional)
     }
 
     #[cfg(not(target_arch = "wasm32"))]
@@ -79,14 +94,12 @@ impl GpuContext {
     }
 
     #[cfg(not(target_arch = "wasm32"))]
-    /// Opens a device on `adapter` with its full limits and, where present,
-    /// timestamp queries.
-    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<GpuContext> {
-        let wanted =
-            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+    /// Opens a device on `adapter` with its full limits and what it has of
+    /// the `optional` features (usually [`OPTIONAL_FEATURES`]).
+    pub fn from_adapter(adapter: &wgpu::Adapter, optional: wgpu::Features) -> Result<GpuContext> {
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("wgcloth"),
-            required_features: adapter.features() & wanted,
+            required_features: adapter.features() & optional,
             required_limits: adapter.limits(),
             ..Default::default()
         }))

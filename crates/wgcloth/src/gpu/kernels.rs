@@ -347,13 +347,13 @@ pub struct Kernels {
     kernels: Vec<Kernel>,
     /// Group 0 of every scene stage: `params` alone.
     params_layout: wgpu::BindGroupLayout,
-    mlp_threads: u32,
+    /// What they were compiled for: their tile, whether they bind the
+    /// largest arrays in parts, whether they sum through subgroups.
+    variant: shaders::Variant,
     software: bool,
     /// Whether the device binds enough storage buffers per stage
     /// ([`SPLIT_STORAGE_BUFFERS`]) for kernels that bind in parts.
     splittable: bool,
-    /// Whether these kernels bind the largest arrays in parts.
-    parted: bool,
     /// The same kernels binding them in parts, compiled the first time a
     /// scene on this device needs them ([`Kernels::in_parts`]).
     in_parts: OnceLock<Box<Kernels>>,
@@ -400,7 +400,7 @@ impl Kernels {
     /// The kernels for a scene whose largest arrays pass one binding: these
     /// bound in parts, compiled on first use (see [`SPLIT_STORAGE_BUFFERS`]).
     pub(crate) async fn in_parts(&self, device: &wgpu::Device) -> Result<&Kernels> {
-        if self.parted {
+        if self.variant.split {
             return Ok(self);
         }
         if self.in_parts.get().is_none() {
@@ -424,7 +424,7 @@ impl Kernels {
     }
 
     fn compile(device: &wgpu::Device, split: bool) -> Result<Kernels> {
-        let mlp_threads = mlp_threads(&device.limits());
+        let variant = shaders::Variant::for_device(device, split);
         let splittable =
             device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -442,11 +442,11 @@ impl Kernels {
         });
         let mut compiled = Vec::new();
         for (stage, _) in STAGES {
-            let mut reflected = shaders::reflect(stage, mlp_threads, split)
+            let mut reflected = shaders::reflect(stage, variant)
                 .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl: {e}")))?;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(stage),
-                source: wgpu::ShaderSource::Wgsl(shaders::source(stage, mlp_threads, split).into()),
+                source: wgpu::ShaderSource::Wgsl(shaders::source(stage, variant).into()),
             });
             for entry in Entry::ALL.into_iter().filter(|e| e.wgsl().0 == stage) {
                 let name = entry.wgsl().1;
@@ -473,10 +473,9 @@ impl Kernels {
         Ok(Kernels {
             kernels: compiled.into_iter().map(|(_, k)| k).collect(),
             params_layout,
-            mlp_threads,
+            variant,
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
             splittable,
-            parted: split,
             in_parts: OnceLock::new(),
         })
     }
@@ -542,6 +541,12 @@ impl Kernels {
         self.software
     }
 
+    /// Whether the solver's workgroup sums run through subgroup operations
+    /// (the device has `wgpu::Features::SUBGROUP`), not workgroup memory alone.
+    pub fn subgroups(&self) -> bool {
+        self.variant.subgroups
+    }
+
     /// Whether the device can bind the largest arrays in parts
     /// ([`SPLIT_STORAGE_BUFFERS`]), so a scene may pass the per-binding limit.
     pub fn splittable(&self) -> bool {
@@ -550,7 +555,7 @@ impl Kernels {
 
     /// Rows (and outputs) per workgroup tile of the network layer.
     pub fn mlp_tile(&self) -> u32 {
-        4 * self.mlp_threads
+        4 * self.variant.mlp_threads
     }
 
     /// Group 0 of every scene stage's pass: the run's constants.
@@ -581,7 +586,12 @@ mod tests {
             assert_eq!(entry as usize, k, "{entry:?} out of order");
         }
         for (stage, _) in STAGES {
-            let mut found: Vec<String> = shaders::reflect(stage, 16, false)
+            let variant = shaders::Variant {
+                mlp_threads: 16,
+                split: false,
+                subgroups: false,
+            };
+            let mut found: Vec<String> = shaders::reflect(stage, variant)
                 .unwrap()
                 .into_iter()
                 .map(|e| e.name)

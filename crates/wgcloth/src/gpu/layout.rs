@@ -508,7 +508,14 @@ mod tests {
 
     /// The size naga gives the WGSL struct `name` in `stage`'s source.
     fn wgsl_size(stage: &str, name: &str) -> usize {
-        let source = crate::gpu::shaders::source(stage, 8, true);
+        let source = crate::gpu::shaders::source(
+            stage,
+            crate::gpu::shaders::Variant {
+                mlp_threads: 8,
+                split: true,
+                subgroups: false,
+            },
+        );
         let module = naga::front::wgsl::parse_str(&source).expect("the stage parses");
         let (_, ty) = module
             .types

@@ -17,7 +17,7 @@ pub mod sim;
 pub(crate) mod stages;
 
 pub use budget::CgBudget;
-pub use context::GpuContext;
+pub use context::{GpuContext, OPTIONAL_FEATURES};
 pub use kernels::Kernels;
 pub use mlp::GpuMlp;
 pub use readback::Readback;

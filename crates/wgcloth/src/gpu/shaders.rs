@@ -30,7 +30,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 7] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 8] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -72,11 +72,48 @@ pub const INCLUDES: [(&str, &str, &[&str]); 7] = [
         &["assemble"],
     ),
     (
+        "sums",
+        include_str!("../../wgsl/sums.wgsl"),
+        &["pcg", "multigrid"],
+    ),
+    (
         "partials",
         include_str!("../../wgsl/partials.wgsl"),
         &["pcg", "multigrid"],
     ),
 ];
+
+/// `wgsl/sums_subgroup.wgsl`: the workgroup sums through subgroup
+/// operations, in the place of the `sums` include where
+/// [`Variant::subgroups`].
+pub const SUBGROUP_SUMS: &str = include_str!("../../wgsl/sums_subgroup.wgsl");
+
+/// What one device's kernels are compiled for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Variant {
+    /// Threads per edge of the network layer's tile
+    /// ([`mlp_threads`](crate::gpu::kernels::mlp_threads)).
+    pub mlp_threads: u32,
+    /// Whether the largest arrays are bound in parts ([`SPLIT_ARRAYS`]).
+    pub split: bool,
+    /// Whether workgroup sums use subgroup operations: the device has
+    /// `wgpu::Features::SUBGROUP` and is not a browser's, whose WGSL asks
+    /// for an `enable subgroups;` that naga refuses.
+    pub subgroups: bool,
+}
+
+impl Variant {
+    /// The kernels' variant for `device`: whether they bind in parts is
+    /// the caller's choice.
+    pub fn for_device(device: &wgpu::Device, split: bool) -> Variant {
+        Variant {
+            mlp_threads: crate::gpu::kernels::mlp_threads(&device.limits()),
+            split,
+            subgroups: cfg!(not(target_arch = "wasm32"))
+                && device.features().contains(wgpu::Features::SUBGROUP),
+        }
+    }
+}
 
 /// Stages that do not depend on the scene and get no common code.
 pub const STANDALONE: [&str; 2] = ["batch", "mlp"];
@@ -158,7 +195,7 @@ fn split_accessors(text: &str, split: bool) -> String {
 /// `mlp_threads` per edge), common code, the stage's includes, the stage's
 /// own code, then the accessors of its split arrays ([`SPLIT_ARRAYS`],
 /// bound in parts where `split`).
-pub fn source(stage: &str, mlp_threads: u32, split: bool) -> String {
+pub fn source(stage: &str, variant: Variant) -> String {
     let body = STAGES
         .iter()
         .find(|(name, _)| *name == stage)
@@ -167,14 +204,19 @@ pub fn source(stage: &str, mlp_threads: u32, split: bool) -> String {
     let includes: String = INCLUDES
         .iter()
         .filter(|(_, _, users)| users.contains(&stage))
-        .map(|(_, text, _)| format!("{text}\n"))
+        .map(
+            |(name, text, _)| match *name == "sums" && variant.subgroups {
+                true => format!("{SUBGROUP_SUMS}\n"),
+                false => format!("{text}\n"),
+            },
+        )
         .collect();
-    let prelude = constants::prelude(mlp_threads);
+    let prelude = constants::prelude(variant.mlp_threads);
     match STANDALONE.contains(&stage) {
         true => format!("{prelude}\n{body}"),
         false => {
             let code = format!("{includes}{body}");
-            let accessors = split_accessors(&code, split);
+            let accessors = split_accessors(&code, variant.split);
             format!("{prelude}\n{COMMON}\n{code}\n{accessors}")
         }
     }
@@ -211,15 +253,16 @@ pub struct EntryPoint {
 
 /// Parses and validates a stage with naga, returning a readable error, and
 /// lists its entry points with the bindings each uses.
-pub fn reflect(stage: &str, mlp_threads: u32, split: bool) -> Result<Vec<EntryPoint>, String> {
-    let src = source(stage, mlp_threads, split);
+pub fn reflect(stage: &str, variant: Variant) -> Result<Vec<EntryPoint>, String> {
+    let src = source(stage, variant);
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
-    let info = naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
-    )
-    .validate(&module)
-    .map_err(|e| e.emit_to_string(&src))?;
+    let capabilities = match variant.subgroups {
+        true => naga::valid::Capabilities::SUBGROUP,
+        false => naga::valid::Capabilities::empty(),
+    };
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
+        .validate(&module)
+        .map_err(|e| e.emit_to_string(&src))?;
     let mut declared = Vec::new();
     for (handle, var) in module.global_variables.iter() {
         let (Some(name), Some(rb)) = (&var.name, &var.binding) else {
@@ -279,21 +322,43 @@ mod tests {
         STAGES
             .into_iter()
             .chain(includes)
-            .chain([("common", COMMON)])
+            .chain([("common", COMMON), ("sums_subgroup", SUBGROUP_SUMS)])
             .collect()
     }
 
-    /// The kernels as compiled for a device with WebGPU's default limits,
-    /// and as compiled to split the largest arrays ([`SPLIT_ARRAYS`]) where
-    /// the device allows [`SPLIT_STORAGE_BUFFERS`](crate::gpu::kernels::SPLIT_STORAGE_BUFFERS).
+    /// Every variant of the kernels: with and without subgroup sums, as
+    /// compiled for a device with WebGPU's default limits, and as compiled
+    /// to split the largest arrays ([`SPLIT_ARRAYS`]) where the device
+    /// allows [`SPLIT_STORAGE_BUFFERS`](crate::gpu::kernels::SPLIT_STORAGE_BUFFERS).
+    fn variants() -> impl Iterator<Item = Variant> {
+        [false, true].into_iter().flat_map(|split| {
+            [false, true].map(|subgroups| Variant {
+                mlp_threads: 16,
+                split,
+                subgroups,
+            })
+        })
+    }
+
     #[test]
     fn every_entry_point_validates_and_fits_webgpu_default_limits() {
-        for split in [false, true] {
-            let limit = match split {
+        for variant in variants() {
+            let limit = match variant.split {
                 false => wgpu::Limits::default().max_storage_buffers_per_shader_stage,
                 true => crate::gpu::kernels::SPLIT_STORAGE_BUFFERS,
             };
-            check_bindings(split, limit);
+            check_bindings(variant, limit);
+        }
+    }
+
+    #[test]
+    fn only_the_subgroup_variant_uses_subgroup_operations() {
+        for variant in variants() {
+            for stage in ["pcg", "multigrid"] {
+                let source = source(stage, variant);
+                assert_eq!(source.contains("subgroupAdd"), variant.subgroups);
+                assert!(source.contains("fn workgroup_sum(lane: Lane"));
+            }
         }
     }
 
@@ -307,19 +372,19 @@ mod tests {
                 );
             }
         }
-        for split in [false, true] {
-            let source = source("multigrid", 16, split);
-            assert_eq!(source.contains("operators_2"), split);
+        for variant in variants() {
+            let source = source("multigrid", variant);
+            assert_eq!(source.contains("operators_2"), variant.split);
             assert!(source.contains("fn operators_set("));
             assert!(source.contains("fn matrix_at(") && !source.contains("fn matrix_set("));
         }
     }
 
-    fn check_bindings(split: bool, limit: u32) {
+    fn check_bindings(variant: Variant, limit: u32) {
         let limits = wgpu::Limits::default();
         for (stage, _) in STAGES {
-            let entries =
-                reflect(stage, 16, split).unwrap_or_else(|e| panic!("{stage}.wgsl:\n{e}"));
+            let entries = reflect(stage, variant)
+                .unwrap_or_else(|e| panic!("{stage}.wgsl ({variant:?}):\n{e}"));
             assert!(!entries.is_empty(), "{stage} has no entry point");
             for entry in entries {
                 let storage = entry
