@@ -17,9 +17,10 @@ var<workgroup> scratch_total: vec4<f32>;
 // Sum of `value` over the workgroup, as a uniform value the workgroup may
 // branch on. Every invocation must call it. Up to four sums in one cost
 // what one does. Each subgroup sums its values in registers, then the
-// first subgroup sums the subgroups' partials: one barrier before the
-// uniform load, where workgroup memory alone takes three. The order is
-// fixed for a given subgroup size, so a device repeats its sums bit for bit.
+// first subgroup sums the subgroups' partials: three barriers, counting
+// the uniform load's two, where workgroup memory alone takes five. The
+// order is fixed by the subgroup size, so a pipeline repeats its sums bit
+// for bit (some drivers choose the size per pipeline).
 fn workgroup_sums(lane: Lane, value: vec4<f32>) -> vec4<f32> {
     let partial = subgroupAdd(value);
     if lane.in_subgroup == 0u {
