@@ -216,11 +216,9 @@ pub fn solve(
                 .map(|(i, ((x, r), z))| {
                     *x += alpha * s.p[i];
                     *r -= alpha * s.q[i];
-                    let rz = if jacobi {
-                        *z = *r * s.inv_diag[i];
-                        r.dot(*z) as f64
-                    } else {
-                        0.0
+                    let rz = match jacobi {
+                        true => jacobi_z(*r, s.inv_diag[i], z),
+                        false => 0.0,
                     };
                     (r.length_squared() as f64, rz)
                 })
@@ -265,11 +263,16 @@ fn precondition(
                 .with_min_len(GRAIN)
                 .zip(&s.r)
                 .zip(&s.inv_diag)
-                .map(|((z, r), m)| {
-                    *z = *r * *m;
-                    r.dot(*z) as f64
-                })
+                .map(|((z, r), m)| jacobi_z(*r, *m, z))
                 .sum()
         }
     }
+}
+
+/// Jacobi's z = P⁻¹ r at one vertex (`inv_diag` is P⁻¹'s diagonal),
+/// returning its rᵀz.
+#[inline]
+fn jacobi_z(r: Vec3, inv_diag: Vec3, z: &mut Vec3) -> f64 {
+    *z = r * inv_diag;
+    r.dot(*z) as f64
 }

@@ -120,6 +120,7 @@ impl Mlp {
         // nonempty; it is dropped below.
         let per_jacobian = outs * t.max(1);
         let (mut values, mut jacobians) = (vec![0.0; n * outs], vec![0.0; n * per_jacobian]);
+        let wanted = Wanted { wrt, rows: 0..outs };
         xs[..n * n_in]
             .par_chunks(LANES * n_in)
             .zip(values.par_chunks_mut(LANES * outs))
@@ -127,10 +128,6 @@ impl Mlp {
             .for_each_init(
                 || Scratch::new(self),
                 |scratch, ((x, y), j)| {
-                    let wanted = Wanted {
-                        wrt: wrt.clone(),
-                        rows: 0..outs,
-                    };
                     let io = Block {
                         xs: x,
                         values: y,
