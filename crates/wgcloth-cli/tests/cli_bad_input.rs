@@ -1,7 +1,8 @@
 //! The `wgcloth` binary on bad input: every case must exit with code 2,
 //! say what is wrong in one `error:` line naming the bad field or file,
-//! and never panic. Two tiny valid runs check the happy path and the
-//! `--report` JSON. Every run is `--grid 4 --steps 2` so the file is fast.
+//! and never panic. Tiny valid runs check the happy path, the `--report`
+//! JSON and how a GPU run's solver sums (`--no-subgroups`). Every run is
+//! `--grid 4 --steps 2` so the file is fast.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -506,6 +507,45 @@ fn tiny_run_writes_report_json() {
     assert_eq!(json["grid"], serde_json::json!([4, 4]), "{text}");
     assert_eq!(json["steps"], serde_json::json!(2), "{text}");
     assert_eq!(json["finite"], serde_json::json!(true), "{text}");
+}
+
+/// A GPU run says how its solver sums (the backend line, the report's
+/// `gpu_subgroup_sums`): through subgroups where the adapter has them,
+/// through workgroup memory with `--no-subgroups`.
+#[test]
+fn gpu_runs_say_how_the_solver_sums() {
+    let adapter = match wgcloth::gpu::GpuContext::pick_adapter() {
+        Ok(adapter) => adapter,
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI needs a GPU adapter: {e}")
+        }
+        Err(e) => return eprintln!("skipping GPU test: {e}"),
+    };
+    let has = adapter.features().contains(wgpu::Features::SUBGROUP);
+    let dir = TempDir::new("subgroups");
+    for (flag, expected) in [(None, has), (Some("--no-subgroups"), false)] {
+        let report = dir.path(flag.map_or("report.json", |_| "report_no_subgroups.json"));
+        let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
+        args.extend(TINY);
+        args.extend(flag);
+        let out = wgcloth(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(
+            json["gpu_subgroup_sums"],
+            serde_json::json!(expected),
+            "{flag:?}"
+        );
+        let how = match expected {
+            true => "solver sums through subgroups",
+            false => "solver sums through workgroup memory",
+        };
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains(how),
+            "{flag:?}"
+        );
+    }
 }
 
 #[test]
