@@ -14,10 +14,15 @@
 // sees the same α and β. The scalars and the direction ping-pong between
 // two buffers each (`*_in` this iteration's, `*_next` the next one's), and
 // the pᵀq partials between two segments, by the iteration count's parity.
-// The scalars also hold the dispatch sizes of every level of the next
-// iteration's indirect dispatches, zero once the solve is over, so a
-// converged solve records iterations that cost nothing; `next` (one
-// workgroup once the solve is over) and `conclude` carry the scalars.
+// After the scalars, each buffer holds the dispatch sizes of every level
+// of the next iteration's indirect dispatches, zero once the solve is
+// over, so a converged solve records iterations that cost nothing; `next`
+// (one workgroup once the solve is over) and `conclude` carry the scalars.
+// `init_scalars` writes the sizes into both buffers, so an iteration that
+// goes on copies nothing, and kernels read the scalars alone: lavapipe
+// appears to execute a struct copy in a branch for every 8 invocations
+// whether they take it or not, and copying the sizes too made its
+// iterations 2.5 to 5 times as long (BENCHMARKS.md).
 
 struct Scalars {
     delta: f32,
@@ -31,6 +36,11 @@ struct Scalars {
     // `next`'s [workgroups, 1, 1]: the cloth's while the solve goes on, one
     // (to carry the scalars) once it is over.
     next_groups: array<u32, 3>,
+}
+
+// A scalars buffer whole.
+struct ScalarsAndSizes {
+    scalars: Scalars,
     // [workgroups, 1, 1] per multigrid level (level 0: the cloth).
     groups: array<u32, 3 * MAX_LEVELS>,
     // The same for each level's patch sweeps (multigrid::colour_grid).
@@ -49,7 +59,9 @@ struct Scalars {
 @group(1) @binding(7) var<storage, read_write> p_next: array<vec4<f32>>;
 @group(1) @binding(8) var<storage, read_write> inv_diag: array<vec4<f32>>;
 @group(1) @binding(10) var<storage, read> scalars_in: Scalars;
-@group(1) @binding(11) var<storage, read_write> scalars_next: Scalars;
+@group(1) @binding(11) var<storage, read_write> scalars_next: ScalarsAndSizes;
+// `init_scalars`: the other buffer, iteration 1's.
+@group(1) @binding(15) var<storage, read_write> scalars_spare: ScalarsAndSizes;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
 // Stage "self_contact"'s lists and contacts: the cloth–cloth couplings C,
 // the blocks of A outside the springs' pattern.
@@ -135,16 +147,15 @@ fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
     return rr > threshold && delta > 0.0;
 }
 
-// `s` with the solve over: later iterations dispatch no workgroups.
-fn stopped(s: Scalars) -> Scalars {
-    var out = s;
-    out.done = 1u;
-    out.next_groups[0] = 1u;
+// Ends the solve with scalars `s`: later iterations dispatch no workgroups.
+fn stop(s: Scalars) {
+    scalars_next.scalars = s;
+    scalars_next.scalars.done = 1u;
+    scalars_next.scalars.next_groups[0] = 1u;
     for (var l = 0u; l < MAX_LEVELS; l++) {
-        out.groups[3u * l] = 0u;
-        out.patch_groups[3u * l] = 0u;
+        scalars_next.groups[3u * l] = 0u;
+        scalars_next.patch_groups[3u * l] = 0u;
     }
-    return out;
 }
 
 // A non-finite scalar, or rᵀz ≤ 0 above the goal (a preconditioner that is
@@ -173,18 +184,21 @@ fn init_scalars(lane: Lane) {
         var nx = params.cells_x + 1u;
         var ny = params.cells_y + 1u;
         s.next_groups = array<u32, 3>(select(1u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on), 1u, 1u);
+        var sizes: ScalarsAndSizes;
+        sizes.scalars = s;
         for (var l = 0u; l < MAX_LEVELS; l++) {
-            s.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
-            s.groups[3u * l + 1u] = 1u;
-            s.groups[3u * l + 2u] = 1u;
+            sizes.groups[3u * l] = select(0u, (nx * ny + WORKGROUP - 1u) / WORKGROUP, on);
+            sizes.groups[3u * l + 1u] = 1u;
+            sizes.groups[3u * l + 2u] = 1u;
             let threads = patch_threads(nx, ny);
-            s.patch_groups[3u * l] = select(0u, (threads + WORKGROUP - 1u) / WORKGROUP, on);
-            s.patch_groups[3u * l + 1u] = 1u;
-            s.patch_groups[3u * l + 2u] = 1u;
+            sizes.patch_groups[3u * l] = select(0u, (threads + WORKGROUP - 1u) / WORKGROUP, on);
+            sizes.patch_groups[3u * l + 1u] = 1u;
+            sizes.patch_groups[3u * l + 2u] = 1u;
             nx = (nx + 1u) / 2u;
             ny = (ny + 1u) / 2u;
         }
-        scalars_next = s;
+        scalars_next = sizes;
+        scalars_spare = sizes;
     }
 }
 
@@ -289,7 +303,7 @@ fn end_iteration(lane: Lane, wg: u32) -> Ending {
     let leader = lane.index == 0u && wg == 0u;
     if scalars_in.done != 0u {
         if leader {
-            scalars_next = scalars_in;
+            stop(scalars_in);
         }
         return Ending(false, 0.0);
     }
@@ -297,25 +311,27 @@ fn end_iteration(lane: Lane, wg: u32) -> Ending {
     let pq = sums.x;
     if !usable(pq) {
         if leader {
-            var s = stopped(scalars_in);
+            var s = scalars_in;
             s.breakdown = 1u;
-            scalars_next = s;
+            stop(s);
         }
         return Ending(false, 0.0);
     }
     let delta = sums.y;
     let rr = sums.z;
     let on = going_on(rr, delta, scalars_in.threshold);
-    if leader {
+    if leader && on {
+        // The rest is as `init_scalars` wrote it (no breakdown going on).
+        scalars_next.scalars.delta = delta;
+        scalars_next.scalars.rr = rr;
+        scalars_next.scalars.iterations = scalars_in.iterations + 1u;
+    } else if leader {
         var s = scalars_in;
         s.delta = delta;
         s.rr = rr;
         s.iterations += 1u;
         s.breakdown = u32(stalled(rr, delta, scalars_in.threshold));
-        if !on {
-            s = stopped(s);
-        }
-        scalars_next = s;
+        stop(s);
     }
     return Ending(on, delta / scalars_in.delta);
 }

@@ -11,8 +11,8 @@ use crate::cpu::{self_contact, separate};
 use crate::error::{Error, Result};
 use crate::gpu::constants::{TILE, WORKGROUP, cloth_header, model, motion, self_header};
 use crate::gpu::layout::{
-    BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, Scalars, Sections,
-    StepState, Sym3,
+    BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, ScalarsAndSizes,
+    Sections, StepState, Sym3,
 };
 use crate::gpu::shaders::PARTS;
 use crate::multigrid::{self, NO_PATCHES, PATCH_BLOCKS, PATCH_COLOURS, STORED_STENCIL};
@@ -604,7 +604,7 @@ impl Buffers {
             inv_diag: zeroed("inverse diagonal", sizes.per_vertex),
             partials: zeroed("partial sums", sizes.partials),
             scalars: [0, 1].map(|k| {
-                let bytes = size_of::<Scalars>() as u64;
+                let bytes = size_of::<ScalarsAndSizes>() as u64;
                 counted(device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(&format!("pcg scalars {k}")),
                     size: bytes,

@@ -302,10 +302,12 @@ pub struct BvhNode {
     pub count: u32,
 }
 
-/// PCG scalars (mirrors `Scalars` in wgsl/pcg.wgsl).
+/// A PCG scalars buffer (mirrors `ScalarsAndSizes` in wgsl/pcg.wgsl): the
+/// scalars every kernel reads (WGSL `Scalars`, up to `next_groups`), then
+/// the dispatch sizes of the next iteration's update and V-cycle.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct Scalars {
+pub struct ScalarsAndSizes {
     /// δ = rᵀz of the current iterate.
     pub delta: f32,
     /// |S b|².
@@ -333,20 +335,20 @@ pub struct Scalars {
     pub patch_groups: [u32; 3 * MAX_LEVELS as usize],
 }
 
-impl Scalars {
+impl ScalarsAndSizes {
     /// Byte offset of `next`'s indirect dispatch arguments.
     pub fn next_groups_offset() -> u64 {
-        std::mem::offset_of!(Scalars, next_groups) as u64
+        std::mem::offset_of!(ScalarsAndSizes, next_groups) as u64
     }
 
     /// Byte offset of level `l`'s indirect dispatch arguments.
     pub fn groups_offset(l: usize) -> u64 {
-        (std::mem::offset_of!(Scalars, groups) + 12 * l) as u64
+        (std::mem::offset_of!(ScalarsAndSizes, groups) + 12 * l) as u64
     }
 
     /// Byte offset of level `l`'s patch sweeps' indirect dispatch arguments.
     pub fn patch_groups_offset(l: usize) -> u64 {
-        (std::mem::offset_of!(Scalars, patch_groups) + 12 * l) as u64
+        (std::mem::offset_of!(ScalarsAndSizes, patch_groups) + 12 * l) as u64
     }
 }
 
@@ -533,7 +535,7 @@ mod tests {
             ("assemble", "PackedSym3", size_of::<Sym3>()),
             ("assemble", "Contact", size_of::<Contact>()),
             ("assemble", "Response", size_of::<Response>()),
-            ("pcg", "Scalars", size_of::<Scalars>()),
+            ("pcg", "ScalarsAndSizes", size_of::<ScalarsAndSizes>()),
             ("multigrid", "Hop", size_of::<Hop>()),
             ("assemble", "RigidFrame", size_of::<RigidFrame>()),
             ("assemble", "BvhNode", size_of::<BvhNode>()),

@@ -7,7 +7,7 @@
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::{Grid, Scalars};
+use crate::gpu::layout::{Grid, ScalarsAndSizes};
 use crate::multigrid::{
     NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
 };
@@ -124,8 +124,8 @@ impl Multigrid {
             {
                 Some(args) => {
                     let offset = match sweep {
-                        true => Scalars::patch_groups_offset(level),
-                        false => Scalars::groups_offset(level),
+                        true => ScalarsAndSizes::patch_groups_offset(level),
+                        false => ScalarsAndSizes::groups_offset(level),
                     };
                     kernel.dispatch_indirect(pass, args, offset);
                 }

@@ -8,7 +8,7 @@
 use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::{Params, Scalars};
+use crate::gpu::layout::{Params, ScalarsAndSizes};
 use crate::gpu::stages::multigrid::Multigrid;
 use crate::scene::Scene;
 
@@ -54,6 +54,7 @@ impl Pcg {
                 ("partials", &b.partials),
                 ("scalars_in", &b.scalars[k]),
                 ("scalars_next", &b.scalars[1 - k]),
+                ("scalars_spare", &b.scalars[k]),
                 ("state", &b.state),
                 ("cloth_lists", &b.cloth_lists),
                 ("cloth_pairs", &b.cloth_pairs),
@@ -109,7 +110,8 @@ impl Pcg {
         if let Some(mg) = &self.multigrid {
             count += mg.encode_cycle(pass, None);
         }
-        // Writes scalars[0], which iteration 0 reads.
+        // Writes scalars[0], which iteration 0 reads, and the dispatch sizes
+        // into scalars[1] too.
         self.sides[1].init_scalars.dispatch(pass, 1, 1);
         // Iteration `it`'s x, r and z, sized by the scalars it reads.
         let update = |pass: &mut wgpu::ComputePass, it: usize| {
@@ -117,12 +119,12 @@ impl Pcg {
             match &self.multigrid {
                 Some(mg) => {
                     side.advance
-                        .dispatch_indirect(pass, args, Scalars::groups_offset(0));
+                        .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
                     1 + mg.encode_cycle(pass, Some(args))
                 }
                 None => {
                     side.update
-                        .dispatch_indirect(pass, args, Scalars::groups_offset(0));
+                        .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
                     1
                 }
             }
@@ -136,7 +138,7 @@ impl Pcg {
             count += 2 + update(pass, 0);
             for it in 1..iters {
                 let prev = (it - 1) % 2;
-                let args = (&self.scalars[prev], Scalars::next_groups_offset());
+                let args = (&self.scalars[prev], ScalarsAndSizes::next_groups_offset());
                 self.sides[prev]
                     .next
                     .dispatch_indirect(pass, args.0, args.1);
