@@ -24,16 +24,17 @@ cargo clippy --release --workspace --all-targets --features wgcloth-cli/viewer -
 # The library alone, with its default features, as an app gets it: no CLI,
 # training, image or plotting crate in its tree, and it builds by itself.
 bash scripts/check-library.sh
-cargo test --release --workspace
+# With the viewer's feature, as clippy checks it: one build for the tests
+# and every example, the viewer's included (run below).
+cargo test --release --workspace --features wgcloth-cli/viewer
 # The embedding example (the crate docs' example) on a default-limits device.
 cargo run --release -p wgcloth --example embed
 # The library in a real browser: the demo page in headless Chromium's WebGPU.
 bash scripts/test-web.sh
 
-# The interactive viewer (examples/viewer.rs, feature `viewer`): without a
-# display it must fail with one clear line and exit code 2; with Xvfb here
-# it must run a few frames.
-cargo build --release -p wgcloth-cli --features viewer --example viewer
+# The interactive viewer (examples/viewer.rs, feature `viewer`, built by
+# the tests above): without a display it must fail with one clear line and
+# exit code 2; with Xvfb here it must run a few frames.
 set +e
 message=$(env -u DISPLAY -u WAYLAND_DISPLAY target/release/examples/viewer 2>&1)
 code=$?

@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use wgcloth::config::ModelKind;
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
 use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
 use wgcloth::{Config, Scene};
 use winit::application::ApplicationHandler;
@@ -46,6 +46,9 @@ struct Gfx {
 struct Running {
     scene: Scene,
     sim: GpuSim,
+    /// Each frame waits for its step anyway: a step records the PCG
+    /// iterations recent ones took, not the whole cap.
+    solved: SolvedSteps,
 }
 
 /// An orbit around the scene's framing target.
@@ -153,16 +156,19 @@ impl App {
         }
         gfx.window
             .set_title(&format!("wgcloth: {}", config.model.name()));
-        self.running = Some(Running { scene, sim });
+        let solver = &scene.config.solver;
+        let solved = SolvedSteps::new(&sim, CgBudget::new(solver.cg_iters, solver.cg_tol));
+        self.running = Some(Running { scene, sim, solved });
         Ok(())
     }
 
     fn redraw(&mut self) -> Result<(), String> {
-        let (Some(gfx), Some(run), Some(orbit)) = (&self.gfx, &self.running, &self.orbit) else {
+        let (Some(gfx), Some(run), Some(orbit)) = (&self.gfx, &mut self.running, &self.orbit)
+        else {
             return Ok(());
         };
         if !self.paused || self.step_once {
-            run.sim.step();
+            run.solved.step(&run.sim).map_err(|e| e.to_string())?;
             self.step_once = false;
         }
         let frame = match gfx.surface.get_current_texture() {

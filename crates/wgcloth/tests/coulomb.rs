@@ -74,9 +74,10 @@ fn on_cpu(scene: &Scene) -> Trace {
 
 fn on_gpu(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, scene: &Scene) -> Trace {
     let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene).unwrap();
+    let mut solved = common::solved_steps(&sim, scene);
     (0..STEPS)
         .map(|_| {
-            sim.step();
+            solved.step(&sim).unwrap();
             (
                 mean(&sim.read_positions().unwrap()),
                 mean(&sim.read_velocities().unwrap()),
@@ -237,9 +238,10 @@ fn flap_runs(scene: &Scene, steps: usize) -> Vec<(&'static str, Trace)> {
     )];
     if let Some(ctx) = common::gpu_context() {
         let gpu = GpuSim::new(&ctx.device, &ctx.queue, scene).unwrap();
+        let mut solved = common::solved_steps(&gpu, scene);
         let trace = (0..steps)
             .map(|_| {
-                gpu.step();
+                solved.step(&gpu).unwrap();
                 let (x, v) = (
                     gpu.read_positions().unwrap(),
                     gpu.read_velocities().unwrap(),

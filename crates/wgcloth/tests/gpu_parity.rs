@@ -9,7 +9,7 @@ use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
-use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
 use wgcloth::{Config, Scene};
 
 fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
@@ -327,8 +327,9 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
             cpu_deepest = cpu_deepest.max(s.max_penetration);
         }
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        let mut solved = common::solved_steps(&gpu, &scene);
         for _ in 0..steps {
-            gpu.step();
+            solved.step(&gpu).unwrap();
         }
         let x = gpu.read_positions().unwrap();
         let state = gpu.read_state().unwrap();
@@ -400,7 +401,11 @@ fn vertices_deep_inside_are_measured_and_pushed_out_as_on_the_cpu() {
 #[test]
 fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let scene = sphere(12, ModelKind::Friction);
+    // A cap of 40 iterations, more than these steps take: a fifth of the
+    // default's dispatches to record.
+    let mut config = sphere(12, ModelKind::Friction).config;
+    config.solver.cg_iters = 40;
+    let scene = Scene::new(&config).unwrap();
     let separate = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     for _ in 0..50 {
         separate.step();
@@ -900,9 +905,10 @@ fn a_coarse_cloth_keeps_every_face_vertex_contact_and_repeats_bit_for_bit() {
         let steps = 100;
         let run = |count: bool| {
             let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+            let mut solved = common::solved_steps(&gpu, &scene);
             let mut most = 0;
             for _ in 0..steps {
-                gpu.step();
+                solved.step(&gpu).unwrap();
                 if count {
                     let (_, face_vertex) = gpu.read_contacts().unwrap();
                     let mut per_triangle = vec![0; scene.cloth.triangles.len()];
@@ -935,4 +941,58 @@ fn a_coarse_cloth_keeps_every_face_vertex_contact_and_repeats_bit_for_bit() {
         );
         assert!(dev < 1e-3, "{model:?}: GPU and CPU drifted {dev} m apart");
     }
+}
+
+/// `SolvedSteps` records the iterations its budget gives and solves a step
+/// the budget cut again from its start with the whole cap: every step, and
+/// the run's statistics, end bit for bit where steps recording the cap end.
+#[test]
+fn solved_steps_end_where_steps_recording_the_cap_end() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    // Jacobi's steps take tens of iterations to 1e-5, the budget's first 17.
+    let scene = hang_solved(12, PRECONDITIONERS[0], 300, 1e-5);
+    let capped = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let budgeted = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let mut budget = CgBudget::new(300, 1e-5);
+    // A budget that has seen only one-iteration steps cuts the first ones.
+    for _ in 0..CgBudget::WINDOW {
+        budget.observe(1, 300, 0.0);
+    }
+    let mut solved = SolvedSteps::new(&budgeted, budget);
+    let bits = |sim: &GpuSim| {
+        let (x, v) = (
+            sim.read_positions().unwrap(),
+            sim.read_velocities().unwrap(),
+        );
+        let state = sim.read_state().unwrap();
+        let words: Vec<u32> = x
+            .iter()
+            .chain(&v)
+            .flat_map(|p| p.to_array().map(f32::to_bits))
+            .collect();
+        (words, bytemuck::bytes_of(&state).to_vec())
+    };
+    let mut most = 0;
+    for step in 1..=12 {
+        capped.step();
+        let state = solved.step(&budgeted).unwrap();
+        most = most.max(state.last_iterations);
+        assert!(
+            bits(&capped) == bits(&budgeted),
+            "step {step}: the budgeted run left the capped one"
+        );
+    }
+    eprintln!(
+        "{} of 12 steps solved again, at most {most} iterations, the last budget {}",
+        solved.resolved(),
+        budgeted.cg_budget()
+    );
+    assert!(
+        solved.resolved() > 0,
+        "no step was cut: the repeat went untested"
+    );
+    assert!(
+        budgeted.cg_budget() < 200,
+        "the budget never fell below the cap"
+    );
 }

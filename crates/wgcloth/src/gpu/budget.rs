@@ -3,8 +3,12 @@
 //! run loop of `wgcloth run` and the browser demo use it, and so may an app
 //! that records steps with [`GpuSim::encode_step`].
 
-#[cfg(doc)]
+#[cfg(not(target_arch = "wasm32"))]
+use crate::error::Result;
+#[cfg(any(doc, not(target_arch = "wasm32")))]
 use crate::gpu::GpuSim;
+#[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::layout::StepState;
 
 /// How many PCG iterations the next GPU step records: half again the
 /// most any of the last [`CgBudget::WINDOW`] steps took, plus
@@ -80,6 +84,89 @@ impl CgBudget {
         self.recent
             .push_back(if ran_out { self.cap } else { iterations });
         cut
+    }
+}
+
+/// Steps that wait for each other (native only): what a loop of
+/// [`GpuSim::step`] does, with each step's PCG iterations recorded by a
+/// [`CgBudget`] instead of the whole cap, and a step the budget cut short
+/// of the tolerance solved again from its start with the cap, as
+/// `wgcloth run` does without waiting. Iterations after convergence
+/// change nothing, so each step ends bit for bit where one recording the
+/// cap ends, for the dispatches it records. `wgcloth validate` and the
+/// tests step this way. It keeps the start of the step it runs on the
+/// device (positions, velocities and [`StepState`]), in buffers of its own.
+#[cfg(not(target_arch = "wasm32"))]
+pub struct SolvedSteps {
+    budget: CgBudget,
+    start: [wgpu::Buffer; 3],
+    resolved: u32,
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+impl SolvedSteps {
+    /// Steps of `sim` with `budget` (`CgBudget::new(solver.cg_iters,
+    /// solver.cg_tol)` for its scene's solver).
+    pub fn new(sim: &GpuSim, budget: CgBudget) -> SolvedSteps {
+        let start = Self::kept(sim).map(|b| {
+            sim.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some("step start"),
+                size: b.size(),
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        SolvedSteps {
+            budget,
+            start,
+            resolved: 0,
+        }
+    }
+
+    /// What a step starts from and a repeat puts back.
+    fn kept(sim: &GpuSim) -> [&wgpu::Buffer; 3] {
+        [sim.positions(), sim.velocities(), sim.statistics()]
+    }
+
+    /// Runs one step to the tolerance and waits for it: its [`StepState`].
+    pub fn step(&mut self, sim: &GpuSim) -> Result<StepState> {
+        let budget = self.budget.next();
+        let state = self.run(sim, budget, true)?;
+        if !self
+            .budget
+            .cut(state.last_iterations, budget, state.last_residual)
+        {
+            self.budget
+                .observe(state.last_iterations, budget, state.last_residual);
+            return Ok(state);
+        }
+        self.resolved += 1;
+        let state = self.run(sim, self.budget.cap(), false)?;
+        self.budget.observe(
+            state.last_iterations,
+            self.budget.cap(),
+            state.last_residual,
+        );
+        Ok(state)
+    }
+
+    /// Steps recording `budget` iterations, from the state `sim` holds
+    /// (kept first) or from the kept start.
+    fn run(&self, sim: &GpuSim, budget: u32, keep: bool) -> Result<StepState> {
+        let mut encoder = sim.device().create_command_encoder(&Default::default());
+        for (live, kept) in Self::kept(sim).into_iter().zip(&self.start) {
+            let (from, to) = if keep { (live, kept) } else { (kept, live) };
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+        }
+        sim.set_cg_budget(budget);
+        sim.encode_step(&mut encoder);
+        sim.queue().submit([encoder.finish()]);
+        sim.read_state()
+    }
+
+    /// Steps the budget cut and [`Self::step`] solved again.
+    pub fn resolved(&self) -> u32 {
+        self.resolved
     }
 }
 

@@ -17,6 +17,8 @@ pub mod sim;
 pub(crate) mod stages;
 
 pub use budget::CgBudget;
+#[cfg(not(target_arch = "wasm32"))]
+pub use budget::SolvedSteps;
 pub use context::{GpuContext, OPTIONAL_FEATURES};
 pub use kernels::Kernels;
 pub use mlp::GpuMlp;

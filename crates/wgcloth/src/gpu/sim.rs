@@ -214,6 +214,18 @@ impl GpuSim {
             .collect()
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
+    /// The device the scene lives on.
+    pub(crate) fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// The queue its steps are submitted to.
+    pub(crate) fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
     /// Cloth positions, one `vec4<f32>` (w = 1) per vertex: a vertex buffer.
     pub fn positions(&self) -> &wgpu::Buffer {
         &self.buffers.x
