@@ -37,7 +37,7 @@ fn workgroup_sums(lane: Lane, value: vec4<f32>) -> vec4<f32> {
         }
         scratch[0] = s;
     }
-    let total = workgroupUniformLoad(&scratch[0]);
-    workgroupBarrier();
-    return total;
+    // Its barriers order this call's reads of `scratch` before the next
+    // call's writes.
+    return workgroupUniformLoad(&scratch[0]);
 }
