@@ -2,7 +2,6 @@
 //! the `--report` JSON of docs/DESIGN.md and the one-screen summary.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
@@ -15,7 +14,7 @@ use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::mlp::NetworkKernel;
-use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps, context::describe};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, SolvedSteps, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
 use wgcloth::stage::{SelfContactStages, Stage};
@@ -570,7 +569,7 @@ fn run_gpu(
     obs: &mut Observers,
     mut checkpoint: Option<&mut Checkpoint>,
 ) -> Result<Report> {
-    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let kernels = ctx.kernels()?;
     let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, scene)?;
     ctx.finish()?;
     if let Some(r) = obs.recording.as_deref_mut() {
@@ -802,7 +801,7 @@ pub fn validate(
     steps: u64,
     mut each_step: impl FnMut(u64, &GpuSim, &CpuSim),
 ) -> Result<Validation> {
-    let kernels = Arc::new(Kernels::new(&ctx.device)?);
+    let kernels = ctx.kernels()?;
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene)?;
     let solver = &scene.config.solver;
     let mut solved = SolvedSteps::new(&gpu, CgBudget::new(solver.cg_iters, solver.cg_tol));

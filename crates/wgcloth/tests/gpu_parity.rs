@@ -996,3 +996,17 @@ fn solved_steps_end_where_steps_recording_the_cap_end() {
         "the budget never fell below the cap"
     );
 }
+
+/// A context compiles its kernels once: later calls, and its clones made
+/// before or after, get the same ones.
+#[test]
+fn a_context_compiles_its_kernels_once() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let before = ctx.clone();
+    let first = ctx.kernels().unwrap();
+    assert!(Arc::ptr_eq(&first, &ctx.kernels().unwrap()));
+    assert!(Arc::ptr_eq(&first, &before.kernels().unwrap()));
+    assert!(Arc::ptr_eq(&first, &ctx.clone().kernels().unwrap()));
+}

@@ -24,7 +24,7 @@ use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::mlp::{BatchShape, NetworkBatch};
-use wgcloth::gpu::{GpuContext, Kernels, context::describe};
+use wgcloth::gpu::{GpuContext, context::describe};
 use wgcloth::multigrid;
 use wgcloth::nn::weights::{self, Shipped};
 use wgcloth::scene::Scene;
@@ -917,7 +917,7 @@ fn network_rows(
     progress: &mut impl FnMut(&str),
 ) -> Result<Vec<NetworkRow>> {
     let kernels = match gpu {
-        Some(ctx) => Some(Arc::new(Kernels::new(&ctx.device)?)),
+        Some(ctx) => Some(ctx.kernels()?),
         None => None,
     };
     let mut rows = Vec::new();

@@ -8,7 +8,12 @@ use crate::error::{Error, Result};
 
 #[cfg(not(target_arch = "wasm32"))]
 use bytemuck::Pod;
+#[cfg(not(target_arch = "wasm32"))]
+use std::sync::OnceLock;
 use std::sync::{Arc, Mutex};
+
+#[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::Kernels;
 #[cfg(not(target_arch = "wasm32"))]
 use std::time::Duration;
 
@@ -24,6 +29,21 @@ pub struct GpuContext {
     /// The first validation error or device loss, recorded instead of
     /// panicking so a run can stop with one clear error.
     fault: Arc<Mutex<Option<String>>>,
+    #[cfg(not(target_arch = "wasm32"))]
+    kernels: KernelCache,
+}
+
+/// The kernels compiled for a context's device ([`GpuContext::kernels`]),
+/// shared by its clones.
+#[cfg(not(target_arch = "wasm32"))]
+#[derive(Clone, Default)]
+struct KernelCache(Arc<OnceLock<Arc<Kernels>>>);
+
+#[cfg(not(target_arch = "wasm32"))]
+impl std::fmt::Debug for KernelCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "KernelCache {{ compiled: {} }}", self.0.get().is_some())
+    }
 }
 
 /// "name (backend, device type)" for logs and reports.
@@ -130,7 +150,21 @@ impl GpuContext {
             queue,
             adapter: adapter.get_info(),
             fault,
+            kernels: KernelCache::default(),
         })
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// The kernels for this device, compiled by the first call (about a
+    /// second on lavapipe) and shared by every later one, and by the
+    /// context's clones: each run of `wgcloth bench` on one device
+    /// compiles nothing again.
+    pub fn kernels(&self) -> Result<Arc<Kernels>> {
+        if let Some(kernels) = self.kernels.0.get() {
+            return Ok(kernels.clone());
+        }
+        let kernels = Arc::new(Kernels::new(&self.device)?);
+        Ok(self.kernels.0.get_or_init(|| kernels).clone())
     }
 
     #[cfg(not(target_arch = "wasm32"))]
