@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use wgcloth::config::ModelKind;
-use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, SolvedSteps};
 use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
 use wgcloth::{Config, Scene};
 use winit::application::ApplicationHandler;
@@ -38,7 +38,6 @@ struct Gfx {
     config: wgpu::SurfaceConfiguration,
     depth: wgpu::TextureView,
     ctx: GpuContext,
-    kernels: Arc<Kernels>,
     pipelines: Pipelines,
 }
 
@@ -128,7 +127,8 @@ impl App {
         }
         config.present_mode = wgpu::PresentMode::AutoVsync;
         surface.configure(&ctx.device, &config);
-        let kernels = Arc::new(Kernels::new(&ctx.device).map_err(|e| e.to_string())?);
+        // Compiled here, so a window that cannot run them fails at once.
+        ctx.kernels().map_err(|e| e.to_string())?;
         Ok(Gfx {
             depth: depth_target(&ctx.device, config.width, config.height),
             pipelines: Pipelines::new(&ctx.device, config.format),
@@ -136,7 +136,6 @@ impl App {
             surface,
             config,
             ctx,
-            kernels,
         })
     }
 
@@ -148,7 +147,8 @@ impl App {
             ..self.config.clone()
         };
         let scene = Scene::new(&config).map_err(|e| e.to_string())?;
-        let sim = GpuSim::with_kernels(&gfx.kernels, &gfx.ctx.device, &gfx.ctx.queue, &scene)
+        let kernels = gfx.ctx.kernels().map_err(|e| e.to_string())?;
+        let sim = GpuSim::with_kernels(&kernels, &gfx.ctx.device, &gfx.ctx.queue, &scene)
             .map_err(|e| e.to_string())?;
         if self.orbit.is_none() {
             let period = scene.config.rigid.motion.period;

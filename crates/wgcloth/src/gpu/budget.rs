@@ -93,8 +93,8 @@ impl CgBudget {
 /// of the tolerance solved again from its start with the cap, as
 /// `wgcloth run` does without waiting. Iterations after convergence
 /// change nothing, so each step ends bit for bit where one recording the
-/// cap ends, for the dispatches it records. `wgcloth validate` and the
-/// tests step this way. It keeps the start of the step it runs on the
+/// cap ends, for the dispatches it records. `wgcloth validate`, the
+/// viewer and the tests step this way. It keeps the start of the step it runs on the
 /// device (positions, velocities and [`StepState`]), in buffers of its own.
 #[cfg(not(target_arch = "wasm32"))]
 pub struct SolvedSteps {
