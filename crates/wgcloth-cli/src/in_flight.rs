@@ -29,6 +29,13 @@ struct Slot {
     stats: wgpu::Buffer,
 }
 
+impl Slot {
+    /// Its copy of `GpuSim::step_start`, in the same order.
+    fn kept(&self) -> [&wgpu::Buffer; 3] {
+        [&self.x, &self.v, &self.stats]
+    }
+}
+
 struct Pending {
     step: u64,
     budget: u32,
@@ -109,11 +116,7 @@ impl InFlight {
         let slot = &self.slots[k];
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         let (stats, staging) = (sim.statistics(), slot.staging.buffer());
-        for (from, to) in [
-            (sim.positions(), &slot.x),
-            (sim.velocities(), &slot.v),
-            (stats, &slot.stats),
-        ] {
+        for (from, to) in sim.step_start().into_iter().zip(slot.kept()) {
             encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
         }
         let dispatches = sim.encode_step(&mut encoder);
@@ -199,11 +202,7 @@ impl InFlight {
         while self.next(ctx, sim, true)?.is_some() {}
         let slot = &self.slots[finished.slot];
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        for (from, to) in [
-            (&slot.x, sim.positions()),
-            (&slot.v, sim.velocities()),
-            (&slot.stats, sim.statistics()),
-        ] {
+        for (from, to) in slot.kept().into_iter().zip(sim.step_start()) {
             encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
         }
         ctx.queue.submit([encoder.finish()]);

@@ -108,7 +108,7 @@ impl SolvedSteps {
     /// Steps of `sim` with `budget` (`CgBudget::new(solver.cg_iters,
     /// solver.cg_tol)` for its scene's solver).
     pub fn new(sim: &GpuSim, budget: CgBudget) -> SolvedSteps {
-        let start = Self::kept(sim).map(|b| {
+        let start = sim.step_start().map(|b| {
             sim.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some("step start"),
                 size: b.size(),
@@ -121,11 +121,6 @@ impl SolvedSteps {
             start,
             resolved: 0,
         }
-    }
-
-    /// What a step starts from and a repeat puts back.
-    fn kept(sim: &GpuSim) -> [&wgpu::Buffer; 3] {
-        [sim.positions(), sim.velocities(), sim.statistics()]
     }
 
     /// Runs one step to the tolerance and waits for it: its [`StepState`].
@@ -154,7 +149,7 @@ impl SolvedSteps {
     /// (kept first) or from the kept start.
     fn run(&self, sim: &GpuSim, budget: u32, keep: bool) -> Result<StepState> {
         let mut encoder = sim.device().create_command_encoder(&Default::default());
-        for (live, kept) in Self::kept(sim).into_iter().zip(&self.start) {
+        for (live, kept) in sim.step_start().into_iter().zip(&self.start) {
             let (from, to) = if keep { (live, kept) } else { (kept, live) };
             encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
         }

@@ -242,6 +242,14 @@ impl GpuSim {
         &self.buffers.state
     }
 
+    /// What a step starts from: [`Self::positions`], [`Self::velocities`]
+    /// and [`Self::statistics`] (with the clock). Copied back, they make the
+    /// next step repeat one, as the run loop's rewind and
+    /// [`SolvedSteps`](crate::gpu::budget::SolvedSteps) do.
+    pub fn step_start(&self) -> [&wgpu::Buffer; 3] {
+        [self.positions(), self.velocities(), self.statistics()]
+    }
+
     /// Where each recorded step leaves its passes' timestamps (two `u64`
     /// ticks per [`Stage::ALL`] entry; [`Self::stage_ms`] reads them), when
     /// the adapter has timestamp queries.
