@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use wgcloth::config::ModelKind;
-use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, SolvedSteps};
+use wgcloth::gpu::{GpuContext, GpuSim, SolvedSteps};
 use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
 use wgcloth::{Config, Scene};
 use winit::application::ApplicationHandler;
@@ -156,8 +156,7 @@ impl App {
         }
         gfx.window
             .set_title(&format!("wgcloth: {}", config.model.name()));
-        let solver = &scene.config.solver;
-        let solved = SolvedSteps::new(&sim, CgBudget::new(solver.cg_iters, solver.cg_tol));
+        let solved = SolvedSteps::for_scene(&sim, &scene);
         self.running = Some(Running { scene, sim, solved });
         Ok(())
     }

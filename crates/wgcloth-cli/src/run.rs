@@ -803,8 +803,7 @@ pub fn validate(
 ) -> Result<Validation> {
     let kernels = ctx.kernels()?;
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene)?;
-    let solver = &scene.config.solver;
-    let mut solved = SolvedSteps::new(&gpu, CgBudget::new(solver.cg_iters, solver.cg_tol));
+    let mut solved = SolvedSteps::for_scene(&gpu, &scene);
     let mut cpu = CpuSim::new(scene.clone());
     let mut nudged = CpuSim::new(scene);
     for (i, x) in nudged.state.x.iter_mut().enumerate() {

@@ -8,7 +8,7 @@ mod common;
 use glam::{Quat, Vec3};
 use wgcloth::config::{ModelKind, MotionKind, Pins, Rotation, SceneKind, Shape};
 use wgcloth::cpu::CpuSim;
-use wgcloth::gpu::{GpuSim, Kernels};
+use wgcloth::gpu::{GpuSim, Kernels, SolvedSteps};
 use wgcloth::{Config, Scene};
 
 const MODELS: [ModelKind; 2] = [ModelKind::Friction, ModelKind::FrictionNet];
@@ -74,7 +74,7 @@ fn on_cpu(scene: &Scene) -> Trace {
 
 fn on_gpu(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, scene: &Scene) -> Trace {
     let sim = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene).unwrap();
-    let mut solved = common::solved_steps(&sim, scene);
+    let mut solved = SolvedSteps::for_scene(&sim, scene);
     (0..STEPS)
         .map(|_| {
             solved.step(&sim).unwrap();
@@ -238,7 +238,7 @@ fn flap_runs(scene: &Scene, steps: usize) -> Vec<(&'static str, Trace)> {
     )];
     if let Some(ctx) = common::gpu_context() {
         let gpu = GpuSim::new(&ctx.device, &ctx.queue, scene).unwrap();
-        let mut solved = common::solved_steps(&gpu, scene);
+        let mut solved = SolvedSteps::for_scene(&gpu, scene);
         let trace = (0..steps)
             .map(|_| {
                 solved.step(&gpu).unwrap();

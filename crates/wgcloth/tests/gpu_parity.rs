@@ -327,7 +327,7 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
             cpu_deepest = cpu_deepest.max(s.max_penetration);
         }
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-        let mut solved = common::solved_steps(&gpu, &scene);
+        let mut solved = SolvedSteps::for_scene(&gpu, &scene);
         for _ in 0..steps {
             solved.step(&gpu).unwrap();
         }
@@ -905,7 +905,7 @@ fn a_coarse_cloth_keeps_every_face_vertex_contact_and_repeats_bit_for_bit() {
         let steps = 100;
         let run = |count: bool| {
             let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-            let mut solved = common::solved_steps(&gpu, &scene);
+            let mut solved = SolvedSteps::for_scene(&gpu, &scene);
             let mut most = 0;
             for _ in 0..steps {
                 solved.step(&gpu).unwrap();

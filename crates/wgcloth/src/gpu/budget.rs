@@ -9,6 +9,8 @@ use crate::error::Result;
 use crate::gpu::GpuSim;
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::layout::StepState;
+#[cfg(not(target_arch = "wasm32"))]
+use crate::scene::Scene;
 
 /// How many PCG iterations the next GPU step records: half again the
 /// most any of the last [`CgBudget::WINDOW`] steps took, plus
@@ -105,8 +107,14 @@ pub struct SolvedSteps {
 
 #[cfg(not(target_arch = "wasm32"))]
 impl SolvedSteps {
-    /// Steps of `sim` with `budget` (`CgBudget::new(solver.cg_iters,
-    /// solver.cg_tol)` for its scene's solver).
+    /// Steps of `sim`, which holds `scene`, with its solver's cap and
+    /// tolerance.
+    pub fn for_scene(sim: &GpuSim, scene: &Scene) -> SolvedSteps {
+        let solver = &scene.config.solver;
+        Self::new(sim, CgBudget::new(solver.cg_iters, solver.cg_tol))
+    }
+
+    /// Steps of `sim` with `budget`.
     pub fn new(sim: &GpuSim, budget: CgBudget) -> SolvedSteps {
         let start = sim.step_start().map(|b| {
             sim.device().create_buffer(&wgpu::BufferDescriptor {

@@ -63,18 +63,6 @@ pub fn gpu_context() -> Option<wgcloth::gpu::GpuContext> {
     }
 }
 
-/// Steps of `sim` that wait for each other and record the PCG iterations
-/// `wgcloth run` would for `scene`'s solver (`SolvedSteps`): each ends
-/// where a step recording the whole cap ends, for a fraction of its
-/// dispatches on lavapipe.
-pub fn solved_steps(
-    sim: &wgcloth::gpu::GpuSim,
-    scene: &wgcloth::Scene,
-) -> wgcloth::gpu::SolvedSteps {
-    let s = &scene.config.solver;
-    wgcloth::gpu::SolvedSteps::new(sim, wgcloth::gpu::CgBudget::new(s.cg_iters, s.cg_tol))
-}
-
 /// The thesis sphere scene on an N×N cloth with `model`.
 pub fn sphere(grid: u32, model: wgcloth::config::ModelKind) -> wgcloth::Scene {
     let mut c = wgcloth::Config {
