@@ -84,6 +84,26 @@ fn frobenius(m: Mat3) -> f32 {
     m.to_cols_array().iter().map(|e| e * e).sum::<f32>().sqrt()
 }
 
+/// Asks the cache for `items` ahead of their use: a hint, which changes no
+/// result, where the CPU has one (x86-64) and nothing elsewhere.
+#[inline(always)]
+fn prefetch<T>(items: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let bytes = std::mem::size_of_val(items);
+        let start = items.as_ptr().cast::<i8>();
+        // Every 64-byte line from the first byte to the last.
+        for offset in (0..bytes).step_by(64).chain(bytes.checked_sub(1)) {
+            // SAFETY: the address is inside `items`, and a prefetch never
+            // faults or writes.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(start.add(offset)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = items;
+}
+
 /// Grid coordinates of node `i` of `level`.
 fn coords(level: Level, i: usize) -> (u32, u32) {
     (
@@ -386,6 +406,11 @@ impl Multigrid {
             }
             *d = std::array::from_fn(|k| Vec3::from_slice(&out[3 * k..3 * k + 3]));
         };
+        // A coarse level's forward sweep is the V-cycle's first read of its
+        // stencils since the last one, and the finer levels' passes between
+        // have evicted them: each patch asks for its colour's next patch in
+        // its column while it is computed (BENCHMARKS.md, "Reading ahead").
+        let read_ahead = forward && l > 0;
         // A colour's patches of one window, solved a patch row to a task
         // from the same z, then set.
         let mut solved = vec![[Vec3::ZERO; PATCH as usize]; ROWS.div_ceil(2) * px.div_ceil(2)];
@@ -411,6 +436,9 @@ impl Multigrid {
                         // The residuals a grid row at a time, in memory order.
                         for (half, r) in [(0, 2 * pr), (2, 2 * pr + 1)] {
                             for (m, d) in row.iter_mut().enumerate() {
+                                if read_ahead {
+                                    self.read_ahead(l, (cx + 2 * m, pr + 2), half);
+                                }
                                 for side in 0..2 {
                                     let c = 4 * m + 2 * cx + side;
                                     let inside = c < level.nx as usize && r < level.ny as usize;
@@ -436,6 +464,27 @@ impl Multigrid {
                     }
                 }
             }
+        }
+    }
+
+    /// Prefetches the stencil rows of patch `(pc, pr)` of coarse level `l`
+    /// in its grid row `half` (0 or 2, as the sweep's residuals), and with
+    /// the first its inverse. Past the grid's edge, nothing.
+    fn read_ahead(&self, l: usize, (pc, pr): (usize, usize), half: usize) {
+        let level = self.levels[l];
+        let (px, py) = patch_grid(level);
+        let (r, nx) = (2 * pr + half / 2, level.nx as usize);
+        if pr >= py as usize || r >= level.ny as usize || 2 * pc >= nx {
+            return;
+        }
+        let first = r * nx + 2 * pc;
+        let last = (first + 1).min(r * nx + nx - 1);
+        let w = STORED_STENCIL as usize;
+        prefetch(&self.stencils[l - 1][first * w..(last + 1) * w]);
+        if half == 0 {
+            prefetch(std::slice::from_ref(
+                &self.patch_inverses[l][pr * px as usize + pc],
+            ));
         }
     }
 
