@@ -589,7 +589,7 @@ fn run_gpu(
     let mut timings = Timings::default();
     let (mut divergence, mut last_good) = (None, None);
     let mut residuals = Residuals::default();
-    let mut budget = CgBudget::new(config.solver.cg_iters, config.solver.cg_tol);
+    let mut budget = CgBudget::for_solver(&config.solver);
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut resolved) = (0u64, 0u64, 0u64);

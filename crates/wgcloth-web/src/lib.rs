@@ -286,7 +286,7 @@ impl App {
             pipelines: Pipelines::new(&device, view_format),
             view_format,
             readback: Readback::new(&device, size_of::<StepState>() as u64, 3),
-            budget: CgBudget::new(cfg.solver.cg_iters, cfg.solver.cg_tol),
+            budget: CgBudget::for_solver(&cfg.solver),
             mark: (performance.now(), 0),
             performance,
             device,

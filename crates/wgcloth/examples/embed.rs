@@ -25,7 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // A step records as many PCG iterations as recent steps needed, not the
     // whole cap: each empty one still costs its dispatches.
     let mut statistics = Readback::new(&device, sim.statistics().size(), 2);
-    let mut budget = CgBudget::new(scene.config.solver.cg_iters, scene.config.solver.cg_tol);
+    let mut budget = CgBudget::for_solver(&scene.config.solver);
 
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("cloth"),

@@ -56,6 +56,17 @@ pub struct Multigrid {
     smoother: Smoother,
 }
 
+/// Which way a patch sweep goes.
+enum Sweep<'a> {
+    /// Colours 0 to 3 from zero, each patch's residual from the colours
+    /// before it (the rest are still zero, whatever z holds there) and its
+    /// nodes set. The function is called with z and, in order, the grid
+    /// rows whose nodes and neighbours within two rows are all set.
+    Forward(&'a mut dyn FnMut(&[Vec3], Range<usize>)),
+    /// Colours 3 to 0 from the guess in z, each node corrected.
+    Backward,
+}
+
 /// The nodes of patch (pc, pr) of `level`, by local index; None past the
 /// grid's edge.
 fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH as usize] {
@@ -362,14 +373,9 @@ impl Multigrid {
     }
 
     /// One block Gauss-Seidel pass over level `l`'s patches on `z` for
-    /// A z = `rhs` (kernels `patch_down`, `patch_up`): `forward`, colours
-    /// 0 to 3 from zero, each patch's residual from the colours before it
-    /// (the rest are still zero, whatever `z` holds there) and its nodes
-    /// set; else 3 to 0 from the guess in `z`, each node corrected.
+    /// A z = `rhs` (kernels `patch_down`, `patch_up`), the way `sweep` says.
     /// Patches of a colour share no spring (those within two nodes are of
     /// other colours), so each colour's are solved from the same z.
-    /// `finished(z, rows)` is called, in order, with the grid rows whose
-    /// nodes and neighbours are all set, while their blocks are in cache.
     fn patch_sweep(
         &self,
         a: &BlockMatrix,
@@ -377,9 +383,9 @@ impl Multigrid {
         l: usize,
         rhs: &[Vec3],
         z: &mut [Vec3],
-        forward: bool,
-        mut finished: impl FnMut(&[Vec3], Range<usize>),
+        mut sweep: Sweep,
     ) {
+        let forward = matches!(sweep, Sweep::Forward(_));
         let level = self.levels[l];
         let (px, py) = patch_grid(level);
         let (px, py) = (px as usize, py as usize);
@@ -492,7 +498,10 @@ impl Multigrid {
                 true => level.ny as usize,
                 false => (2 * set).saturating_sub(2),
             };
-            if rows > done && (set == py || (rows - done) * level.nx as usize >= FINISHED_NODES) {
+            if let Sweep::Forward(finished) = &mut sweep
+                && rows > done
+                && (set == py || (rows - done) * level.nx as usize >= FINISHED_NODES)
+            {
                 finished(z, done..rows);
                 done = rows;
             }
@@ -620,7 +629,7 @@ impl Multigrid {
                 // their blocks are still in cache.
                 Smoother::Patches => {
                     let colours = &self.colours[l];
-                    self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, true, |pre, rows| {
+                    let mut finished = |pre: &[Vec3], rows| {
                         for_each_node_in(from, rows, &mut residual, |node| {
                             if colours[node.0] as usize == PATCH_COLOURS - 1 {
                                 return Vec3::ZERO;
@@ -628,7 +637,9 @@ impl Multigrid {
                             let later = |j: usize| colours[j] > colours[node.0];
                             -self.row_where(a, cloth, l, node, later, |j| pre[j])
                         })
-                    });
+                    };
+                    let sweep = Sweep::Forward(&mut finished);
+                    self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, sweep);
                 }
                 Smoother::BlockJacobi => {
                     pre.par_iter_mut()
@@ -684,7 +695,7 @@ impl Multigrid {
             };
             match self.smoother {
                 Smoother::Patches => {
-                    self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, false, |_, _| {});
+                    self.patch_sweep(a, cloth, l, fine_rhs, &mut guess, Sweep::Backward);
                     target.copy_from_slice(&guess);
                 }
                 Smoother::BlockJacobi => for_each_node(level, target, |node: Node| {

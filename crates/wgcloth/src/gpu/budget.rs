@@ -3,6 +3,7 @@
 //! run loop of `wgcloth run` and the browser demo use it, and so may an app
 //! that records steps with [`GpuSim::encode_step`].
 
+use crate::config::SolverConfig;
 #[cfg(not(target_arch = "wasm32"))]
 use crate::error::Result;
 #[cfg(any(doc, not(target_arch = "wasm32")))]
@@ -51,6 +52,12 @@ impl CgBudget {
             tol,
             recent: Default::default(),
         }
+    }
+
+    /// A budget of at most `solver.cg_iters` for steps solved to
+    /// `solver.cg_tol`.
+    pub fn for_solver(solver: &SolverConfig) -> CgBudget {
+        Self::new(solver.cg_iters, solver.cg_tol)
     }
 
     /// Iterations for the next step to record ([`GpuSim::set_cg_budget`]).
@@ -110,8 +117,7 @@ impl SolvedSteps {
     /// Steps of `sim`, which holds `scene`, with its solver's cap and
     /// tolerance.
     pub fn for_scene(sim: &GpuSim, scene: &Scene) -> SolvedSteps {
-        let solver = &scene.config.solver;
-        Self::new(sim, CgBudget::new(solver.cg_iters, solver.cg_tol))
+        Self::new(sim, CgBudget::for_solver(&scene.config.solver))
     }
 
     /// Steps of `sim` with `budget`.
