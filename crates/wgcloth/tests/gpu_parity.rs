@@ -486,8 +486,9 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
             cpu_worst = cpu_worst.max(out.relative_residual);
         }
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        let mut solved = SolvedSteps::for_scene(&gpu, &scene);
         for _ in 0..20 {
-            gpu.step();
+            solved.step(&gpu).unwrap();
         }
         let state = gpu.read_state().unwrap();
         let gpu_iters = state.cg_iterations_total;
@@ -543,9 +544,10 @@ fn subgroup_sums_solve_as_workgroup_memory_sums_do() {
         let scene = hang_solved(21, solve, 300, 1e-4);
         let with = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         let without = GpuSim::with_kernels(&plain, &device, &queue, &scene).unwrap();
+        let mut solved = [&with, &without].map(|sim| SolvedSteps::for_scene(sim, &scene));
         for _ in 0..20 {
-            with.step();
-            without.step();
+            solved[0].step(&with).unwrap();
+            solved[1].step(&without).unwrap();
         }
         let (a, b) = (with.read_state().unwrap(), without.read_state().unwrap());
         let (pa, pb) = (
