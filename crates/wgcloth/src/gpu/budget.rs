@@ -139,23 +139,19 @@ impl SolvedSteps {
 
     /// Runs one step to the tolerance and waits for it: its [`StepState`].
     pub fn step(&mut self, sim: &GpuSim) -> Result<StepState> {
-        let budget = self.budget.next();
-        let state = self.run(sim, budget, true)?;
-        if !self
+        let mut budget = self.budget.next();
+        let mut state = self.run(sim, budget, true)?;
+        if self
             .budget
             .cut(state.last_iterations, budget, state.last_residual)
         {
-            self.budget
-                .observe(state.last_iterations, budget, state.last_residual);
-            return Ok(state);
+            self.resolved += 1;
+            budget = self.budget.cap();
+            state = self.run(sim, budget, false)?;
         }
-        self.resolved += 1;
-        let state = self.run(sim, self.budget.cap(), false)?;
-        self.budget.observe(
-            state.last_iterations,
-            self.budget.cap(),
-            state.last_residual,
-        );
+        // The repeat, not the cut step, counts towards the next budgets.
+        self.budget
+            .observe(state.last_iterations, budget, state.last_residual);
         Ok(state)
     }
 
