@@ -270,3 +270,47 @@ fn the_patch_smoother_takes_under_half_block_jacobis_iterations() {
     assert!(patches.0 < 0.5 * jacobi.0, "{patches:?} against {jacobi:?}");
     assert!(patches.1 < jacobi.1 / 2, "{patches:?} against {jacobi:?}");
 }
+
+/// The CPU's patch sweeps cut the rows into a band per thread and solve
+/// the rows at the seams after the bands (src/cpu/multigrid.rs,
+/// `patch_sweep`): any number of threads gives the V-cycle of one, bit for
+/// bit, on a grid of several bands a level, odd rows and pins.
+#[test]
+fn the_patch_v_cycle_is_the_same_on_any_number_of_threads() {
+    let mut rng = Rng(5);
+    let cloth = Cloth::grid(150, 131, 1.0, 1.0, &[0, 149], |u, v| Vec3::new(u, -v, 0.0));
+    let a = random_system(&cloth, &mut rng);
+    let r: Vec<Vec3> = (0..cloth.vertex_count())
+        .map(|i| match cloth.pinned[i] {
+            true => Vec3::ZERO,
+            false => rng.vec3(-1.0, 1.0),
+        })
+        .collect();
+    let v_cycle = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut mg = Multigrid::new(&cloth, Smoother::Patches);
+            mg.setup(&a, &cloth);
+            let mut z = vec![Vec3::ZERO; cloth.vertex_count()];
+            mg.apply(&a, &cloth, &r, &mut z);
+            z.iter()
+                .flat_map(|z| z.to_array().map(f32::to_bits))
+                .collect::<Vec<u32>>()
+        })
+    };
+    let one = v_cycle(1);
+    assert!(one.iter().any(|&bits| f32::from_bits(bits) != 0.0));
+    for threads in [2, 3, 8] {
+        let z = v_cycle(threads);
+        let differ = z.iter().zip(&one).filter(|(x, y)| x != y).count();
+        assert_eq!(
+            differ,
+            0,
+            "{threads} threads: {differ} of {} floats differ",
+            z.len()
+        );
+    }
+}

@@ -59,10 +59,11 @@ pub struct Multigrid {
 /// Which way a patch sweep goes.
 enum Sweep<'a> {
     /// Colours 0 to 3 from zero, each patch's residual from the colours
-    /// before it (the rest are still zero, whatever z holds there) and its
-    /// nodes set. The function is called with z and, in order, the grid
-    /// rows whose nodes and neighbours within two rows are all set.
-    Forward(&'a mut dyn FnMut(&[Vec3], Range<usize>)),
+    /// before it and its nodes set; and what is left of each node's
+    /// residual, the colours after its own, into the slice, computed for
+    /// each grid row once the rows within its reach are set, while their
+    /// blocks are still in cache.
+    Forward(&'a mut [Vec3]),
     /// Colours 3 to 0 from the guess in z, each node corrected.
     Backward,
 }
@@ -130,23 +131,11 @@ type Node = (usize, u32, u32);
 /// Sets `out[i] = f(node i)` for every node of `level`, a grid row at a
 /// time, so no node's coordinates are divided out of its index.
 fn for_each_node<T: Send>(level: Level, out: &mut [T], f: impl Fn(Node) -> T + Sync) {
-    for_each_node_in(level, 0..level.ny as usize, out, f);
-}
-
-/// [`for_each_node`] over the grid rows `rows` alone, `out` the whole level.
-fn for_each_node_in<T: Send>(
-    level: Level,
-    rows: Range<usize>,
-    out: &mut [T],
-    f: impl Fn(Node) -> T + Sync,
-) {
     let nx = level.nx as usize;
-    out[rows.start * nx..rows.end * nx]
-        .par_chunks_mut(nx)
+    out.par_chunks_mut(nx)
         .with_min_len(GRAIN.div_ceil(nx))
         .enumerate()
-        .for_each(|(k, row)| {
-            let r = rows.start + k;
+        .for_each(|(r, row)| {
             for (c, o) in row.iter_mut().enumerate() {
                 *o = f((r * nx + c, c as u32, r as u32));
             }
@@ -375,7 +364,21 @@ impl Multigrid {
     /// One block Gauss-Seidel pass over level `l`'s patches on `z` for
     /// A z = `rhs` (kernels `patch_down`, `patch_up`), the way `sweep` says.
     /// Patches of a colour share no spring (those within two nodes are of
-    /// other colours), so each colour's are solved from the same z.
+    /// other colours), so each colour's are solved from the same z, in any
+    /// order.
+    ///
+    /// A patch row holds two colours and reaches only the rows beside it,
+    /// so the sweep takes a patch row at a time, both its colours, the
+    /// rows in an order the colours allow ([`Pass::rows`]). Each patch is
+    /// solved from the same z as when each colour took its turn over the
+    /// grid, but a row's blocks are read while the row before them is still
+    /// in cache, where each colour read two nodes of four in half the rows
+    /// (BENCHMARKS.md, "A patch row at a time").
+    ///
+    /// The rows are cut into bands, a band to a task. Each band begins at
+    /// a row of the sweep's first two colours, which reads nothing above it
+    /// that the sweep has set, and holds back its last row, which needs the
+    /// next band's first: the held rows are solved after the bands.
     fn patch_sweep(
         &self,
         a: &BlockMatrix,
@@ -385,148 +388,104 @@ impl Multigrid {
         z: &mut [Vec3],
         mut sweep: Sweep,
     ) {
-        let forward = matches!(sweep, Sweep::Forward(_));
         let level = self.levels[l];
-        let (px, py) = patch_grid(level);
-        let (px, py) = (px as usize, py as usize);
-        let (inverses, colours) = (&self.patch_inverses[l], &self.colours[l]);
-        // Each colour in turn over the whole grid would stream the level's
-        // operator four times. The same sums, a few patch rows at a time:
-        // the colour at place q in the order runs q rows behind the first,
-        // so a patch's neighbours of earlier colours are done and those of
-        // later ones not yet begun.
-        let order: [u8; PATCH_COLOURS] = match forward {
-            true => [0, 1, 2, 3],
-            false => [3, 2, 1, 0],
+        let (nx, ny) = (level.nx as usize, level.ny as usize);
+        let py = patch_grid(level).1 as usize;
+        let pass = Pass {
+            multigrid: self,
+            a,
+            cloth,
+            l,
+            rhs,
+            forward: matches!(sweep, Sweep::Forward(_)),
         };
-        const ROWS: usize = 32;
-        // Finished rows are handed on in batches of at least this many
-        // nodes: on a small level each hand-over costs more than the cache
-        // saves (a 128² cloth's solve took about 5 % longer with one a window).
-        const FINISHED_NODES: usize = 16384;
-        // Node (c, r)'s residual among the colours a sweep reads.
-        let residual = |z: &[Vec3], colour: u8, (c, r): (usize, usize)| {
-            let i = r * level.nx as usize + c;
-            // A pinned vertex stays at zero (P̃ = S P).
-            if l == 0 && cloth.pinned[i] {
-                return Vec3::ZERO;
-            }
-            let node = (i, c as u32, r as u32);
-            rhs[i]
-                - match forward {
-                    // Colour 0 has no colour before it.
-                    true if colour == 0 => Vec3::ZERO,
-                    true => self.row_where(a, cloth, l, node, |j| colours[j] < colour, |j| z[j]),
-                    false => self.row(a, cloth, l, node, |j| z[j]),
-                }
+        // Where patch row pr's nodes begin; the nodes of grid rows `rows`.
+        let at = |pr: usize| (2 * pr).min(ny) * nx;
+        let grid_rows = |rows: Range<usize>| rows.start * nx..rows.end.min(ny) * nx;
+        let starts = band_starts(level, pass.first());
+        let ends = starts[1..].iter().copied().chain([py]);
+        let bands: Vec<Range<usize>> = starts.iter().zip(ends).map(|(&s, e)| s..e).collect();
+        let seams = &starts[1..];
+        // The row above each band as it stands before the sweep: the band
+        // before holds it back, and a backward sweep reads it.
+        let above: Vec<Vec<Vec3>> = bands
+            .iter()
+            .map(|band| z[at(band.start.saturating_sub(1))..at(band.start)].to_vec())
+            .collect();
+        let mut residual = match &mut sweep {
+            Sweep::Forward(residual) => Some(&mut **residual),
+            Sweep::Backward => None,
         };
-        // d = M⁻¹ res, a column at a time (M⁻¹ is symmetric, so its rows
-        // are its columns): twelve sums side by side.
-        let solve = |(pc, pr): (usize, usize), d: &mut [Vec3; PATCH as usize]| {
-            let res: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| d[u / 3][u % 3]);
-            let mut out = [0f32; PATCH_UNKNOWNS];
-            for (column, &r) in inverses[pr * px + pc].iter().zip(&res) {
-                for (o, m) in out.iter_mut().zip(column) {
-                    *o += m * r;
-                }
-            }
-            *d = std::array::from_fn(|k| Vec3::from_slice(&out[3 * k..3 * k + 3]));
-        };
-        // A coarse level's forward sweep is the V-cycle's first read of its
-        // stencils since the last one, and the finer levels' passes between
-        // have evicted them: each patch asks for its colour's next patch in
-        // its column while it is computed (BENCHMARKS.md, "Reading ahead").
-        let read_ahead = forward && l > 0;
-        // A colour's patches of one window, solved a patch row to a task
-        // from the same z, then set.
-        let mut solved = vec![[Vec3::ZERO; PATCH as usize]; ROWS.div_ceil(2) * px.div_ceil(2)];
-        let mut done = 0;
-        for start in (0..py + order.len()).step_by(ROWS) {
-            for (q, &colour) in order.iter().enumerate() {
-                let (cx, cy) = (colour as usize % 2, colour as usize / 2);
-                let rows = start.saturating_sub(q)..(start + ROWS).saturating_sub(q).min(py);
-                // The colour's patch rows among them, two apart, and its
-                // patches in each.
-                let first = rows.start + usize::from(rows.start % 2 != cy);
-                let per_row = (px - cx).div_ceil(2);
-                if first >= rows.end || per_row == 0 {
-                    continue;
-                }
-                let solved = &mut solved[..(rows.end - first).div_ceil(2) * per_row];
-                let z_now: &[Vec3] = z;
-                solved
-                    .par_chunks_mut(per_row)
-                    .with_min_len((GRAIN / (16 * PATCH as usize)).div_ceil(per_row))
-                    .enumerate()
-                    .for_each(|(k, row)| {
-                        let pr = first + 2 * k;
-                        // The residuals a grid row at a time, in memory order.
-                        for (half, r) in [(0, 2 * pr), (2, 2 * pr + 1)] {
-                            for (m, d) in row.iter_mut().enumerate() {
-                                if read_ahead {
-                                    self.read_ahead(l, (cx + 2 * m, pr + 2), half);
-                                }
-                                for side in 0..2 {
-                                    let c = 4 * m + 2 * cx + side;
-                                    let inside = c < level.nx as usize && r < level.ny as usize;
-                                    d[half + side] = match inside {
-                                        true => residual(z_now, colour, (c, r)),
-                                        false => Vec3::ZERO,
-                                    };
-                                }
-                            }
-                        }
-                        for (m, d) in row.iter_mut().enumerate() {
-                            solve((cx + 2 * m, pr), d);
-                        }
-                    });
-                for (k, row) in solved.chunks(per_row).enumerate() {
-                    for (m, d) in row.iter().enumerate() {
-                        let nodes = patch_nodes(level, (cx + 2 * m, first + 2 * k));
-                        for (node, d) in nodes.iter().zip(d) {
-                            if let Some((i, ..)) = *node {
-                                z[i] = if forward { *d } else { z[i] + *d };
-                            }
-                        }
+        let owned = pieces(z, bands.iter().map(|band| at(band.start)..at(band.end)));
+        let band_residual = optional_pieces(
+            residual.as_deref_mut(),
+            bands.iter().map(|band| at(band.start)..at(band.end)),
+        );
+        bands
+            .par_iter()
+            .zip(owned)
+            .zip(&above)
+            .zip(band_residual)
+            .for_each(|(((band, own), above), mut residual)| {
+                let first = at(band.start);
+                let mut z = BandZ { first, own, above };
+                // Its last row waits for the next band's first, and its
+                // residual rows are those that reach none of the rows
+                // around the seams.
+                let held = band.end < py;
+                let rows = band.start..band.end - usize::from(held);
+                let reach = match band.start {
+                    0 => 0,
+                    s => 2 * s + 2,
+                }..match held {
+                    true => 2 * band.end - 4,
+                    false => ny,
+                };
+                let mut done = reach.start;
+                pass.rows(&mut z, rows, |z, set| {
+                    let Some(residual) = &mut residual else {
+                        return;
+                    };
+                    let end = match set == py {
+                        true => ny,
+                        false => 2 * set - 2,
+                    };
+                    let end = end.min(reach.end);
+                    if end > done {
+                        let out = &mut residual[done * nx - first..];
+                        pass.residual_rows(z, done..end, out);
+                        done = end;
                     }
+                });
+            });
+        // The held rows, and the residual rows around them: each seam's
+        // reads and writes lie within three patch rows of it, and seams are
+        // further apart than six (MIN_BAND).
+        let reach = |e: usize| e - 3..e + 2;
+        let owned = pieces(
+            z,
+            seams.iter().map(|&e| at(reach(e).start)..at(reach(e).end)),
+        );
+        let seam_residual = optional_pieces(
+            residual,
+            seams.iter().map(|&e| grid_rows(2 * e - 4..2 * e + 2)),
+        );
+        seams
+            .par_iter()
+            .zip(owned)
+            .zip(seam_residual)
+            .for_each(|((&e, own), residual)| {
+                let first = at(reach(e).start);
+                let mut z = BandZ {
+                    first,
+                    own,
+                    above: &[],
+                };
+                pass.rows(&mut z, e - 1..e, |_, _| ());
+                if let Some(residual) = residual {
+                    pass.residual_rows(&z, 2 * e - 4..(2 * e + 2).min(ny), residual);
                 }
-            }
-            // Every colour has set the patch rows before the last colour's
-            // end; a grid row is finished once those within two of it are.
-            let set = (start + ROWS).saturating_sub(order.len() - 1).min(py);
-            let rows = match set == py {
-                true => level.ny as usize,
-                false => (2 * set).saturating_sub(2),
-            };
-            if let Sweep::Forward(finished) = &mut sweep
-                && rows > done
-                && (set == py || (rows - done) * level.nx as usize >= FINISHED_NODES)
-            {
-                finished(z, done..rows);
-                done = rows;
-            }
-        }
-    }
-
-    /// Prefetches the stencil rows of patch `(pc, pr)` of coarse level `l`
-    /// in its grid row `half` (0 or 2, as the sweep's residuals), and with
-    /// the first its inverse. Past the grid's edge, nothing.
-    fn read_ahead(&self, l: usize, (pc, pr): (usize, usize), half: usize) {
-        let level = self.levels[l];
-        let (px, py) = patch_grid(level);
-        let (r, nx) = (2 * pr + half / 2, level.nx as usize);
-        if pr >= py as usize || r >= level.ny as usize || 2 * pc >= nx {
-            return;
-        }
-        let first = r * nx + 2 * pc;
-        let last = (first + 1).min(r * nx + nx - 1);
-        let w = STORED_STENCIL as usize;
-        prefetch(&self.stencils[l - 1][first * w..(last + 1) * w]);
-        if half == 0 {
-            prefetch(std::slice::from_ref(
-                &self.patch_inverses[l][pr * px as usize + pc],
-            ));
-        }
+            });
     }
 
     /// Rebuilds every level's smoother and coarse operator from this step's
@@ -622,23 +581,8 @@ impl Multigrid {
             let smooth = &self.smoothers[l];
             let (from, to) = (self.levels[l], self.levels[l + 1]);
             match self.smoother {
-                // Each patch was solved for the colours before it, the
-                // later ones zero: the later colours' part is what is left
-                // (none at the last colour's), computed for each grid row
-                // once the sweep has set the rows within its reach, while
-                // their blocks are still in cache.
                 Smoother::Patches => {
-                    let colours = &self.colours[l];
-                    let mut finished = |pre: &[Vec3], rows| {
-                        for_each_node_in(from, rows, &mut residual, |node| {
-                            if colours[node.0] as usize == PATCH_COLOURS - 1 {
-                                return Vec3::ZERO;
-                            }
-                            let later = |j: usize| colours[j] > colours[node.0];
-                            -self.row_where(a, cloth, l, node, later, |j| pre[j])
-                        })
-                    };
-                    let sweep = Sweep::Forward(&mut finished);
+                    let sweep = Sweep::Forward(&mut residual);
                     self.patch_sweep(a, cloth, l, fine_rhs, &mut pre, sweep);
                 }
                 Smoother::BlockJacobi => {
@@ -713,5 +657,281 @@ impl Multigrid {
             .zip(z.par_iter())
             .map(|(r, z)| r.dot(*z) as f64)
             .sum()
+    }
+}
+
+/// What a patch sweep of one level reads, and which way it goes.
+#[derive(Clone, Copy)]
+struct Pass<'a> {
+    multigrid: &'a Multigrid,
+    a: &'a BlockMatrix,
+    cloth: &'a Cloth,
+    l: usize,
+    rhs: &'a [Vec3],
+    forward: bool,
+}
+
+impl Pass<'_> {
+    /// The parity of the patch rows a sweep takes first, and within a row
+    /// of the patch columns: even forward (colours 0 and 1 before 2 and 3,
+    /// 0 before 1), odd backward (3 and 2 before 1 and 0, 3 before 2).
+    fn first(self) -> usize {
+        usize::from(!self.forward)
+    }
+
+    /// Solves patch rows `rows` in an order the colours allow: each row of
+    /// the sweep's first two colours, then the row before it, both of whose
+    /// neighbours are now set; a last row of the other two at the end, the
+    /// row after it set by then or past the grid. Calls `set(z, k)` each
+    /// time rows `rows.start..k` are all set.
+    fn rows(self, z: &mut BandZ, rows: Range<usize>, mut set: impl FnMut(&BandZ, usize)) {
+        let first = self.first();
+        let mut residuals = Vec::new();
+        for pr in rows.clone().filter(|pr| pr % 2 == first) {
+            let before = (pr > rows.start).then(|| pr - 1);
+            let next = before.unwrap_or(pr + 2);
+            self.patch_row(z, (pr, next), &mut residuals);
+            if let Some(before) = before {
+                self.patch_row(z, (before, pr + 2), &mut residuals);
+            }
+            set(z, pr + 1);
+        }
+        let last = rows.end.checked_sub(1);
+        if let Some(pr) = last.filter(|&pr| pr >= rows.start && pr % 2 != first) {
+            self.patch_row(z, (pr, rows.end), &mut residuals);
+            set(z, rows.end);
+        }
+    }
+
+    /// Solves patch row `pr`: its first colour's patches, their residuals
+    /// a grid row at a time into `residuals`, then its second colour's;
+    /// meanwhile reads ahead for row `next`, the one solved after it.
+    fn patch_row(
+        self,
+        z: &mut BandZ,
+        (pr, next): (usize, usize),
+        residuals: &mut Vec<[Vec3; PATCH as usize]>,
+    ) {
+        let level = self.multigrid.levels[self.l];
+        let (nx, ny) = (level.nx as usize, level.ny as usize);
+        let px = patch_grid(level).0 as usize;
+        let first = self.first();
+        for cx in [first, 1 - first] {
+            let colour = (cx + 2 * (pr % 2)) as u8;
+            residuals.clear();
+            residuals.resize((px - cx).div_ceil(2), [Vec3::ZERO; PATCH as usize]);
+            for (half, r) in [(0, 2 * pr), (2, 2 * pr + 1)] {
+                if r >= ny {
+                    continue;
+                }
+                for (m, d) in residuals.iter_mut().enumerate() {
+                    if cx == first && half == 0 {
+                        self.read_ahead((2 * m, next));
+                    }
+                    for side in 0..2 {
+                        let c = 4 * m + 2 * cx + side;
+                        if c < nx {
+                            let node = (r * nx + c, c as u32, r as u32);
+                            d[half + side] = self.residual(z, colour, node);
+                        }
+                    }
+                }
+            }
+            for (m, residual) in residuals.iter().enumerate() {
+                self.patch(z, (cx + 2 * m, pr), residual);
+            }
+        }
+    }
+
+    /// Solves patch `(pc, pr)` from its residual: d = M⁻¹ res, z = d
+    /// forward and z + d backward.
+    fn patch(self, z: &mut BandZ, (pc, pr): (usize, usize), residual: &[Vec3; PATCH as usize]) {
+        let level = self.multigrid.levels[self.l];
+        let nodes = patch_nodes(level, (pc, pr));
+        // M⁻¹ is symmetric, so its rows are its columns: twelve sums side
+        // by side.
+        let px = patch_grid(level).0 as usize;
+        let inverse = &self.multigrid.patch_inverses[self.l][pr * px + pc];
+        let res: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| residual[u / 3][u % 3]);
+        let mut d = [0f32; PATCH_UNKNOWNS];
+        for (column, &r) in inverse.iter().zip(&res) {
+            for (o, m) in d.iter_mut().zip(column) {
+                *o += m * r;
+            }
+        }
+        for (k, node) in nodes.iter().enumerate() {
+            if let Some((i, ..)) = *node {
+                let d = Vec3::from_slice(&d[3 * k..3 * k + 3]);
+                z.set(i, if self.forward { d } else { z.get(i) + d });
+            }
+        }
+    }
+
+    /// Asks the cache for what solving patches `pc` and `pc + 1` of patch
+    /// row `pr` reads first from memory: their inverses, and their nodes'
+    /// stencil rows on a coarse level or, on a large cloth, their diagonal
+    /// blocks, adjacency and the blocks of the springs they start. A hint,
+    /// which changes no result. The rows of a sweep follow each other two
+    /// and three rows apart, which the hardware's prefetcher does not
+    /// follow, and a coarse level's forward sweep is the V-cycle's first
+    /// read of its stencils since the finer levels' passes evicted them
+    /// (BENCHMARKS.md, "A patch row at a time").
+    // Out of line: inlined into the row loop, the 512² solve took 2 % to
+    // 5 % longer.
+    #[inline(never)]
+    fn read_ahead(self, (pc, pr): (usize, usize)) {
+        let (multigrid, l) = (self.multigrid, self.l);
+        let level = multigrid.levels[l];
+        let (nx, ny) = (level.nx as usize, level.ny as usize);
+        let (px, py) = patch_grid(level);
+        let (px, py) = (px as usize, py as usize);
+        if pr >= py || pc >= px {
+            return;
+        }
+        prefetch(&multigrid.patch_inverses[l][pr * px + pc..pr * px + (pc + 2).min(px)]);
+        for r in (2 * pr..2 * pr + 2).filter(|&r| r < ny) {
+            let nodes = r * nx + 2 * pc..r * nx + (2 * pc + 4).min(nx);
+            match l {
+                0 if level.nodes() >= CLOTH_READ_AHEAD => {
+                    let (a, adj) = (self.a, &self.cloth.adjacency);
+                    prefetch(&a.diag[nodes.clone()]);
+                    let entries =
+                        adj.offsets[nodes.start] as usize..adj.offsets[nodes.end] as usize;
+                    prefetch(&adj.other[entries.clone()]);
+                    prefetch(&adj.spring[entries]);
+                    for i in nodes {
+                        for k in adj.range(i).filter(|&k| adj.other[k] as usize > i) {
+                            prefetch(std::slice::from_ref(&a.off[adj.spring[k] as usize]));
+                        }
+                    }
+                }
+                0 => {}
+                _ => {
+                    let w = STORED_STENCIL as usize;
+                    prefetch(&multigrid.stencils[l - 1][nodes.start * w..nodes.end * w]);
+                }
+            }
+        }
+    }
+
+    /// Node `(i, c, r)`'s residual among the colours the sweep reads: all
+    /// backward, those before `colour` forward (the rest are still zero,
+    /// whatever z holds there).
+    fn residual(self, z: &BandZ, colour: u8, node: Node) -> Vec3 {
+        let (multigrid, l) = (self.multigrid, self.l);
+        // A pinned vertex stays at zero (P̃ = S P).
+        if l == 0 && self.cloth.pinned[node.0] {
+            return Vec3::ZERO;
+        }
+        let colours = &multigrid.colours[l];
+        let (a, cloth) = (self.a, self.cloth);
+        self.rhs[node.0]
+            - match self.forward {
+                // Colour 0 has no colour before it.
+                true if colour == 0 => Vec3::ZERO,
+                true => {
+                    multigrid.row_where(a, cloth, l, node, |j| colours[j] < colour, |j| z.get(j))
+                }
+                false => multigrid.row(a, cloth, l, node, |j| z.get(j)),
+            }
+    }
+
+    /// What a forward sweep leaves of each node's residual at grid rows
+    /// `rows`: minus its row over the colours after its own (none after
+    /// the last), into `out`, which begins at the first row's first node.
+    fn residual_rows(self, z: &BandZ, rows: Range<usize>, out: &mut [Vec3]) {
+        let (multigrid, l) = (self.multigrid, self.l);
+        let nx = multigrid.levels[l].nx as usize;
+        let colours = &multigrid.colours[l];
+        let rows_first = rows.start * nx;
+        for r in rows {
+            for c in 0..nx {
+                let i = r * nx + c;
+                out[i - rows_first] = match colours[i] as usize {
+                    colour if colour == PATCH_COLOURS - 1 => Vec3::ZERO,
+                    _ => -multigrid.row_where(
+                        self.a,
+                        self.cloth,
+                        l,
+                        (i, c as u32, r as u32),
+                        |j| colours[j] > colours[i],
+                        |j| z.get(j),
+                    ),
+                };
+            }
+        }
+    }
+}
+
+/// A band's view of z in a patch sweep: its own nodes, from node `first`
+/// on, and the patch row above them as it stood before the sweep.
+struct BandZ<'a> {
+    first: usize,
+    own: &'a mut [Vec3],
+    above: &'a [Vec3],
+}
+
+impl BandZ<'_> {
+    #[inline(always)]
+    fn get(&self, j: usize) -> Vec3 {
+        match j.checked_sub(self.first) {
+            Some(k) => self.own[k],
+            None => self.above[self.above.len() - (self.first - j)],
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, i: usize, value: Vec3) {
+        self.own[i - self.first] = value;
+    }
+}
+
+/// The fewest nodes of a cloth whose sweeps read ahead its own blocks
+/// ([`Pass::read_ahead`]): finding a node's springs costs a walk of its
+/// adjacency, which at 128² (16,384 nodes, whose operator and inverses
+/// stay in a 32 MiB cache) made the solve 15 % slower, and at 256² made it
+/// 3 % faster.
+const CLOTH_READ_AHEAD: usize = 1 << 15;
+
+/// The fewest patch rows a sweep's band holds: more than the six a seam's
+/// held row and residual rows reach, so seams run side by side.
+const MIN_BAND: usize = 8;
+
+/// The first patch row of each band of a sweep of `level`, a band to a
+/// thread but none under [`MIN_BAND`] rows or [`GRAIN`] nodes; each but
+/// the first starts at a row of parity `first` ([`Pass::first`]).
+fn band_starts(level: Level, first: usize) -> Vec<usize> {
+    let py = patch_grid(level).1 as usize;
+    let rows = MIN_BAND.max(GRAIN.div_ceil(2 * level.nx as usize));
+    let bands = rayon::current_num_threads().min(py / rows).max(1);
+    (0..bands)
+        .map(|k| {
+            let start = k * py / bands;
+            start + usize::from(k > 0 && start % 2 != first)
+        })
+        .collect()
+}
+
+/// The pieces of `v` at `ranges`, which ascend and do not overlap.
+fn pieces<T>(mut v: &mut [T], ranges: impl Iterator<Item = Range<usize>>) -> Vec<&mut [T]> {
+    let mut cut = 0;
+    ranges
+        .map(|range| {
+            let rest = take(&mut v).split_at_mut(range.start - cut).1;
+            let (piece, rest) = rest.split_at_mut(range.len());
+            (v, cut) = (rest, range.end);
+            piece
+        })
+        .collect()
+}
+
+/// [`pieces`] of `v` where there is one, else a None for each range.
+fn optional_pieces<T>(
+    v: Option<&mut [T]>,
+    ranges: impl Iterator<Item = Range<usize>>,
+) -> Vec<Option<&mut [T]>> {
+    match v {
+        Some(v) => pieces(v, ranges).into_iter().map(Some).collect(),
+        None => ranges.map(|_| None).collect(),
     }
 }
