@@ -390,19 +390,23 @@ impl Multigrid {
     ) {
         let level = self.levels[l];
         let (nx, ny) = (level.nx as usize, level.ny as usize);
-        let py = patch_grid(level).1 as usize;
+        let (px, py) = patch_grid(level);
+        let (px, py) = (px as usize, py as usize);
         let pass = Pass {
             multigrid: self,
             a,
             cloth,
             l,
+            level,
+            px,
+            py,
             rhs,
             forward: matches!(sweep, Sweep::Forward(_)),
         };
         // Where patch row pr's nodes begin; the nodes of grid rows `rows`.
         let at = |pr: usize| (2 * pr).min(ny) * nx;
         let grid_rows = |rows: Range<usize>| rows.start * nx..rows.end.min(ny) * nx;
-        let starts = band_starts(level, pass.first());
+        let starts = band_starts(pass);
         let ends = starts[1..].iter().copied().chain([py]);
         let bands: Vec<Range<usize>> = starts.iter().zip(ends).map(|(&s, e)| s..e).collect();
         let seams = &starts[1..];
@@ -667,6 +671,10 @@ struct Pass<'a> {
     a: &'a BlockMatrix,
     cloth: &'a Cloth,
     l: usize,
+    /// Level `l`, and its patches per row and column ([`patch_grid`]).
+    level: Level,
+    px: usize,
+    py: usize,
     rhs: &'a [Vec3],
     forward: bool,
 }
@@ -712,9 +720,7 @@ impl Pass<'_> {
         (pr, next): (usize, usize),
         residuals: &mut Vec<[Vec3; PATCH as usize]>,
     ) {
-        let level = self.multigrid.levels[self.l];
-        let (nx, ny) = (level.nx as usize, level.ny as usize);
-        let px = patch_grid(level).0 as usize;
+        let (nx, ny, px) = (self.level.nx as usize, self.level.ny as usize, self.px);
         let first = self.first();
         for cx in [first, 1 - first] {
             let colour = (cx + 2 * (pr % 2)) as u8;
@@ -746,12 +752,10 @@ impl Pass<'_> {
     /// Solves patch `(pc, pr)` from its residual: d = M⁻¹ res, z = d
     /// forward and z + d backward.
     fn patch(self, z: &mut BandZ, (pc, pr): (usize, usize), residual: &[Vec3; PATCH as usize]) {
-        let level = self.multigrid.levels[self.l];
-        let nodes = patch_nodes(level, (pc, pr));
+        let nodes = patch_nodes(self.level, (pc, pr));
         // M⁻¹ is symmetric, so its rows are its columns: twelve sums side
         // by side.
-        let px = patch_grid(level).0 as usize;
-        let inverse = &self.multigrid.patch_inverses[self.l][pr * px + pc];
+        let inverse = &self.multigrid.patch_inverses[self.l][pr * self.px + pc];
         let res: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| residual[u / 3][u % 3]);
         let mut d = [0f32; PATCH_UNKNOWNS];
         for (column, &r) in inverse.iter().zip(&res) {
@@ -780,12 +784,9 @@ impl Pass<'_> {
     // 5 % longer.
     #[inline(never)]
     fn read_ahead(self, (pc, pr): (usize, usize)) {
-        let (multigrid, l) = (self.multigrid, self.l);
-        let level = multigrid.levels[l];
-        let (nx, ny) = (level.nx as usize, level.ny as usize);
-        let (px, py) = patch_grid(level);
-        let (px, py) = (px as usize, py as usize);
-        if pr >= py || pc >= px {
+        let (multigrid, l, level) = (self.multigrid, self.l, self.level);
+        let (nx, ny, px) = (level.nx as usize, level.ny as usize, self.px);
+        if pr >= self.py || pc >= px {
             return;
         }
         prefetch(&multigrid.patch_inverses[l][pr * px + pc..pr * px + (pc + 2).min(px)]);
@@ -841,7 +842,7 @@ impl Pass<'_> {
     /// the last), into `out`, which begins at the first row's first node.
     fn residual_rows(self, z: &BandZ, rows: Range<usize>, out: &mut [Vec3]) {
         let (multigrid, l) = (self.multigrid, self.l);
-        let nx = multigrid.levels[l].nx as usize;
+        let nx = self.level.nx as usize;
         let colours = &multigrid.colours[l];
         let rows_first = rows.start * nx;
         for r in rows {
@@ -897,17 +898,17 @@ const CLOTH_READ_AHEAD: usize = 1 << 15;
 /// held row and residual rows reach, so seams run side by side.
 const MIN_BAND: usize = 8;
 
-/// The first patch row of each band of a sweep of `level`, a band to a
+/// The first patch row of each band of `pass`'s sweep, a band to a
 /// thread but none under [`MIN_BAND`] rows or [`GRAIN`] nodes; each but
-/// the first starts at a row of parity `first` ([`Pass::first`]).
-fn band_starts(level: Level, first: usize) -> Vec<usize> {
-    let py = patch_grid(level).1 as usize;
-    let rows = MIN_BAND.max(GRAIN.div_ceil(2 * level.nx as usize));
-    let bands = rayon::current_num_threads().min(py / rows).max(1);
+/// the first starts at a row of the sweep's first two colours
+/// ([`Pass::first`]).
+fn band_starts(pass: Pass) -> Vec<usize> {
+    let rows = MIN_BAND.max(GRAIN.div_ceil(2 * pass.level.nx as usize));
+    let bands = rayon::current_num_threads().min(pass.py / rows).max(1);
     (0..bands)
         .map(|k| {
-            let start = k * py / bands;
-            start + usize::from(k > 0 && start % 2 != first)
+            let start = k * pass.py / bands;
+            start + usize::from(k > 0 && start % 2 != pass.first())
         })
         .collect()
 }
