@@ -271,10 +271,11 @@ fn the_patch_smoother_takes_under_half_block_jacobis_iterations() {
     assert!(patches.1 < jacobi.1 / 2, "{patches:?} against {jacobi:?}");
 }
 
-/// The CPU's patch sweeps cut the rows into a band per thread and solve
-/// the rows at the seams after the bands (src/cpu/multigrid.rs,
-/// `patch_sweep`): any number of threads gives the V-cycle of one, bit for
-/// bit, on a grid of several bands a level, odd rows and pins.
+/// The CPU's patch sweeps cut the rows into a band per thread, each of
+/// which also solves the next band's first row for its own last
+/// (src/cpu/multigrid.rs, `patch_sweep`): any number of threads gives the
+/// V-cycle of one, bit for bit, on a grid of several bands a level, odd
+/// rows and pins.
 #[test]
 fn the_patch_v_cycle_is_the_same_on_any_number_of_threads() {
     let mut rng = Rng(5);

@@ -375,10 +375,15 @@ impl Multigrid {
     /// in cache, where each colour read two nodes of four in half the rows
     /// (BENCHMARKS.md, "A patch row at a time").
     ///
-    /// The rows are cut into bands, a band to a task. Each band begins at
-    /// a row of the sweep's first two colours, which reads nothing above it
-    /// that the sweep has set, and holds back its last row, which needs the
-    /// next band's first: the held rows are solved after the bands.
+    /// The rows are cut into bands, a band to a task, each on a copy of its
+    /// rows and those beside it as they stand before the sweep. A band
+    /// begins at a row of the sweep's first two colours, which reads
+    /// nothing above it that the sweep has set. Its last row needs the next
+    /// band's first, which reads only rows as they stand before the sweep
+    /// (its own, and backward the rows beside it): the band solves that row
+    /// too, in its copy, from the same values as the next band. So no band
+    /// waits for another; only the residual of each band's first row, which
+    /// reaches the row above, is computed after the bands.
     fn patch_sweep(
         &self,
         a: &BlockMatrix,
@@ -403,46 +408,40 @@ impl Multigrid {
             rhs,
             forward: matches!(sweep, Sweep::Forward(_)),
         };
-        // Where patch row pr's nodes begin; the nodes of grid rows `rows`.
+        // Where patch row pr's nodes begin.
         let at = |pr: usize| (2 * pr).min(ny) * nx;
-        let grid_rows = |rows: Range<usize>| rows.start * nx..rows.end.min(ny) * nx;
         let starts = band_starts(pass);
         let ends = starts[1..].iter().copied().chain([py]);
         let bands: Vec<Range<usize>> = starts.iter().zip(ends).map(|(&s, e)| s..e).collect();
-        let seams = &starts[1..];
-        // The row above each band as it stands before the sweep: the band
-        // before holds it back, and a backward sweep reads it.
-        let above: Vec<Vec<Vec3>> = bands
-            .iter()
-            .map(|band| z[at(band.start.saturating_sub(1))..at(band.start)].to_vec())
-            .collect();
         let mut residual = match &mut sweep {
             Sweep::Forward(residual) => Some(&mut **residual),
             Sweep::Backward => None,
         };
-        let owned = pieces(z, bands.iter().map(|band| at(band.start)..at(band.end)));
         let band_residual = optional_pieces(
             residual.as_deref_mut(),
             bands.iter().map(|band| at(band.start)..at(band.end)),
         );
-        bands
+        let before: &[Vec3] = z;
+        let solved: Vec<Vec<Vec3>> = bands
             .par_iter()
-            .zip(owned)
-            .zip(&above)
             .zip(band_residual)
-            .for_each(|(((band, own), above), mut residual)| {
-                let first = at(band.start);
-                let mut z = BandZ { first, own, above };
-                // Its last row waits for the next band's first, and its
-                // residual rows are those that reach none of the rows
-                // around the seams.
-                let held = band.end < py;
-                let rows = band.start..band.end - usize::from(held);
+            .map(|(band, mut residual)| {
+                // The band's rows, the row above and the two below as they
+                // stand before the sweep.
+                let copied = band.start.saturating_sub(1)..(band.end + 2).min(py);
+                let first = at(copied.start);
+                let mut z = BandZ {
+                    first,
+                    z: before[first..at(copied.end)].to_vec(),
+                };
+                // Its rows and the next band's first, which its last needs.
+                let rows = band.start..(band.end + 1).min(py);
+                // Its residual rows: those whose reach is set here.
                 let reach = match band.start {
                     0 => 0,
                     s => 2 * s + 2,
-                }..match held {
-                    true => 2 * band.end - 4,
+                }..match band.end < py {
+                    true => 2 * band.end,
                     false => ny,
                 };
                 let mut done = reach.start;
@@ -456,40 +455,27 @@ impl Multigrid {
                     };
                     let end = end.min(reach.end);
                     if end > done {
-                        let out = &mut residual[done * nx - first..];
-                        pass.residual_rows(z, done..end, out);
+                        let out = &mut residual[(done - 2 * band.start) * nx..];
+                        pass.residual_rows(|j| z.get(j), done..end, out);
                         done = end;
                     }
                 });
-            });
-        // The held rows, and the residual rows around them: each seam's
-        // reads and writes lie within three patch rows of it, and seams are
-        // further apart than six (MIN_BAND).
-        let reach = |e: usize| e - 3..e + 2;
-        let owned = pieces(
-            z,
-            seams.iter().map(|&e| at(reach(e).start)..at(reach(e).end)),
-        );
-        let seam_residual = optional_pieces(
-            residual,
-            seams.iter().map(|&e| grid_rows(2 * e - 4..2 * e + 2)),
-        );
-        seams
-            .par_iter()
-            .zip(owned)
-            .zip(seam_residual)
-            .for_each(|((&e, own), residual)| {
-                let first = at(reach(e).start);
-                let mut z = BandZ {
-                    first,
-                    own,
-                    above: &[],
-                };
-                pass.rows(&mut z, e - 1..e, |_, _| ());
-                if let Some(residual) = residual {
-                    pass.residual_rows(&z, 2 * e - 4..(2 * e + 2).min(ny), residual);
-                }
-            });
+                z.z
+            })
+            .collect();
+        for (band, solved) in bands.iter().zip(&solved) {
+            let first = at(band.start.saturating_sub(1));
+            z[at(band.start)..at(band.end)]
+                .copy_from_slice(&solved[at(band.start) - first..at(band.end) - first]);
+        }
+        // The residual rows of each band's first row, which reach the row
+        // above, set in the band before.
+        if let Some(residual) = residual {
+            for band in &bands[1..] {
+                let rows = 2 * band.start..(2 * band.start + 2).min(ny);
+                pass.residual_rows(|j| z[j], rows.clone(), &mut residual[rows.start * nx..]);
+            }
+        }
     }
 
     /// Rebuilds every level's smoother and coarse operator from this step's
@@ -840,7 +826,7 @@ impl Pass<'_> {
     /// What a forward sweep leaves of each node's residual at grid rows
     /// `rows`: minus its row over the colours after its own (none after
     /// the last), into `out`, which begins at the first row's first node.
-    fn residual_rows(self, z: &BandZ, rows: Range<usize>, out: &mut [Vec3]) {
+    fn residual_rows(self, z: impl Fn(usize) -> Vec3, rows: Range<usize>, out: &mut [Vec3]) {
         let (multigrid, l) = (self.multigrid, self.l);
         let nx = self.level.nx as usize;
         let colours = &multigrid.colours[l];
@@ -856,7 +842,7 @@ impl Pass<'_> {
                         l,
                         (i, c as u32, r as u32),
                         |j| colours[j] > colours[i],
-                        |j| z.get(j),
+                        &z,
                     ),
                 };
             }
@@ -864,26 +850,21 @@ impl Pass<'_> {
     }
 }
 
-/// A band's view of z in a patch sweep: its own nodes, from node `first`
-/// on, and the patch row above them as it stood before the sweep.
-struct BandZ<'a> {
+/// A band's copy of z in a patch sweep, from node `first` on.
+struct BandZ {
     first: usize,
-    own: &'a mut [Vec3],
-    above: &'a [Vec3],
+    z: Vec<Vec3>,
 }
 
-impl BandZ<'_> {
+impl BandZ {
     #[inline(always)]
     fn get(&self, j: usize) -> Vec3 {
-        match j.checked_sub(self.first) {
-            Some(k) => self.own[k],
-            None => self.above[self.above.len() - (self.first - j)],
-        }
+        self.z[j - self.first]
     }
 
     #[inline(always)]
     fn set(&mut self, i: usize, value: Vec3) {
-        self.own[i - self.first] = value;
+        self.z[i - self.first] = value;
     }
 }
 
@@ -894,8 +875,8 @@ impl BandZ<'_> {
 /// 3 % faster.
 const CLOTH_READ_AHEAD: usize = 1 << 15;
 
-/// The fewest patch rows a sweep's band holds: more than the six a seam's
-/// held row and residual rows reach, so seams run side by side.
+/// The fewest patch rows a sweep's band holds, so that the row a band
+/// solves again for the one before it stays a small share of its work.
 const MIN_BAND: usize = 8;
 
 /// The first patch row of each band of `pass`'s sweep, a band to a
