@@ -417,12 +417,12 @@ impl Multigrid {
             Sweep::Forward(residual) => Some(&mut **residual),
             Sweep::Backward => None,
         };
-        let band_residual = optional_pieces(
+        let band_residual = parts(
             residual.as_deref_mut(),
-            bands.iter().map(|band| at(band.start)..at(band.end)),
+            bands.iter().map(|band| at(band.end) - at(band.start)),
         );
         let before: &[Vec3] = z;
-        let solved: Vec<Vec<Vec3>> = bands
+        let solved: Vec<BandZ> = bands
             .par_iter()
             .zip(band_residual)
             .map(|(band, mut residual)| {
@@ -460,13 +460,12 @@ impl Multigrid {
                         done = end;
                     }
                 });
-                z.z
+                z
             })
             .collect();
         for (band, solved) in bands.iter().zip(&solved) {
-            let first = at(band.start.saturating_sub(1));
-            z[at(band.start)..at(band.end)]
-                .copy_from_slice(&solved[at(band.start) - first..at(band.end) - first]);
+            let own = at(band.start) - solved.first..at(band.end) - solved.first;
+            z[at(band.start)..at(band.end)].copy_from_slice(&solved.z[own]);
         }
         // The residual rows of each band's first row, which reach the row
         // above, set in the band before.
@@ -894,26 +893,17 @@ fn band_starts(pass: Pass) -> Vec<usize> {
         .collect()
 }
 
-/// The pieces of `v` at `ranges`, which ascend and do not overlap.
-fn pieces<T>(mut v: &mut [T], ranges: impl Iterator<Item = Range<usize>>) -> Vec<&mut [T]> {
-    let mut cut = 0;
-    ranges
-        .map(|range| {
-            let rest = take(&mut v).split_at_mut(range.start - cut).1;
-            let (piece, rest) = rest.split_at_mut(range.len());
-            (v, cut) = (rest, range.end);
-            piece
+/// `v` cut into consecutive parts of `lengths`, or a None for each where
+/// there is no `v`.
+fn parts<T>(
+    mut v: Option<&mut [T]>,
+    lengths: impl Iterator<Item = usize>,
+) -> Vec<Option<&mut [T]>> {
+    lengths
+        .map(|length| {
+            let (part, rest) = v.take()?.split_at_mut(length);
+            v = Some(rest);
+            Some(part)
         })
         .collect()
-}
-
-/// [`pieces`] of `v` where there is one, else a None for each range.
-fn optional_pieces<T>(
-    v: Option<&mut [T]>,
-    ranges: impl Iterator<Item = Range<usize>>,
-) -> Vec<Option<&mut [T]>> {
-    match v {
-        Some(v) => pieces(v, ranges).into_iter().map(Some).collect(),
-        None => ranges.map(|_| None).collect(),
-    }
 }
