@@ -359,7 +359,7 @@ fn hierarchy(a: &BlockMatrix, cloth: &Cloth, x: &[Vec3], cycle: Cycle) -> Vec<Le
         for (j, block) in blocks.filter(|&(j, _)| !cloth.pinned[j]) {
             for r in 0..3 {
                 for c in 0..3 {
-                    fine[3 * i + r].push((3 * j + c, block.col(c)[r] as f64));
+                    fine[3 * i + r].push((3 * j + c, block.columns()[c][r] as f64));
                 }
             }
         }

@@ -655,7 +655,6 @@ fn run_gpu(
                 sim.step();
                 ctx.finish()?;
                 let (diag, _, b) = sim.read_system()?;
-                let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
                 let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
                 divergence = Some(health::diagnose(&FailedStep {
                     step: f.step + 1,

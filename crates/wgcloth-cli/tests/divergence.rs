@@ -16,6 +16,7 @@ use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuSim, Kernels};
 use wgcloth::health::{self, FailedStep, NOT_FINITE, TOO_FAST};
+use wgcloth::math::Sym3;
 use wgcloth::{Config, Scene};
 use wgcloth_cli::run::{self, Chosen, Steps};
 
@@ -156,7 +157,6 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     let state = sim.read_state().expect("state");
     assert_eq!(state.health & NOT_FINITE, NOT_FINITE, "{state:?}");
     let (diag, _, b) = sim.read_system().expect("system");
-    let diag: Vec<glam::Mat3> = diag.iter().map(|d| d.to_mat3()).collect();
     let (x, v) = (
         sim.read_positions().unwrap(),
         sim.read_velocities().unwrap(),
@@ -207,8 +207,8 @@ fn the_gpu_raises_the_same_flags_as_the_cpu() {
 #[test]
 fn a_breakdown_names_the_vertex_whose_block_is_not_positive_definite() {
     let n = 9;
-    let mut diag = vec![glam::Mat3::IDENTITY; n];
-    diag[5] = glam::Mat3::from_diagonal(Vec3::new(1.0, -2.0, 1.0));
+    let mut diag = vec![Sym3::from_diagonal(Vec3::ONE); n];
+    diag[5] = Sym3::from_diagonal(Vec3::new(1.0, -2.0, 1.0));
     let zeros = vec![Vec3::ZERO; n];
     let d = health::diagnose(&FailedStep {
         step: 3,

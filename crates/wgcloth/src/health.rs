@@ -8,8 +8,10 @@
 //! diagnosis runs here for both, on the failing step only, from the state
 //! and the system that step left.
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 use serde::Serialize;
+
+use crate::math::Sym3;
 
 /// A position or velocity is not finite.
 pub const NOT_FINITE: u32 = 1;
@@ -36,7 +38,7 @@ pub struct FailedStep<'a> {
     /// Whether PCG broke down (pᵀAp ≤ 0 or a non-finite scalar).
     pub breakdown: bool,
     /// A's diagonal blocks and b, as the step assembled them.
-    pub diag: &'a [Mat3],
+    pub diag: &'a [Sym3],
     /// The right-hand side b of A v' = b, one entry per vertex.
     pub b: &'a [Vec3],
     /// The state after the step.
@@ -52,7 +54,8 @@ pub fn failed(flags: u32, breakdown: bool) -> bool {
     flags != 0 || breakdown
 }
 
-fn positive_definite(m: &Mat3) -> bool {
+fn positive_definite(m: &Sym3) -> bool {
+    let m = m.to_mat3();
     let minor = m.x_axis.x * m.y_axis.y - m.y_axis.x * m.x_axis.y;
     m.x_axis.x > 0.0 && minor > 0.0 && m.determinant() > 0.0
 }

@@ -2,7 +2,112 @@
 //! coordinates, and the projection that keeps contact blocks symmetric
 //! negative semidefinite so the implicit system stays SPD (DESIGN "physics").
 
+use std::ops::{Add, AddAssign, Mul};
+
+use bytemuck::{Pod, Zeroable};
 use glam::{Mat3, Vec3, Vec3A};
+
+/// A symmetric 3 × 3 block as six floats, xx, yy, zz, xy, xz, yz: every
+/// block of the implicit system on both paths (the GPU's buffers hold it as
+/// `PackedSym3`, wgsl/common.wgsl), two thirds of a `Mat3`'s bytes. Its
+/// arithmetic does what `Mat3`'s does to the same entries, so a product
+/// with a vector rounds as the full matrix's does.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Sym3(pub [f32; 6]);
+
+impl Sym3 {
+    /// The zero block.
+    pub const ZERO: Sym3 = Sym3([0.0; 6]);
+
+    /// diag(d).
+    pub fn from_diagonal(d: Vec3) -> Sym3 {
+        Sym3([d.x, d.y, d.z, 0.0, 0.0, 0.0])
+    }
+
+    /// a aᵀ, the products of `outer(a, a)`.
+    pub fn outer(a: Vec3) -> Sym3 {
+        Sym3([
+            a.x * a.x,
+            a.y * a.y,
+            a.z * a.z,
+            a.x * a.y,
+            a.x * a.z,
+            a.y * a.z,
+        ])
+    }
+
+    /// The symmetric part (M + Mᵀ) / 2 of `m`, which is `m` to the bit where
+    /// `m` is symmetric.
+    pub fn from_mat3(m: Mat3) -> Sym3 {
+        let s = symmetric_part(m);
+        Sym3([
+            s.x_axis.x, s.y_axis.y, s.z_axis.z, s.y_axis.x, s.z_axis.x, s.z_axis.y,
+        ])
+    }
+
+    /// Its columns (which are its rows).
+    #[inline(always)]
+    pub fn columns(self) -> [Vec3; 3] {
+        let [xx, yy, zz, xy, xz, yz] = self.0;
+        [
+            Vec3::new(xx, xy, xz),
+            Vec3::new(xy, yy, yz),
+            Vec3::new(xz, yz, zz),
+        ]
+    }
+
+    /// (xx, yy, zz).
+    pub fn diagonal(self) -> Vec3 {
+        Vec3::new(self.0[0], self.0[1], self.0[2])
+    }
+
+    /// The full matrix.
+    pub fn to_mat3(self) -> Mat3 {
+        let [x, y, z] = self.columns();
+        Mat3::from_cols(x, y, z)
+    }
+
+    /// Whether every entry is finite.
+    pub fn is_finite(self) -> bool {
+        self.0.iter().all(|e| e.is_finite())
+    }
+}
+
+impl Mul<Vec3> for Sym3 {
+    type Output = Vec3;
+    /// Column by column, as `Mat3 * Vec3`.
+    #[inline(always)]
+    fn mul(self, v: Vec3) -> Vec3 {
+        let [x, y, z] = self.columns();
+        x * v.x + y * v.y + z * v.z
+    }
+}
+
+impl Mul<Sym3> for f32 {
+    type Output = Sym3;
+    #[inline(always)]
+    fn mul(self, m: Sym3) -> Sym3 {
+        let [a, b, c, d, e, f] = m.0;
+        Sym3([self * a, self * b, self * c, self * d, self * e, self * f])
+    }
+}
+
+impl Add for Sym3 {
+    type Output = Sym3;
+    #[inline(always)]
+    fn add(self, o: Sym3) -> Sym3 {
+        let ([a, b, c, d, e, f], [p, q, r, s, t, u]) = (self.0, o.0);
+        Sym3([a + p, b + q, c + r, d + s, e + t, f + u])
+    }
+}
+
+impl AddAssign for Sym3 {
+    #[inline(always)]
+    fn add_assign(&mut self, o: Sym3) {
+        *self = *self + o;
+    }
+}
 
 /// Σ_k A_k x_k, a block row times a vector, with each column's products
 /// summed apart: one dependent add per block in each of three chains,
@@ -21,10 +126,11 @@ pub struct RowSum {
 impl RowSum {
     /// Adds `block` × `v`.
     #[inline(always)]
-    pub fn add(&mut self, block: Mat3, v: Vec3) {
-        self.x += Vec3A::from(block.x_axis) * v.x;
-        self.y += Vec3A::from(block.y_axis) * v.y;
-        self.z += Vec3A::from(block.z_axis) * v.z;
+    pub fn add(&mut self, block: Sym3, v: Vec3) {
+        let [x, y, z] = block.columns();
+        self.x += Vec3A::from(x) * v.x;
+        self.y += Vec3A::from(y) * v.y;
+        self.z += Vec3A::from(z) * v.z;
     }
 
     /// The sum.

@@ -10,6 +10,7 @@ use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
+use wgcloth::math::Sym3;
 use wgcloth::{Config, Scene};
 
 fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
@@ -27,6 +28,10 @@ fn max_dev(a: &[Vec3], b: &[Vec3]) -> f32 {
 
 fn max_norm(a: &[Vec3]) -> f32 {
     a.iter().map(|p| p.length()).fold(0.0, f32::max)
+}
+
+fn full(blocks: &[Sym3]) -> Vec<Mat3> {
+    blocks.iter().map(|m| m.to_mat3()).collect()
 }
 
 fn mat_dev(a: &[Mat3], b: &[Mat3]) -> (f32, f32) {
@@ -91,9 +96,9 @@ fn assembly_matches_the_cpu_on_the_same_state() {
 
     let (gd, go, gb) = gpu.read_system().unwrap();
     let (a, b) = cpu.system();
-    let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
+    let (dev, norm) = mat_dev(&full(&gd), &full(&a.diag));
     assert!(dev <= 1e-5 * norm, "A diagonal {dev} vs {norm}");
-    let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
+    let (dev, norm) = mat_dev(&full(&go), &full(&a.off));
     assert!(dev <= 1e-5 * norm, "A off-diagonal {dev} vs {norm}");
     assert!(
         max_dev(&gb, b) <= 1e-5 * max_norm(b),
@@ -253,12 +258,12 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
         let (gd, go, gb) = gpu.read_system().unwrap();
         let (a, b) = cpu.system();
         // A kink's damping enters blocks scaled by h β_k β_l ≤ 1.
-        let (dev, norm) = mat_dev(&gd.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.diag);
+        let (dev, norm) = mat_dev(&full(&gd), &full(&a.diag));
         assert!(
             dev <= 1e-4 * norm + kink_dev,
             "{model:?}: A diagonal {dev} vs {norm}"
         );
-        let (dev, norm) = mat_dev(&go.iter().map(|m| m.to_mat3()).collect::<Vec<_>>(), &a.off);
+        let (dev, norm) = mat_dev(&full(&go), &full(&a.off));
         assert!(
             dev <= 1e-4 * norm + kink_dev,
             "{model:?}: A off-diagonal {dev} vs {norm}"

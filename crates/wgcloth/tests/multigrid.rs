@@ -12,6 +12,7 @@ use wgcloth::config::{Preconditioner, SceneKind, Smoother};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::multigrid::Multigrid;
 use wgcloth::cpu::pcg::BlockMatrix;
+use wgcloth::math::Sym3;
 use wgcloth::multigrid::{Level, weight};
 use wgcloth::scene::Cloth;
 use wgcloth::{Config, Scene};
@@ -25,13 +26,13 @@ fn random_system(cloth: &Cloth, rng: &mut Rng) -> BlockMatrix {
             rng.vec3(-1.0, 1.0),
             rng.vec3(-1.0, 1.0),
         );
-        (m + m.transpose()) * (0.5 * scale)
+        (0.5 * scale) * Sym3::from_mat3(m + m.transpose())
     };
     for o in &mut a.off {
         *o = sym(1.0);
     }
     for d in &mut a.diag {
-        *d = sym(1.0) + Mat3::from_diagonal(Vec3::splat(40.0));
+        *d = sym(1.0) + Sym3::from_diagonal(Vec3::splat(40.0));
     }
     a
 }
@@ -65,13 +66,17 @@ fn interpolation(fine: Level, coarse: Level, filtered: &dyn Fn(usize) -> bool) -
 fn check_galerkin(
     fine: Level,
     coarse: Level,
-    fine_block: &dyn Fn(usize, usize) -> Mat3,
+    fine_block: &dyn Fn(usize, usize) -> Sym3,
     filtered: &dyn Fn(usize) -> bool,
-    coarse_block: &dyn Fn(usize, usize) -> Mat3,
+    coarse_block: &dyn Fn(usize, usize) -> Sym3,
 ) {
     let p = interpolation(fine, coarse, filtered);
     let blocks: Vec<Vec<Mat3>> = (0..fine.nodes())
-        .map(|i| (0..fine.nodes()).map(|j| fine_block(i, j)).collect())
+        .map(|i| {
+            (0..fine.nodes())
+                .map(|j| fine_block(i, j).to_mat3())
+                .collect()
+        })
         .collect();
     for big_i in 0..coarse.nodes() {
         for big_j in 0..coarse.nodes() {
@@ -81,7 +86,7 @@ fn check_galerkin(
                     expected += (p[i][big_i] * p[j][big_j]) * *block;
                 }
             }
-            let got = coarse_block(big_i, big_j);
+            let got = coarse_block(big_i, big_j).to_mat3();
             let scale = expected
                 .abs()
                 .to_cols_array()
@@ -115,7 +120,7 @@ fn coarse_operators_are_galerkin_products_with_pins_filtered() {
         let adj = &cloth.adjacency;
         adj.range(i)
             .find(|&k| adj.other[k] as usize == j)
-            .map_or(Mat3::ZERO, |k| a.off[adj.spring[k] as usize])
+            .map_or(Sym3::ZERO, |k| a.off[adj.spring[k] as usize])
     };
     let pinned = |i: usize| cloth.pinned[i];
     let mg = &mg;

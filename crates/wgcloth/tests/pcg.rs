@@ -9,6 +9,7 @@ use glam::{Mat3, Vec3};
 use wgcloth::config::ModelKind;
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, Preconditioner, Smoother, SolveSettings, solve};
+use wgcloth::math::Sym3;
 use wgcloth::scene::Cloth;
 use wgcloth::{Config, Scene};
 
@@ -44,12 +45,12 @@ fn dense_free_system(
         }
     };
     for i in 0..n {
-        put(i, i, a.diag[i], &mut rhs);
+        put(i, i, a.diag[i].to_mat3(), &mut rhs);
         for k in cloth.adjacency.range(i) {
             put(
                 i,
                 cloth.adjacency.other[k] as usize,
-                a.off[cloth.adjacency.spring[k] as usize],
+                a.off[cloth.adjacency.spring[k] as usize].to_mat3(),
                 &mut rhs,
             );
         }
@@ -176,7 +177,7 @@ fn pcg_matches_direct_solve_on_random_spd_systems() {
                 rng.vec3(-1.0, 1.0),
                 rng.vec3(-1.0, 1.0),
             );
-            *o = (m + m.transpose()) * 0.5;
+            *o = Sym3::from_mat3(m);
         }
         // Symmetric random diagonal blocks made strictly dominant: SPD.
         for d in &mut a.diag {
@@ -185,7 +186,7 @@ fn pcg_matches_direct_solve_on_random_spd_systems() {
                 rng.vec3(-1.0, 1.0),
                 rng.vec3(-1.0, 1.0),
             );
-            *d = m * m.transpose() + Mat3::from_diagonal(Vec3::splat(40.0));
+            *d = Sym3::from_mat3(m * m.transpose() + Mat3::from_diagonal(Vec3::splat(40.0)));
         }
         let b: Vec<Vec3> = (0..cloth.vertex_count())
             .map(|_| rng.vec3(-1.0, 1.0))

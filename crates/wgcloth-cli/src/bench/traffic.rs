@@ -13,6 +13,7 @@ use serde::Serialize;
 use wgcloth::config::Smoother;
 use wgcloth::error::Result;
 use wgcloth::gpu::{GpuContext, layout};
+use wgcloth::math::Sym3;
 use wgcloth::multigrid::{
     COARSE_SWEEPS, Level, PATCH_BLOCKS, PATCH_UNKNOWNS, STORED_STENCIL, patch_grid,
 };
@@ -71,31 +72,31 @@ pub fn stage_multiply_adds(stage: Stage, e: &Extent) -> f64 {
 /// writes x and r, reads p, q and P⁻¹ and writes z: 12 vectors.
 pub const GPU: Layout = Layout {
     vector: 16,
-    diag_block: size_of::<layout::Sym3>() as u64,
-    off_block: size_of::<layout::Sym3>() as u64,
+    diag_block: size_of::<Sym3>() as u64,
+    off_block: size_of::<Sym3>() as u64,
     flag: 4,
     vectors_per_iteration: 12,
-    patch_inverse: PATCH_BLOCKS as u64 * size_of::<layout::Sym3>() as u64,
+    patch_inverse: PATCH_BLOCKS as u64 * size_of::<Sym3>() as u64,
     contact: size_of::<layout::Contact>() as u64,
     response: size_of::<layout::Response>() as u64,
     // Each spring's force and block is computed where it is gathered.
     spring_term: 0,
 };
 
-/// src/cpu/pcg.rs: `Vec3` vectors, `Mat3` blocks, bool flags. Per vertex
+/// src/cpu/pcg.rs: `Vec3` vectors, `Sym3` blocks, bool flags. Per vertex
 /// `spmv` reads p and writes q; `update` reads and writes x and r, reads
 /// p, q and P⁻¹ and writes z; `direction` reads z and reads and writes p:
 /// 13 vectors.
 pub const CPU: Layout = Layout {
     vector: 12,
-    diag_block: 36,
-    off_block: 36,
+    diag_block: size_of::<Sym3>() as u64,
+    off_block: size_of::<Sym3>() as u64,
     flag: 1,
     vectors_per_iteration: 13,
     patch_inverse: (PATCH_UNKNOWNS * PATCH_UNKNOWNS * 4) as u64,
     contact: size_of::<wgcloth::cpu::collide::Contact>() as u64,
     response: size_of::<wgcloth::cpu::contact::Response>() as u64,
-    spring_term: 12 + 36,
+    spring_term: 12 + size_of::<Sym3>() as u64,
 };
 
 impl Layout {

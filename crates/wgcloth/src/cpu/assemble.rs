@@ -6,13 +6,14 @@
 //! Mirrors wgsl/assemble.wgsl: per-vertex gathers over the adjacency, then
 //! the contacts.
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
 use crate::cpu::collide::Contact;
 use crate::cpu::contact::Response;
 use crate::cpu::pcg::BlockMatrix;
+use crate::math::Sym3;
 use crate::scene::Cloth;
 
 /// Scalars of one step.
@@ -34,7 +35,7 @@ pub fn springs_and_inertia(
     p: &StepParams,
     v: &[Vec3],
     spring_forces: &[Vec3],
-    spring_blocks: &[Mat3],
+    spring_blocks: &[Sym3],
     a: &mut BlockMatrix,
     b: &mut [Vec3],
 ) {
@@ -42,7 +43,7 @@ pub fn springs_and_inertia(
     let m = cloth.vertex_mass;
     // A_ij = −(h² + hβ) K_s; A_ii = (1 + hα) m I + (h² + hβ) Σ K_s.
     let k_scale = h * h + h * p.damping_stiffness;
-    let mass_diag = Mat3::from_diagonal(Vec3::splat((1.0 + h * p.damping_mass) * m));
+    let mass_diag = Sym3::from_diagonal(Vec3::splat((1.0 + h * p.damping_mass) * m));
     let adj = &cloth.adjacency;
     a.off
         .par_iter_mut()
@@ -55,7 +56,7 @@ pub fn springs_and_inertia(
         .zip(b.par_iter_mut())
         .enumerate()
         .for_each(|(i, (d, bi))| {
-            let mut k_sum = Mat3::ZERO;
+            let mut k_sum = Sym3::ZERO;
             let mut f = m * p.gravity;
             for k in adj.range(i) {
                 let s = adj.spring[k] as usize;
@@ -87,7 +88,7 @@ pub fn contacts(
 ) {
     let h = dt;
     for (c, r) in contacts.iter().zip(responses) {
-        let block = -(h * r.damping + h * h * r.stiffness);
+        let block = Sym3::from_mat3(-(h * r.damping + h * h * r.stiffness));
         let cloth_velocity = c.relative_velocity(v) - c.velocity_offset;
         let rhs = h * (r.force - r.damping * cloth_velocity);
         let count = c.vertex_count();

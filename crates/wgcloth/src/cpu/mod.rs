@@ -20,9 +20,10 @@ use std::time::Instant;
 #[cfg(target_arch = "wasm32")]
 use web_time::Instant;
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 
 use crate::bvh::{Bvh, triangle_boxes};
+use crate::math::Sym3;
 use crate::scene::Scene;
 use crate::stage::Stage;
 use assemble::StepParams;
@@ -101,7 +102,7 @@ pub struct CpuSim {
     contacts: Vec<Contact>,
     responses: Vec<Response>,
     spring_forces: Vec<Vec3>,
-    spring_blocks: Vec<Mat3>,
+    spring_blocks: Vec<Sym3>,
     matrix: BlockMatrix,
     rhs: Vec<Vec3>,
     scratch: PcgScratch,
@@ -142,7 +143,7 @@ impl CpuSim {
             contacts: Vec::new(),
             responses: Vec::new(),
             spring_forces: vec![Vec3::ZERO; cloth.springs.len()],
-            spring_blocks: vec![Mat3::ZERO; cloth.springs.len()],
+            spring_blocks: vec![Sym3::ZERO; cloth.springs.len()],
             matrix: BlockMatrix::new(n, cloth.springs.len()),
             rhs: vec![Vec3::ZERO; n],
             scratch: PcgScratch::default(),

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use crate::config::Smoother;
 use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
-use crate::math::RowSum;
+use crate::math::{RowSum, Sym3};
 use crate::multigrid::{
     COARSE_SWEEPS, Level, PATCH, PATCH_COLOURS, PATCH_UNKNOWNS, PatchMatrix, STENCIL,
     STORED_STENCIL, levels, node_colour, parents, patch_grid, patch_inverse, row_weight,
@@ -33,7 +33,7 @@ pub struct Multigrid {
     levels: Vec<Level>,
     /// Per coarse level (index l − 1): [`STORED_STENCIL`] blocks per node,
     /// the upper half of its stencil (`multigrid::stored_at`).
-    stencils: Vec<Vec<Mat3>>,
+    stencils: Vec<Vec<Sym3>>,
     /// Per level: ω D⁻¹, zero where D is singular (a pinned node, or a coarse
     /// node whose fine nodes are all pinned); empty on the levels the patch
     /// smoother smooths (all but the coarsest), which need none.
@@ -83,13 +83,14 @@ fn patch_nodes(level: Level, (pc, pr): (usize, usize)) -> [Option<Node>; PATCH a
 
 /// ω_i D⁻¹ of a row with diagonal block `d` and off-diagonal blocks `off`
 /// ([`row_weight`]), or zero if D is not invertible.
-fn smoother(d: Mat3, off: impl Iterator<Item = Mat3>) -> Mat3 {
+fn smoother(d: Sym3, off: impl Iterator<Item = Sym3>) -> Mat3 {
+    let d = d.to_mat3();
     let det = d.determinant();
     if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
         return Mat3::ZERO;
     }
     let inverse = d.inverse();
-    let spread = off.map(|block| frobenius(inverse * block)).sum();
+    let spread = off.map(|block| frobenius(inverse * block.to_mat3())).sum();
     row_weight(spread) * inverse
 }
 
@@ -155,7 +156,7 @@ impl Multigrid {
         Multigrid {
             stencils: levels[1..]
                 .iter()
-                .map(|l| vec![Mat3::ZERO; l.nodes() * STORED_STENCIL as usize])
+                .map(|l| vec![Sym3::ZERO; l.nodes() * STORED_STENCIL as usize])
                 .collect(),
             smoothers: vec![Vec::new(); levels.len()],
             rhs: coarse().collect(),
@@ -194,19 +195,19 @@ impl Multigrid {
 
     /// Block (i, j) of coarse level `l`'s operator (`l` ≥ 1), zero where j
     /// is outside i's stencil.
-    pub fn coarse_block(&self, l: usize, i: usize, j: usize) -> Mat3 {
+    pub fn coarse_block(&self, l: usize, i: usize, j: usize) -> Sym3 {
         let level = self.levels[l];
         let ((ci, ri), (cj, rj)) = (coords(level, i), coords(level, j));
         let (dx, dy) = (cj as i32 - ci as i32, rj as i32 - ri as i32);
         if dx.abs() > 2 || dy.abs() > 2 {
-            return Mat3::ZERO;
+            return Sym3::ZERO;
         }
         self.stored_block(l, i, j, dx, dy)
     }
 
     /// Block (i, j) of coarse level `l`, j at (dx, dy) from i, from where
     /// the upper half of the stencils keeps it.
-    fn stored_block(&self, l: usize, i: usize, j: usize, dx: i32, dy: i32) -> Mat3 {
+    fn stored_block(&self, l: usize, i: usize, j: usize, dx: i32, dy: i32) -> Sym3 {
         let (at_neighbour, slot) = stored_at(dx, dy);
         let node = if at_neighbour { j } else { i };
         self.stencils[l - 1][node * STORED_STENCIL as usize + slot]
@@ -220,7 +221,7 @@ impl Multigrid {
         cloth: &Cloth,
         l: usize,
         (i, c, r): Node,
-        mut f: impl FnMut(usize, Mat3),
+        mut f: impl FnMut(usize, Sym3),
     ) {
         if l == 0 {
             f(i, a.diag[i]);
@@ -321,7 +322,7 @@ impl Multigrid {
         // vertices alone (a zero row).
         let held = |node: Option<Node>| match node {
             None => true,
-            Some((i, ..)) => (l == 0 && cloth.pinned[i]) || diagonal(i) == Mat3::ZERO,
+            Some((i, ..)) => (l == 0 && cloth.pinned[i]) || diagonal(i) == Sym3::ZERO,
         };
         // Block (i, j) of the operator, j in i's patch.
         let block = |(i, c, r): Node, (j, cj, rj): Node| match l {
@@ -329,7 +330,7 @@ impl Multigrid {
             0 => {
                 let adj = &cloth.adjacency;
                 let k = adj.range(i).find(|&k| adj.other[k] as usize == j);
-                k.map_or(Mat3::ZERO, |k| a.off[adj.spring[k] as usize])
+                k.map_or(Sym3::ZERO, |k| a.off[adj.spring[k] as usize])
             }
             _ => self.stored_block(l, i, j, cj as i32 - c as i32, rj as i32 - r as i32),
         };
@@ -347,9 +348,9 @@ impl Multigrid {
                     };
                     for (b, &other) in nodes.iter().enumerate() {
                         let Some(other) = other else { continue };
-                        let columns = block(node, other).to_cols_array_2d();
+                        let columns = block(node, other).columns();
                         for (c, column) in columns.iter().enumerate() {
-                            for (r, &e) in column.iter().enumerate() {
+                            for (r, &e) in column.to_array().iter().enumerate() {
                                 m[3 * k + r][3 * b + c] = e;
                             }
                         }
@@ -513,7 +514,7 @@ impl Multigrid {
                 .enumerate()
                 .filter_map(|(coarse, stored)| {
                     let (cc, rc) = coords(to, coarse);
-                    let mut out = [Mat3::ZERO; STENCIL as usize];
+                    let mut out = [Sym3::ZERO; STENCIL as usize];
                     for node in Self::children(from, (cc, rc)) {
                         let wi = self.fine_weight(cloth, l, node, (cc, rc));
                         if wi == 0.0 {

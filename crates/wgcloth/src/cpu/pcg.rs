@@ -4,13 +4,14 @@
 //! thesis's Jacobi or a multigrid V-cycle (`cpu::multigrid`). Mirrors
 //! wgsl/pcg.wgsl.
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 pub use crate::config::{Preconditioner, Smoother};
 use crate::cpu::GRAIN;
 use crate::cpu::multigrid::Multigrid;
 use crate::cpu::self_contact::Couplings;
+use crate::math::Sym3;
 use crate::multigrid::Level;
 use crate::scene::Cloth;
 use crate::scene::cloth::Adjacency;
@@ -22,9 +23,9 @@ use crate::scene::cloth::Adjacency;
 #[derive(Clone, Debug, Default)]
 pub struct BlockMatrix {
     /// A_ii, one block per vertex.
-    pub diag: Vec<Mat3>,
+    pub diag: Vec<Sym3>,
     /// A_ij = A_ji, one block per spring (i, j), in spring order.
-    pub off: Vec<Mat3>,
+    pub off: Vec<Sym3>,
     /// The cloth–cloth contacts' off-diagonal blocks (none without
     /// self-contact forces); the preconditioners see only their diagonal.
     pub couplings: Couplings,
@@ -35,8 +36,8 @@ impl BlockMatrix {
     /// springs.
     pub fn new(vertices: usize, springs: usize) -> BlockMatrix {
         BlockMatrix {
-            diag: vec![Mat3::ZERO; vertices],
-            off: vec![Mat3::ZERO; springs],
+            diag: vec![Sym3::ZERO; vertices],
+            off: vec![Sym3::ZERO; springs],
             couplings: Couplings::default(),
         }
     }
@@ -166,11 +167,10 @@ pub fn solve(
                 .with_min_len(GRAIN)
                 .enumerate()
                 .for_each(|(i, m)| {
-                    let d = a.diag[i];
                     *m = if pinned[i] {
                         Vec3::ZERO
                     } else {
-                        Vec3::new(d.x_axis.x, d.y_axis.y, d.z_axis.z).recip()
+                        a.diag[i].diagonal().recip()
                     };
                 }),
         }

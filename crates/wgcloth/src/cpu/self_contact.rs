@@ -36,7 +36,7 @@ use crate::cpu::GRAIN;
 use crate::cpu::collide::{Tolerances, point_triangle};
 use crate::cpu::contact::{Coefficients, friction, response};
 use crate::cpu::separate::EDGE_PAIR;
-use crate::math::{closest_between_segments, closest_on_triangle, segment_parameters};
+use crate::math::{Sym3, closest_between_segments, closest_on_triangle, segment_parameters};
 use crate::scene::Cloth;
 
 /// The most pairs a vertex takes part in (the GPU's list per vertex, or
@@ -411,10 +411,11 @@ impl Couplings {
 
 /// Adds each pair's diagonal blocks β_k² B to A's diagonal and β_k times
 /// its right-hand side to b.
-pub fn add_to_system(pairs: &[Pair], terms: &[PairTerm], diag: &mut [Mat3], b: &mut [Vec3]) {
+pub fn add_to_system(pairs: &[Pair], terms: &[PairTerm], diag: &mut [Sym3], b: &mut [Vec3]) {
     for (p, t) in pairs.iter().zip(terms) {
+        let block = Sym3::from_mat3(t.block);
         for (&v, &beta) in p.vertices.iter().zip(&p.beta) {
-            diag[v as usize] += beta * beta * t.block;
+            diag[v as usize] += beta * beta * block;
             b[v as usize] += beta * t.rhs;
         }
     }
@@ -586,7 +587,7 @@ mod tests {
         let terms = respond(&pairs, &alone(&x), &x, &v, &BAND);
         let n = x.len();
         let couplings = Couplings::new(n, &pairs, &terms);
-        let mut diag = vec![Mat3::ZERO; n];
+        let mut diag = vec![Sym3::ZERO; n];
         add_to_system(&pairs, &terms, &mut diag, &mut vec![Vec3::ZERO; n]);
         let probe: Vec<Vec3> = (0..n)
             .map(|i| Vec3::new((i as f32).cos(), (2.0 * i as f32).sin(), 0.5))

@@ -3,11 +3,11 @@
 //! one term per spring for the assembly to gather, where the GPU computes
 //! each where it is gathered.
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cpu::GRAIN;
-use crate::math::outer;
+use crate::math::Sym3;
 use crate::scene::Cloth;
 
 /// Force on the spring's first vertex i (the second gets the opposite) and
@@ -18,23 +18,24 @@ use crate::scene::Cloth;
 /// rewritten with the unit direction). Under compression (l < L) the
 /// matrix keeps 1 − L/l at 0 so K stays negative semidefinite and the
 /// implicit system positive definite; the force is never clamped.
-pub fn spring(xi: Vec3, xj: Vec3, rest: f32, stiffness: f32) -> (Vec3, Mat3) {
+pub fn spring(xi: Vec3, xj: Vec3, rest: f32, stiffness: f32) -> (Vec3, Sym3) {
     let dx = xj - xi;
     let l = dx.length();
     if l <= f32::MIN_POSITIVE {
         // Coincident endpoints: no direction, hence no force; the block
         // stays isotropic so the system is still well posed.
-        return (Vec3::ZERO, Mat3::ZERO);
+        return (Vec3::ZERO, Sym3::ZERO);
     }
     let d = dx / l;
     let ratio = rest / l;
     let force = stiffness * (l - rest) * d;
-    let block = stiffness * (ratio * outer(d, d) + (1.0 - ratio).max(0.0) * Mat3::IDENTITY);
+    let block = stiffness
+        * (ratio * Sym3::outer(d) + Sym3::from_diagonal(Vec3::splat((1.0 - ratio).max(0.0))));
     (force, block)
 }
 
 /// Evaluates every spring at positions `x`.
-pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Mat3]) {
+pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Sym3]) {
     forces
         .par_iter_mut()
         .with_min_len(GRAIN)

@@ -8,6 +8,10 @@ use crate::gpu::constants::NO_TRIANGLE;
 use crate::multigrid::MAX_LEVELS;
 use crate::scene::Scene;
 
+/// A symmetric 3×3 block as buffers hold it (`PackedSym3` in
+/// wgsl/common.wgsl), the CPU's type.
+pub use crate::math::Sym3;
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 /// The run's constants, as every scene stage reads them (mirrors `Params`
@@ -212,20 +216,6 @@ pub struct ClothPair {
     pub block: Sym3,
     /// Pads the struct to a multiple of 16 bytes.
     pub pad: [u32; 2],
-}
-
-/// A symmetric 3×3 block as buffers hold it (mirrors `PackedSym3` in
-/// wgsl/common.wgsl): xx, yy, zz, xy, xz, yz.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct Sym3(pub [f32; 6]);
-
-impl Sym3 {
-    /// The full symmetric matrix.
-    pub fn to_mat3(self) -> glam::Mat3 {
-        let [xx, yy, zz, xy, xz, yz] = self.0;
-        glam::Mat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz])
-    }
 }
 
 #[repr(C)]
