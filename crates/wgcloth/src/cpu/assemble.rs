@@ -29,13 +29,14 @@ pub struct StepParams {
     pub damping_stiffness: f32,
 }
 
-/// Springs and gravity: A's diagonal and spring blocks, and b.
+/// Springs and gravity: A's diagonal and spring blocks, and b, from the
+/// springs' forces and their blocks K_s, which `a.off` holds on entry
+/// (`springs::evaluate`): one array of blocks, not two.
 pub fn springs_and_inertia(
     cloth: &Cloth,
     p: &StepParams,
     v: &[Vec3],
     spring_forces: &[Vec3],
-    spring_blocks: &[Sym3],
     a: &mut BlockMatrix,
     b: &mut [Vec3],
 ) {
@@ -45,13 +46,8 @@ pub fn springs_and_inertia(
     let k_scale = h * h + h * p.damping_stiffness;
     let mass_diag = Sym3::from_diagonal(Vec3::splat((1.0 + h * p.damping_mass) * m));
     let adj = &cloth.adjacency;
-    a.off
-        .par_iter_mut()
-        .with_min_len(GRAIN)
-        .zip(spring_blocks)
-        .for_each(|(o, k)| *o = -k_scale * *k);
-    a.diag
-        .par_iter_mut()
+    let (diag, spring_blocks) = (&mut a.diag, &a.off);
+    diag.par_iter_mut()
         .with_min_len(GRAIN)
         .zip(b.par_iter_mut())
         .enumerate()
@@ -72,6 +68,10 @@ pub fn springs_and_inertia(
             *d = mass_diag + k_scale * k_sum;
             *bi = m * v[i] + h * f;
         });
+    a.off
+        .par_iter_mut()
+        .with_min_len(GRAIN)
+        .for_each(|o| *o = -k_scale * *o);
 }
 
 /// Adds every contact: b_k += h β_k (f − D_c (v_rel − u)) and

@@ -23,7 +23,6 @@ use web_time::Instant;
 use glam::Vec3;
 
 use crate::bvh::{Bvh, triangle_boxes};
-use crate::math::Sym3;
 use crate::scene::Scene;
 use crate::stage::Stage;
 use assemble::StepParams;
@@ -102,7 +101,6 @@ pub struct CpuSim {
     contacts: Vec<Contact>,
     responses: Vec<Response>,
     spring_forces: Vec<Vec3>,
-    spring_blocks: Vec<Sym3>,
     matrix: BlockMatrix,
     rhs: Vec<Vec3>,
     scratch: PcgScratch,
@@ -143,7 +141,6 @@ impl CpuSim {
             contacts: Vec::new(),
             responses: Vec::new(),
             spring_forces: vec![Vec3::ZERO; cloth.springs.len()],
-            spring_blocks: vec![Sym3::ZERO; cloth.springs.len()],
             matrix: BlockMatrix::new(n, cloth.springs.len()),
             rhs: vec![Vec3::ZERO; n],
             scratch: PcgScratch::default(),
@@ -260,13 +257,13 @@ impl CpuSim {
                 );
             }
             Stage::Assemble => {
-                springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.spring_blocks);
+                // Each K_s goes where A's block for its spring will be.
+                springs::evaluate(cloth, x, &mut self.spring_forces, &mut self.matrix.off);
                 assemble::springs_and_inertia(
                     cloth,
                     &self.params,
                     v,
                     &self.spring_forces,
-                    &self.spring_blocks,
                     &mut self.matrix,
                     &mut self.rhs,
                 );
