@@ -7,7 +7,9 @@
 #     of $GOAL_GRIDS (default 1024), report run_N.json: the issue's goal is
 #     60 steps a second at 1024² (each run cut at $RUN_TIMEOUT seconds,
 #     default 600); then the same run with --no-subgroups, the solver's
-#     sums through workgroup memory alone, into run_N_no_subgroups.json;
+#     sums through workgroup memory alone, into run_N_no_subgroups.json,
+#     and with --vectors vec4, the solver's vectors a vec4 each rather
+#     than packed, into run_N_vec4.json;
 #  2. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput and the sphere period, into bench.json,
 #     bench.png and bench.txt.
@@ -49,13 +51,17 @@ case "$adapter" in
 esac
 echo "adapter: $adapter"
 for n in $goal_grids; do
-  for sums in "" --no-subgroups; do
-    echo "== default run, ${n}² ${sums}"
-    report=$out/run_$n${sums:+_no_subgroups}.json
+  for variant in "" --no-subgroups "--vectors vec4"; do
+    echo "== default run, ${n}² ${variant}"
+    case "$variant" in
+      "") report=$out/run_$n.json ;;
+      --no-subgroups) report=$out/run_${n}_no_subgroups.json ;;
+      *) report=$out/run_${n}_vec4.json ;;
+    esac
     # A run that fails or outlasts $RUN_TIMEOUT seconds leaves the bench to run.
     if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
-      $sums --report "$report"; then
-      echo "the ${n}² run ${sums} failed or outlasted ${RUN_TIMEOUT:-600} s"
+      $variant --report "$report"; then
+      echo "the ${n}² run ${variant} failed or outlasted ${RUN_TIMEOUT:-600} s"
     fi
   done
 done

@@ -8,6 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Shape, Smoother};
 use wgcloth::gpu::GpuContext;
+use wgcloth::gpu::layout::VectorLayout;
 use wgcloth::nn::weights::NetKind;
 use wgcloth::{Config, Error, Result, Scene};
 use wgcloth_cli::run::{self, Backend, Chosen, check_diverged, choose_backend};
@@ -160,6 +161,10 @@ struct RunArgs {
     /// workgroup sums go through workgroup memory alone (to compare).
     #[arg(long)]
     no_subgroups: bool,
+    /// How the GPU solver lays out its vectors [default: packed, three
+    /// floats a vertex; vec4 on a CPU adapter such as lavapipe] (to compare).
+    #[arg(long)]
+    vectors: Option<Vectors>,
     /// Write the run report as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -196,6 +201,13 @@ struct RunArgs {
     /// With --monitor: a row every K steps (and one of the start).
     #[arg(long, value_name = "K", default_value_t = 1000)]
     monitor_every: u64,
+}
+
+/// `run --vectors`: wgcloth::gpu::layout::VectorLayout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Vectors {
+    Packed,
+    Vec4,
 }
 
 /// Geometry formats `run --export` writes.
@@ -344,7 +356,14 @@ fn run(args: &RunArgs) -> Result<()> {
     if args.no_subgroups {
         optional.remove(wgpu::Features::SUBGROUP);
     }
-    let (chosen, notice) = choose_backend(args.backend, optional)?;
+    let (mut chosen, notice) = choose_backend(args.backend, optional)?;
+    if let (Some(vectors), Chosen::Gpu { ctx, .. }) = (args.vectors, &mut chosen) {
+        let layout = match vectors {
+            Vectors::Packed => VectorLayout::Packed,
+            Vectors::Vec4 => VectorLayout::Vec4,
+        };
+        **ctx = ctx.clone().with_vectors(layout);
+    }
     if let Some(n) = notice {
         eprintln!("{n}");
     }

@@ -128,6 +128,9 @@ pub struct Report {
     /// Whether the solver's workgroup sums ran through subgroup operations
     /// (`Kernels::subgroups`; GPU only).
     pub gpu_subgroup_sums: Option<bool>,
+    /// How the solver's vectors lay in GPU memory, `packed` or `vec4`
+    /// (`Kernels::vectors`; GPU only).
+    pub gpu_vectors: Option<String>,
     /// The process's peak resident memory, bytes (Linux `VmHWM`; absent
     /// elsewhere): on the CPU path the simulation's memory plus the
     /// program's own.
@@ -514,6 +517,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         gpu_bytes_per_vertex: None,
         gpu_split_arrays: Vec::new(),
         gpu_subgroup_sums: None,
+        gpu_vectors: None,
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration,
         finite: sim.is_finite(),
@@ -733,6 +737,7 @@ fn run_gpu(
             .map(|(name, parts)| (name.to_string(), parts))
             .collect(),
         gpu_subgroup_sums: Some(kernels.subgroups()),
+        gpu_vectors: Some(sim.vector_layout().name().to_string()),
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,
@@ -878,7 +883,7 @@ impl Report {
                 .unwrap_or_default();
         format!(
             "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
-             backend      {} — {}{}\n\
+             backend      {} — {}{}{}\n\
              {}\
              ms/step      {:.3} (median{dispatches}), {:.3} (mean)\n\
              {memory}\
@@ -900,6 +905,10 @@ impl Report {
                 Some(false) => ", solver sums through workgroup memory",
                 None => "",
             },
+            self.gpu_vectors
+                .as_ref()
+                .map(|v| format!(", vectors {v}"))
+                .unwrap_or_default(),
             self.network
                 .as_ref()
                 .map(|n| format!("network      {n}\n"))

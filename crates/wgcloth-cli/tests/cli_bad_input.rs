@@ -1,11 +1,14 @@
 //! The `wgcloth` binary on bad input: every case must exit with code 2,
 //! say what is wrong in one `error:` line naming the bad field or file,
 //! and never panic. Tiny valid runs check the happy path, the `--report`
-//! JSON and how a GPU run's solver sums (`--no-subgroups`). Every run is
+//! JSON and how a GPU run's solver sums (`--no-subgroups`) and lays out
+//! its vectors (`--vectors`). Every run is
 //! `--grid 4 --steps 2` so the file is fast.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+use wgcloth::gpu::layout::VectorLayout;
 
 /// Flags that keep a run tiny if validation ever lets it through.
 const TINY: &[&str] = &["--grid", "4", "--steps", "2"];
@@ -511,9 +514,10 @@ fn tiny_run_writes_report_json() {
 
 /// A GPU run says how its solver sums (the backend line, the report's
 /// `gpu_subgroup_sums`): through subgroups where the adapter has them,
-/// through workgroup memory with `--no-subgroups`.
+/// through workgroup memory with `--no-subgroups`; and how it lays out its
+/// vectors (`gpu_vectors`): as suits the adapter, or as `--vectors` says.
 #[test]
-fn gpu_runs_say_how_the_solver_sums() {
+fn gpu_runs_say_how_the_solver_sums_and_lays_out_its_vectors() {
     let adapter = match wgcloth::gpu::GpuContext::pick_adapter() {
         Ok(adapter) => adapter,
         Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
@@ -522,28 +526,37 @@ fn gpu_runs_say_how_the_solver_sums() {
         Err(e) => return eprintln!("skipping GPU test: {e}"),
     };
     let has = adapter.features().contains(wgpu::Features::SUBGROUP);
+    let own = VectorLayout::for_adapter(adapter.get_info().device_type).name();
     let dir = TempDir::new("subgroups");
-    for (flag, expected) in [(None, has), (Some("--no-subgroups"), false)] {
-        let report = dir.path(flag.map_or("report.json", |_| "report_no_subgroups.json"));
+    let cases: [(&[&str], bool, &str); 4] = [
+        (&[], has, own),
+        (&["--no-subgroups"], false, own),
+        (&["--vectors", "packed"], has, "packed"),
+        (&["--vectors", "vec4"], has, "vec4"),
+    ];
+    for (k, (flags, sums, vectors)) in cases.into_iter().enumerate() {
+        let report = dir.path(&format!("report_{k}.json"));
         let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
         args.extend(TINY);
-        args.extend(flag);
+        args.extend(flags);
         let out = wgcloth(&args);
         assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
         assert_eq!(
             json["gpu_subgroup_sums"],
-            serde_json::json!(expected),
-            "{flag:?}"
+            serde_json::json!(sums),
+            "{flags:?}"
         );
-        let how = match expected {
+        assert_eq!(json["gpu_vectors"], serde_json::json!(vectors), "{flags:?}");
+        let how = match sums {
             true => "solver sums through subgroups",
             false => "solver sums through workgroup memory",
         };
+        let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(
-            String::from_utf8_lossy(&out.stdout).contains(how),
-            "{flag:?}"
+            stdout.contains(&format!("{how}, vectors {vectors}")),
+            "{flags:?}: {stdout}"
         );
     }
 }

@@ -9,10 +9,11 @@ mod common;
 use std::path::Path;
 
 use wgcloth::bvh::Bvh;
-use wgcloth::config::Config;
+use wgcloth::config::{Config, Preconditioner, Smoother};
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
 use wgcloth::cpu::{CpuSim, StepStats, integrate, self_contact, separate};
-use wgcloth::gpu::GpuSim;
+use wgcloth::gpu::layout::VectorLayout;
+use wgcloth::gpu::{GpuSim, Kernels};
 use wgcloth::intersections::intersecting_pairs;
 use wgcloth::scene::Scene;
 use wgcloth::stage::Stage;
@@ -250,14 +251,54 @@ fn the_gpu_pushes_the_cloth_against_itself_as_the_cpu_does() {
     );
 }
 
-/// `scene`'s cloth with its top 1/`part` folded down onto the rest, 3 mm
-/// above it, turned and shifted a little and sliding, uploaded to both
-/// paths, and a step's stages up to the solve run on both.
-fn folded(
-    ctx: &wgcloth::gpu::GpuContext,
-    scene: &Scene,
-    part: usize,
-) -> (CpuSim, GpuSim, StepStats) {
+/// The solver's vectors packed (three floats a vertex, a hardware GPU's
+/// layout) and a `vec4` each (a CPU adapter's) give the same steps to the
+/// bit, cloth–cloth couplings in the solve, with either preconditioner
+/// and either smoother: the pleat scene folded as below, 3 steps.
+#[test]
+fn both_vector_layouts_step_bit_for_bit() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let layouts = [VectorLayout::Packed, VectorLayout::Vec4]
+        .map(|layout| Kernels::with_vectors(&ctx.device, layout).unwrap());
+    for (preconditioner, smoother) in [
+        (Preconditioner::Multigrid, Smoother::Patches),
+        (Preconditioner::Multigrid, Smoother::BlockJacobi),
+        (Preconditioner::Jacobi, Smoother::Patches),
+    ] {
+        let mut config = scene_config("pleat");
+        (config.solver.preconditioner, config.solver.smoother) = (preconditioner, smoother);
+        let scene = Scene::new(&config).unwrap();
+        let start = folded_state(&scene, 4);
+        let runs = layouts.each_ref().map(|kernels| {
+            let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+            gpu.upload_state(&start.state.x, &start.state.v, start.state.step as u32);
+            for _ in 0..3 {
+                gpu.step();
+            }
+            let contacts = gpu.read_cloth_contacts().unwrap().len();
+            (
+                gpu.read_positions().unwrap(),
+                gpu.read_state().unwrap(),
+                contacts,
+            )
+        });
+        let [(x, state, contacts), (x_vec4, state_vec4, _)] = &runs;
+        let what = format!("{preconditioner:?}, {smoother:?}");
+        assert!(*contacts > 0, "{what}: no cloth–cloth contacts to couple");
+        assert!(state.cg_iterations_total > 3 && x.iter().all(|p| p.is_finite()));
+        assert_eq!(
+            state.cg_iterations_total, state_vec4.cg_iterations_total,
+            "{what}"
+        );
+        assert_eq!(x, x_vec4, "{what}: the layouts' positions differ");
+    }
+}
+
+/// `scene`'s CPU state with the cloth's top 1/`part` folded down onto the
+/// rest, 3 mm above it, turned and shifted a little and sliding.
+fn folded_state(scene: &Scene, part: usize) -> CpuSim {
     let mut cpu = CpuSim::new(scene.clone());
     let (nx, ny) = (scene.cloth.nx as usize, scene.cloth.ny as usize);
     let rest = &scene.cloth.rest_positions;
@@ -277,6 +318,17 @@ fn folded(
             0.05 * (2.1 * t).sin(),
         );
     }
+    cpu
+}
+
+/// [`folded_state`] uploaded to both paths, and a step's stages up to the
+/// solve run on both.
+fn folded(
+    ctx: &wgcloth::gpu::GpuContext,
+    scene: &Scene,
+    part: usize,
+) -> (CpuSim, GpuSim, StepStats) {
+    let mut cpu = folded_state(scene, part);
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, scene).unwrap();
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
     let mut stats = StepStats::default();

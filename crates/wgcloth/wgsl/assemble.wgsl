@@ -16,7 +16,8 @@
 @group(1) @binding(5) var<storage, read> triangle_contacts: array<u32>;
 // A: its diagonal blocks (one per vertex), then one block per spring.
 @group(1) @binding(6) var<storage, read_write> matrix: array<PackedSym3>;
-@group(1) @binding(7) var<storage, read_write> b: array<vec4<f32>>;
+// A solver vector (`b_set`: gpu::shaders::PACKED_VECTORS).
+@group(1) @binding(7) var<storage, read_write> b: array<VectorEntry>;
 
 fn stiffness_scale() -> f32 {
     return params.dt * params.dt + params.dt * params.damping_stiffness;
@@ -86,7 +87,7 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     matrix_set(i, sym_pack(diag));
-    b[i] = vec4<f32>(rhs, 0.0);
+    b_set(i, rhs);
 }
 
 @compute @workgroup_size(WORKGROUP)

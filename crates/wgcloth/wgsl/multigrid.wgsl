@@ -55,12 +55,14 @@ var<private> hop: Hop;
 @group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
 // Every level's smoother blocks and every coarse level's stencils.
 @group(1) @binding(2) var<storage, read_write> operators: array<PackedSym3>;
-// Every coarse level's right-hand side and correction.
-@group(1) @binding(3) var<storage, read_write> vectors: array<vec4<f32>>;
+// Every coarse level's right-hand side and correction, and the work
+// vector. It, r and zq are solver vectors, read and written through
+// `vectors_at`, `vectors_set`, ... (gpu::shaders::PACKED_VECTORS).
+@group(1) @binding(3) var<storage, read_write> vectors: array<VectorEntry>;
 // The PCG residual, level 0's right-hand side.
-@group(1) @binding(4) var<storage, read> r: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> r: array<VectorEntry>;
 // z = P⁻¹ r, the V-cycle's result (and q, which it leaves alone).
-@group(1) @binding(5) var<storage, read_write> zq: array<vec4<f32>>;
+@group(1) @binding(5) var<storage, read_write> zq: array<VectorEntry>;
 
 fn nodes(g: Grid) -> u32 {
     return g.nx * g.ny;
@@ -165,9 +167,9 @@ fn smoother(inverse: Sym3, spread: f32) -> Sym3 {
 
 fn fine_rhs(j: u32) -> vec3<f32> {
     if hop.fine.level == 0u {
-        return r[j].xyz;
+        return r_at(j);
     }
-    return vectors[hop.fine.rhs_at + j].xyz;
+    return vectors_at(hop.fine.rhs_at + j);
 }
 
 // The interpolated coarse correction at fine node j.
@@ -182,7 +184,7 @@ fn interpolate(j: u32) -> vec3<f32> {
     for (var b = 0u; b < 2u; b++) {
         for (var a = 0u; a < 2u; a++) {
             let at = py.at[b] * hop.coarse.nx + px.at[a];
-            acc += (px.w[a] * py.w[b]) * vectors[hop.coarse.correction_at + at].xyz;
+            acc += (px.w[a] * py.w[b]) * vectors_at(hop.coarse.correction_at + at);
         }
     }
     return acc;
@@ -194,7 +196,7 @@ fn pre(j: u32) -> vec3<f32> {
 }
 
 fn work(j: u32) -> vec3<f32> {
-    return vectors[hop.fine.work_at + j].xyz;
+    return vectors_at(hop.fine.work_at + j);
 }
 
 // Whether the patch smoother smooths the fine level.
@@ -206,16 +208,16 @@ fn patched() -> bool {
 // place: z on the cloth, the correction on a coarse level.
 fn smoothed(j: u32) -> vec3<f32> {
     if hop.fine.level == 0u {
-        return zq[j].xyz;
+        return zq_at(j);
     }
-    return vectors[hop.fine.correction_at + j].xyz;
+    return vectors_at(hop.fine.correction_at + j);
 }
 
 fn set_smoothed(j: u32, value: vec3<f32>) {
     if hop.fine.level == 0u {
-        zq[j] = vec4<f32>(value, 0.0);
+        zq_set(j, value);
     } else {
-        vectors[hop.fine.correction_at + j] = vec4<f32>(value, 0.0);
+        vectors_set(hop.fine.correction_at + j, value);
     }
 }
 
@@ -426,7 +428,7 @@ fn residual_at(i: u32) {
     } else {
         res = fine_rhs(i) - row_guess(i, false, ALL_COLOURS);
     }
-    vectors[hop.fine.work_at + i] = vec4<f32>(res, 0.0);
+    vectors_set(hop.fine.work_at + i, res);
 }
 
 // Down one level: the coarse right-hand side is the restricted residual,
@@ -454,7 +456,7 @@ fn down_at(I: u32) {
             }
         }
     }
-    vectors[hop.coarse.rhs_at + I] = vec4<f32>(sum, 0.0);
+    vectors_set(hop.coarse.rhs_at + I, sum);
 }
 
 var<workgroup> sweep: array<vec4<f32>, COARSEST_NODES>;
@@ -526,7 +528,7 @@ fn coarse(lid: u32) {
     let mine = lid < nodes(g);
     var e = vec3<f32>(0.0);
     if mine {
-        e = sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors[g.rhs_at + lid].xyz);
+        e = sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors_at(g.rhs_at + lid));
         sweep[lid] = vec4<f32>(e, 0.0);
     }
     workgroupBarrier();
@@ -542,7 +544,7 @@ fn coarse(lid: u32) {
                     }
                 }
             }
-            e += sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors[g.rhs_at + lid].xyz - row);
+            e += sym_mul(sym_unpack(operators_at(g.smoothers_at + lid)), vectors_at(g.rhs_at + lid) - row);
         }
         workgroupBarrier();
         if mine {
@@ -551,7 +553,7 @@ fn coarse(lid: u32) {
         workgroupBarrier();
     }
     if mine {
-        vectors[g.correction_at + lid] = vec4<f32>(e, 0.0);
+        vectors_set(g.correction_at + lid, e);
     }
 }
 
@@ -570,7 +572,7 @@ fn guess_at(i: u32) {
         set_smoothed(i, smoothed(i) + interpolate(i));
         return;
     }
-    vectors[hop.fine.work_at + i] = vec4<f32>(pre(i) + interpolate(i), 0.0);
+    vectors_set(hop.fine.work_at + i, pre(i) + interpolate(i));
 }
 
 // Up one level: one more damped Jacobi sweep from the stored guess. On the
@@ -603,10 +605,10 @@ fn up_at(i: u32) -> f32 {
     }
     let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true, ALL_COLOURS));
     if g.level == 0u {
-        zq[i] = vec4<f32>(zi, 0.0);
+        zq_set(i, zi);
         return dot(ri, zi);
     }
-    vectors[g.correction_at + i] = vec4<f32>(zi, 0.0);
+    vectors_set(g.correction_at + i, zi);
     return 0.0;
 }
 

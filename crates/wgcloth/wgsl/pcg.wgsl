@@ -49,15 +49,17 @@ struct ScalarsAndSizes {
 
 // A: its diagonal blocks (one per vertex), then one block per spring.
 @group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
-@group(1) @binding(2) var<storage, read> b: array<vec4<f32>>;
+// The solver's vectors, read and written through `b_at`, `r_set`, ...
+// (gpu::shaders::PACKED_VECTORS); x, the velocities, is a vec4 each.
+@group(1) @binding(2) var<storage, read> b: array<VectorEntry>;
 @group(1) @binding(3) var<storage, read_write> x: array<vec4<f32>>;
-@group(1) @binding(4) var<storage, read_write> r: array<vec4<f32>>;
-// z = P⁻¹ r, then q = S A p: one vec4 per vertex each.
-@group(1) @binding(5) var<storage, read_write> zq: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> r: array<VectorEntry>;
+// z = P⁻¹ r, then q = S A p.
+@group(1) @binding(5) var<storage, read_write> zq: array<VectorEntry>;
 // This iteration's direction p, and the next one's.
-@group(1) @binding(6) var<storage, read_write> p: array<vec4<f32>>;
-@group(1) @binding(7) var<storage, read_write> p_next: array<vec4<f32>>;
-@group(1) @binding(8) var<storage, read_write> inv_diag: array<vec4<f32>>;
+@group(1) @binding(6) var<storage, read_write> p: array<VectorEntry>;
+@group(1) @binding(7) var<storage, read_write> p_next: array<VectorEntry>;
+@group(1) @binding(8) var<storage, read_write> inv_diag: array<VectorEntry>;
 @group(1) @binding(10) var<storage, read> scalars_in: Scalars;
 @group(1) @binding(11) var<storage, read_write> scalars_next: ScalarsAndSizes;
 // `init_scalars`: the other buffer, iteration 1's.
@@ -74,15 +76,15 @@ fn pq_segment(iteration: u32) -> u32 {
 }
 
 fn z(i: u32) -> vec3<f32> {
-    return zq[i].xyz;
+    return zq_at(i);
 }
 
 fn q(i: u32) -> vec3<f32> {
-    return zq[params.n_vertices + i].xyz;
+    return zq_at(params.n_vertices + i);
 }
 
 fn store_q(i: u32, value: vec3<f32>) {
-    zq[params.n_vertices + i] = vec4<f32>(value, 0.0);
+    zq_set(params.n_vertices + i, value);
 }
 
 // Row i of A x and of A p (WGSL cannot pass storage pointers).
@@ -100,7 +102,7 @@ fn next_direction(j: u32, beta: f32) -> vec3<f32> {
     if beta == 0.0 {
         return z(j);
     }
-    return z(j) + beta * p[j].xyz;
+    return z(j) + beta * p_at(j);
 }
 
 // Row i of A p' for p' = next_direction(·, β).
@@ -125,13 +127,14 @@ fn init(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     if i < params.n_vertices {
         let free = !is_pinned(i);
         let m = select(vec3<f32>(0.0), 1.0 / sym_diag(sym_unpack(matrix_at(i))), free);
-        inv_diag[i] = vec4<f32>(m, 0.0);
-        let ri = select(vec3<f32>(0.0), b[i].xyz - row_x(i), free);
-        r[i] = vec4<f32>(ri, 0.0);
+        inv_diag_set(i, m);
+        let bi = b_at(i);
+        let ri = select(vec3<f32>(0.0), bi - row_x(i), free);
+        r_set(i, ri);
         let zi = m * ri;
-        zq[i] = vec4<f32>(zi, 0.0);
+        zq_set(i, zi);
         rz = dot(ri, zi);
-        bb = select(0.0, dot(b[i].xyz, b[i].xyz), free);
+        bb = select(0.0, dot(bi, bi), free);
         rr = dot(ri, ri);
     }
     let sums = workgroup_sums(lane, vec4<f32>(rz, bb, rr, 0.0));
@@ -213,7 +216,7 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     var pq = 0.0;
     if i < params.n_vertices {
         let pi = z(i);
-        p[i] = vec4<f32>(pi, 0.0);
+        p_set(i, pi);
         let qi = select(vec3<f32>(0.0), row_next(i, 0.0), !is_pinned(i));
         store_q(i, qi);
         pq = dot(pi, qi);
@@ -240,9 +243,9 @@ fn step_length(lane: Lane) -> f32 {
 
 // x += α p; r −= α q at vertex i, returning the new r.
 fn advance_vertex(i: u32, alpha: f32) -> vec3<f32> {
-    x[i] = vec4<f32>(x[i].xyz + alpha * p[i].xyz, x[i].w);
-    let ri = r[i].xyz - alpha * q(i);
-    r[i] = vec4<f32>(ri, 0.0);
+    x[i] = vec4<f32>(x[i].xyz + alpha * p_at(i), x[i].w);
+    let ri = r_at(i) - alpha * q(i);
+    r_set(i, ri);
     return ri;
 }
 
@@ -261,8 +264,8 @@ fn update(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
 
 // Jacobi's z = P⁻¹ r at vertex i, returning (rᵀz, rᵀr) there.
 fn jacobi_z(i: u32, ri: vec3<f32>) -> vec2<f32> {
-    let zi = inv_diag[i].xyz * ri;
-    zq[i] = vec4<f32>(zi, 0.0);
+    let zi = inv_diag_at(i) * ri;
+    zq_set(i, zi);
     return vec2<f32>(dot(ri, zi), dot(ri, ri));
 }
 
@@ -350,7 +353,7 @@ fn next(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     var pq = 0.0;
     if i < params.n_vertices {
         let pi = next_direction(i, ending.beta);
-        p_next[i] = vec4<f32>(pi, 0.0);
+        p_next_set(i, pi);
         let qi = select(vec3<f32>(0.0), row_next(i, ending.beta), !is_pinned(i));
         store_q(i, qi);
         pq = dot(pi, qi);
@@ -373,7 +376,7 @@ fn coupled(i: u32) -> vec3<f32> {
         var others = vec3<f32>(0.0);
         for (var l = 0u; l < 4u; l++) {
             if l != slot {
-                others += pair.beta[l] * p[pair_vertex(pair.key, l)].xyz;
+                others += pair.beta[l] * p_at(pair_vertex(pair.key, l));
             }
         }
         acc += pair.beta[slot] * sym_mul(sym_unpack(pair.block), others);
@@ -381,19 +384,29 @@ fn coupled(i: u32) -> vec3<f32> {
     return acc;
 }
 
-// After `init`, with cloth–cloth contacts: r −= S C x (here `p` is bound
-// to x), Jacobi's z = P⁻¹ r, and the partial rᵀz and rᵀr again.
+// With cloth–cloth contacts, before `couple_init`: p = x, which the first
+// direction overwrites (`spmv`).
+@compute @workgroup_size(WORKGROUP)
+fn couple_start(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i < params.n_vertices {
+        p_set(i, x[i].xyz);
+    }
+}
+
+// After `init`, with cloth–cloth contacts: r −= S C x (x in p, from
+// `couple_start`), Jacobi's z = P⁻¹ r, and the partial rᵀz and rᵀr again.
 @compute @workgroup_size(WORKGROUP)
 fn couple_init(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
                @builtin(workgroup_id) wg: vec3<u32>) {
     let i = id.x;
     var sums = vec2<f32>(0.0);
     if i < params.n_vertices {
-        var ri = r[i].xyz;
+        var ri = r_at(i);
         if !is_pinned(i) {
             ri -= coupled(i);
         }
-        r[i] = vec4<f32>(ri, 0.0);
+        r_set(i, ri);
         sums = jacobi_z(i, ri);
     }
     store_rz_rr(lane, wg.x, sums);
@@ -416,7 +429,7 @@ fn couple(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
             qi += coupled(i);
             store_q(i, qi);
         }
-        pq = dot(p[i].xyz, qi);
+        pq = dot(p_at(i), qi);
     }
     let s = workgroup_sum(lane, pq);
     if lane.index == 0u {

@@ -27,7 +27,8 @@
 @group(1) @binding(14) var<storage, read_write> cloth_lists: array<atomic<u32>>;
 @group(1) @binding(15) var<storage, read_write> cloth_pairs: array<ClothPair>;
 @group(1) @binding(16) var<storage, read_write> matrix: array<PackedSym3>;
-@group(1) @binding(17) var<storage, read_write> b: array<vec4<f32>>;
+// A solver vector (`b_at`, `b_set`: gpu::shaders::PACKED_VECTORS).
+@group(1) @binding(17) var<storage, read_write> b: array<VectorEntry>;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
 
 fn found_at(i: u32) -> u32 {
@@ -259,7 +260,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         atomicStore(&cloth_lists[entry_at(i, j)], e);
     }
     var diag = sym_unpack(matrix_at(i));
-    var rhs = b[i].xyz;
+    var rhs = b_at(i);
     for (var a = 0u; a < listed; a++) {
         let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
         let pair = cloth_pairs[e / 4u];
@@ -268,5 +269,5 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         rhs += beta * pair.rhs;
     }
     matrix_set(i, sym_pack(diag));
-    b[i] = vec4<f32>(rhs, 0.0);
+    b_set(i, rhs);
 }

@@ -707,11 +707,7 @@ fn cg_traffic(rows: &[StepRow], bandwidth: &[traffic::Bandwidth]) -> Vec<Traffic
         .filter_map(|r| {
             let backend = r.report.backend.as_str();
             let gb_per_s = bandwidth.iter().find(|b| b.backend == backend)?.gb_per_s;
-            let layout = if backend == "gpu" {
-                traffic::GPU
-            } else {
-                traffic::CPU
-            };
+            let layout = traffic::of(&r.report);
             let pcg_ms = r.report.stage_ms.get(Stage::Pcg.name())?;
             let iterations = r.report.cg_iterations_mean;
             let bytes = layout.iteration_bytes(r.particles as u64, r.springs as u64);
@@ -849,11 +845,7 @@ fn stage_traffic(
         ) else {
             continue;
         };
-        let layout = if backend == "gpu" {
-            traffic::GPU
-        } else {
-            traffic::CPU
-        };
+        let layout = traffic::of(&r.report);
         let extent = traffic::Extent {
             vertices: r.particles as u64,
             springs: r.springs as u64,

@@ -12,18 +12,24 @@ use serde::Serialize;
 
 use wgcloth::config::Smoother;
 use wgcloth::error::Result;
-use wgcloth::gpu::{GpuContext, layout};
+use wgcloth::gpu::GpuContext;
+use wgcloth::gpu::layout::{self, VectorLayout};
 use wgcloth::math::Sym3;
 use wgcloth::multigrid::{
     COARSE_SWEEPS, Level, PATCH_BLOCKS, PATCH_UNKNOWNS, STORED_STENCIL, patch_grid,
 };
 use wgcloth::stage::Stage;
 
+use crate::run::Report;
+
 /// How a backend stores the solver's data, in bytes.
 #[derive(Clone, Copy, Debug)]
 pub struct Layout {
-    /// One vertex's entry of a vector (x, r, z, p, q, P⁻¹).
+    /// One vertex's entry of a state vector (positions, velocities: PCG's x).
     pub vector: u64,
+    /// One vertex's entry of a solver vector (b, r, z, p, q, P⁻¹, the
+    /// multigrid levels').
+    pub solver_vector: u64,
     /// A diagonal block of A.
     pub diag_block: u64,
     /// A spring's off-diagonal block of A.
@@ -66,22 +72,29 @@ pub fn stage_multiply_adds(stage: Stage, e: &Extent) -> f64 {
     }
 }
 
-/// wgsl/pcg.wgsl: `vec4<f32>` vectors, packed `Sym3` blocks (6 floats), u32
+/// wgsl/pcg.wgsl: `vec4<f32>` positions and velocities, the solver's
+/// vectors as `vectors` lays them out, packed `Sym3` blocks (6 floats), u32
 /// flags; the blocks, slots and spring terms as `gpu::layout` holds them.
 /// Per vertex `next` reads z and p and writes p' and q; `update` reads and
 /// writes x and r, reads p, q and P⁻¹ and writes z: 12 vectors.
-pub const GPU: Layout = Layout {
-    vector: 16,
-    diag_block: size_of::<Sym3>() as u64,
-    off_block: size_of::<Sym3>() as u64,
-    flag: 4,
-    vectors_per_iteration: 12,
-    patch_inverse: PATCH_BLOCKS as u64 * size_of::<Sym3>() as u64,
-    contact: size_of::<layout::Contact>() as u64,
-    response: size_of::<layout::Response>() as u64,
-    // Each spring's force and block is computed where it is gathered.
-    spring_term: 0,
-};
+pub const fn gpu(vectors: VectorLayout) -> Layout {
+    Layout {
+        vector: 16,
+        solver_vector: match vectors {
+            VectorLayout::Packed => 12,
+            VectorLayout::Vec4 => 16,
+        },
+        diag_block: size_of::<Sym3>() as u64,
+        off_block: size_of::<Sym3>() as u64,
+        flag: 4,
+        vectors_per_iteration: 12,
+        patch_inverse: PATCH_BLOCKS as u64 * size_of::<Sym3>() as u64,
+        contact: size_of::<layout::Contact>() as u64,
+        response: size_of::<layout::Response>() as u64,
+        // Each spring's force and block is computed where it is gathered.
+        spring_term: 0,
+    }
+}
 
 /// src/cpu/pcg.rs: `Vec3` vectors, `Sym3` blocks, bool flags. Per vertex
 /// `spmv` reads p and writes q; `update` reads and writes x and r, reads
@@ -89,6 +102,7 @@ pub const GPU: Layout = Layout {
 /// 13 vectors.
 pub const CPU: Layout = Layout {
     vector: 12,
+    solver_vector: 12,
     diag_block: size_of::<Sym3>() as u64,
     off_block: size_of::<Sym3>() as u64,
     flag: 1,
@@ -99,12 +113,25 @@ pub const CPU: Layout = Layout {
     spring_term: 12 + size_of::<Sym3>() as u64,
 };
 
+/// The layout a run's report says its backend used: the GPU's with the
+/// vectors it names, else the CPU's.
+pub fn of(report: &Report) -> Layout {
+    let vectors = [VectorLayout::Packed, VectorLayout::Vec4]
+        .into_iter()
+        .find(|l| report.gpu_vectors.as_deref() == Some(l.name()));
+    match (report.backend.as_str(), vectors) {
+        ("gpu", Some(vectors)) => gpu(vectors),
+        _ => CPU,
+    }
+}
+
 impl Layout {
     /// Bytes one Jacobi iteration must move for `vertices` and `springs`:
-    /// A once ([`Self::matrix_bytes`]) and the vector entries (neighbours'
-    /// come from cache).
+    /// A once ([`Self::matrix_bytes`]) and the vector entries, x's read
+    /// and written and the solver vectors' (neighbours' come from cache).
     pub fn iteration_bytes(&self, vertices: u64, springs: u64) -> u64 {
-        self.matrix_bytes(vertices, springs) + vertices * self.vectors_per_iteration * self.vector
+        let entries = 2 * self.vector + (self.vectors_per_iteration - 2) * self.solver_vector;
+        self.matrix_bytes(vertices, springs) + vertices * entries
     }
 
     /// Bytes of A: per vertex its diagonal block, pinned flag and adjacency
@@ -137,7 +164,7 @@ impl Layout {
         springs: u64,
         smoother: Smoother,
     ) -> u64 {
-        let v = self.vector;
+        let v = self.solver_vector;
         let vertices = levels[0].nodes() as u64;
         let operator = |l: usize| match l {
             0 => self.matrix_bytes(vertices, springs),
@@ -195,10 +222,12 @@ impl Layout {
             Stage::Collide => n * (v + self.contact) + t * 12 + m * (2 * v + self.contact),
             Stage::Contact => (e.contacts * (self.contact + self.response + 3 * v) as f64) as u64,
             Stage::Assemble => {
-                n * (3 * v + self.diag_block + 4)
+                n * (2 * v + self.solver_vector + self.diag_block + 4)
                     + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
-            Stage::SelfContact => n * (3 * v + 8 + 2 * self.diag_block) + t * 12 + s * 8,
+            Stage::SelfContact => {
+                n * (v + 2 * self.solver_vector + 8 + 2 * self.diag_block) + t * 12 + s * 8
+            }
             Stage::Pcg => return None,
             Stage::Separate => n * (2 * v + 8) + t * 12 + s * 8,
             Stage::Integrate => n * (3 * v + self.flag),

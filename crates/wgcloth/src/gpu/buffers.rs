@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::gpu::constants::{TILE, WORKGROUP, cloth_header, model, motion, self_header};
 use crate::gpu::layout::{
     BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, ScalarsAndSizes,
-    Sections, StepState, Sym3,
+    Sections, StepState, Sym3, VectorLayout,
 };
 use crate::gpu::shaders::PARTS;
 use crate::multigrid::{self, NO_PATCHES, PATCH_BLOCKS, PATCH_COLOURS, STORED_STENCIL};
@@ -52,9 +52,11 @@ pub(crate) struct Buffers {
     pub(crate) triangle_contacts: wgpu::Buffer,
     /// A's diagonal blocks, then its off-diagonal ones.
     pub(crate) matrix: Parts,
+    /// How b, r, zq, p, P⁻¹ and the multigrid vectors lie in memory.
+    pub(crate) vector_layout: VectorLayout,
     pub(crate) b: wgpu::Buffer,
     pub(crate) r: wgpu::Buffer,
-    /// PCG: z = P⁻¹ r, then q = S A p (one `vec4` per vertex each).
+    /// PCG: z = P⁻¹ r, then q = S A p.
     pub(crate) zq: wgpu::Buffer,
     /// PCG: the search direction, ping-ponged between iterations.
     pub(crate) p: [wgpu::Buffer; 2],
@@ -360,9 +362,12 @@ pub(crate) fn fit_pair_list(limits: &wgpu::Limits, params: &mut Params) {
 /// read the same numbers.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Sizes {
-    /// One `vec4<f32>` per cloth vertex: x, v, b, r, each p, P⁻¹ (and
-    /// twice this for z and q together, `zq`).
+    /// One `vec4<f32>` per cloth vertex: x and v.
     pub(crate) per_vertex: u64,
+    /// One entry per cloth vertex of a solver vector
+    /// (`gpu::shaders::PACKED_VECTORS`, as `VectorLayout` lays it out): b,
+    /// r, each p, P⁻¹ (and twice this for z and q together, `zq`).
+    pub(crate) solver_vector: u64,
     pub(crate) topology: u64,
     pub(crate) contacts: u64,
     pub(crate) responses: u64,
@@ -385,7 +390,12 @@ pub(crate) struct Sizes {
 }
 
 impl Sizes {
-    pub(crate) fn of(scene: &Scene, params: &Params, topology_words: usize) -> Sizes {
+    pub(crate) fn of(
+        scene: &Scene,
+        params: &Params,
+        topology_words: usize,
+        vectors: VectorLayout,
+    ) -> Sizes {
         let p = params;
         let (n, s, t) = (
             p.n_vertices as u64,
@@ -408,12 +418,13 @@ impl Sizes {
         };
         let size = |n: u64, of: usize| n * of as u64;
         let (grids, operators) = multigrid_layout(scene);
-        let vectors = match grids.last() {
+        let multigrid_entries = match grids.last() {
             Some(last) => last.work_at as u64 + grids[0].nodes() as u64,
             None => 1,
         };
         Sizes {
             per_vertex: size(n, 16),
+            solver_vector: n * vectors.bytes(),
             topology: size(topology_words as u64, 4),
             contacts: size(slots, size_of::<Contact>()),
             responses: size(slots, size_of::<Response>()),
@@ -421,7 +432,7 @@ impl Sizes {
             matrix: size(n + s, size_of::<Sym3>()),
             partials: size(5 * groups(n as u32) as u64, 4),
             operators: size(operators, size_of::<Sym3>()),
-            vectors: size(vectors, 16),
+            vectors: multigrid_entries * vectors.bytes(),
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             // With self-contact, each cell's swept box after them.
             bounds: size(tiles + self_cells, 32),
@@ -444,10 +455,11 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn whole(&self) -> [(&'static str, u64); 18] {
+    pub(crate) fn whole(&self) -> [(&'static str, u64); 19] {
         [
             ("per-vertex vectors", self.per_vertex),
-            ("PCG z and q", 2 * self.per_vertex),
+            ("solver vectors", self.solver_vector),
+            ("PCG z and q", 2 * self.solver_vector),
             ("contacts", self.contacts),
             ("responses", self.responses),
             ("triangle contact lists", self.triangle_contacts),
@@ -485,6 +497,7 @@ impl Buffers {
         scene: &Scene,
         params: &Params,
         (topology, sections): (Vec<u32>, Sections),
+        vectors: VectorLayout,
     ) -> Buffers {
         let cloth = &scene.cloth;
         let level_hops = hops(&multigrid_grids(scene));
@@ -525,7 +538,7 @@ impl Buffers {
                 mapped_at_creation: false,
             }))
         };
-        let sizes = Sizes::of(scene, params, topology.len());
+        let sizes = Sizes::of(scene, params, topology.len(), vectors);
         // `bytes` cut at `cuts` (elements of `size` bytes; at the end where
         // a part is not needed).
         let parts = |name, buffer: wgpu::Buffer, bytes: u64, cuts: [u32; 2], size: usize| {
@@ -594,14 +607,15 @@ impl Buffers {
                 sizes.matrix,
                 params.matrix_splits,
             ),
-            b: zeroed("b", sizes.per_vertex),
-            r: zeroed("r", sizes.per_vertex),
-            zq: zeroed("z and q", 2 * sizes.per_vertex),
+            vector_layout: vectors,
+            b: zeroed("b", sizes.solver_vector),
+            r: zeroed("r", sizes.solver_vector),
+            zq: zeroed("z and q", 2 * sizes.solver_vector),
             p: [
-                zeroed("p 0", sizes.per_vertex),
-                zeroed("p 1", sizes.per_vertex),
+                zeroed("p 0", sizes.solver_vector),
+                zeroed("p 1", sizes.solver_vector),
             ],
-            inv_diag: zeroed("inverse diagonal", sizes.per_vertex),
+            inv_diag: zeroed("inverse diagonal", sizes.solver_vector),
             partials: zeroed("partial sums", sizes.partials),
             scalars: [0, 1].map(|k| {
                 let bytes = size_of::<ScalarsAndSizes>() as u64;
@@ -796,7 +810,7 @@ mod tests {
         let wanted = params.self_capacity as u64 * PAIR_BYTES as u64;
         assert!(wanted > limits.max_storage_buffer_binding_size);
         fit_pair_list(&limits, &mut params);
-        let sizes = Sizes::of(&scene, &params, topology.len());
+        let sizes = Sizes::of(&scene, &params, topology.len(), VectorLayout::Packed);
         assert!(sizes.self_pairs <= limits.max_storage_buffer_binding_size);
         assert!(sizes.self_pairs + PAIR_BYTES as u64 > limits.max_storage_buffer_binding_size);
         assert!(sizes.cloth_lists <= limits.max_storage_buffer_binding_size);

@@ -15,6 +15,8 @@ use std::sync::{Arc, Mutex};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::Kernels;
 #[cfg(not(target_arch = "wasm32"))]
+use crate::gpu::layout::VectorLayout;
+#[cfg(not(target_arch = "wasm32"))]
 use std::time::Duration;
 
 /// A device and queue with what the simulator needs to know of them.
@@ -31,6 +33,10 @@ pub struct GpuContext {
     fault: Arc<Mutex<Option<String>>>,
     #[cfg(not(target_arch = "wasm32"))]
     kernels: KernelCache,
+    /// The solver vectors' layout [`GpuContext::kernels`] compiles for;
+    /// `None`: the adapter's ([`VectorLayout::for_adapter`]).
+    #[cfg(not(target_arch = "wasm32"))]
+    vectors: Option<VectorLayout>,
 }
 
 /// The kernels compiled for a context's device ([`GpuContext::kernels`]),
@@ -151,7 +157,19 @@ impl GpuContext {
             adapter: adapter.get_info(),
             fault,
             kernels: KernelCache::default(),
+            vectors: None,
         })
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// This context with its kernels laying out the solver's vectors as
+    /// `vectors`, not as suits the adapter (to compare the layouts).
+    pub fn with_vectors(self, vectors: VectorLayout) -> GpuContext {
+        GpuContext {
+            kernels: KernelCache::default(),
+            vectors: Some(vectors),
+            ..self
+        }
     }
 
     #[cfg(not(target_arch = "wasm32"))]
@@ -163,7 +181,10 @@ impl GpuContext {
         if let Some(kernels) = self.kernels.0.get() {
             return Ok(kernels.clone());
         }
-        let kernels = Arc::new(Kernels::new(&self.device)?);
+        let kernels = Arc::new(match self.vectors {
+            Some(vectors) => Kernels::with_vectors(&self.device, vectors)?,
+            None => Kernels::new(&self.device)?,
+        });
         Ok(self.kernels.0.get_or_init(|| kernels).clone())
     }
 

@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
 use crate::gpu::buffers::Parts;
+use crate::gpu::layout::VectorLayout;
 use crate::gpu::shaders::{self, Binding, STAGES};
 
 /// Every entry point of every stage: pipelines are found by this, never
@@ -56,6 +57,8 @@ pub enum Entry {
     PcgNext,
     /// Ends the last iteration: its scalars alone (`pcg::conclude`).
     PcgConclude,
+    /// p = x, which `PcgCoupleInit` reads (`pcg::couple_start`).
+    PcgCoupleStart,
     /// r −= S C x for the cloth–cloth couplings C, z = P⁻¹ r, partial rᵀz
     /// and rᵀr (`pcg::couple_init`).
     PcgCoupleInit,
@@ -131,7 +134,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 53] = [
+    pub const ALL: [Entry; 54] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -151,6 +154,7 @@ impl Entry {
         Entry::PcgAdvance,
         Entry::PcgNext,
         Entry::PcgConclude,
+        Entry::PcgCoupleStart,
         Entry::PcgCoupleInit,
         Entry::PcgCouple,
         Entry::PcgFinish,
@@ -209,6 +213,7 @@ impl Entry {
             Entry::PcgAdvance => ("pcg", "advance"),
             Entry::PcgNext => ("pcg", "next"),
             Entry::PcgConclude => ("pcg", "conclude"),
+            Entry::PcgCoupleStart => ("pcg", "couple_start"),
             Entry::PcgCoupleInit => ("pcg", "couple_init"),
             Entry::PcgCouple => ("pcg", "couple"),
             Entry::PcgFinish => ("pcg", "finish"),
@@ -348,7 +353,8 @@ pub struct Kernels {
     /// Group 0 of every scene stage: `params` alone.
     params_layout: wgpu::BindGroupLayout,
     /// What they were compiled for: their tile, whether they bind the
-    /// largest arrays in parts, whether they sum through subgroups.
+    /// largest arrays in parts, whether they sum through subgroups, how
+    /// they lay out the solver's vectors.
     variant: shaders::Variant,
     software: bool,
     /// Whether the device binds enough storage buffers per stage
@@ -394,7 +400,16 @@ impl Kernels {
     /// [`Kernels::new`] as a future: on the web the error scope resolves
     /// only once the event loop runs.
     pub async fn create(device: &wgpu::Device) -> Result<Kernels> {
-        Self::compiled(device, false).await
+        let vectors = VectorLayout::for_adapter(device.adapter_info().device_type);
+        Self::compiled(device, false, vectors).await
+    }
+
+    /// [`Kernels::new`] with the solver's vectors laid out as `vectors`,
+    /// not as suits the adapter ([`VectorLayout::for_adapter`]): to compare
+    /// the layouts.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn with_vectors(device: &wgpu::Device, vectors: VectorLayout) -> Result<Kernels> {
+        pollster::block_on(Self::compiled(device, false, vectors))
     }
 
     /// The kernels for a scene whose largest arrays pass one binding: these
@@ -404,16 +419,20 @@ impl Kernels {
             return Ok(self);
         }
         if self.in_parts.get().is_none() {
-            let parted = Self::compiled(device, true).await?;
+            let parted = Self::compiled(device, true, self.variant.vectors).await?;
             // Another scene may have set it meanwhile: the same kernels.
             let _ = self.in_parts.set(Box::new(parted));
         }
         Ok(self.in_parts.get().expect("set above"))
     }
 
-    async fn compiled(device: &wgpu::Device, parted: bool) -> Result<Kernels> {
+    async fn compiled(
+        device: &wgpu::Device,
+        parted: bool,
+        vectors: VectorLayout,
+    ) -> Result<Kernels> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let kernels = Self::compile(device, parted);
+        let kernels = Self::compile(device, parted, vectors);
         if let Some(e) = scope.pop().await {
             return Err(Error::Gpu(format!(
                 "compiling the kernels: {}",
@@ -423,8 +442,8 @@ impl Kernels {
         kernels
     }
 
-    fn compile(device: &wgpu::Device, split: bool) -> Result<Kernels> {
-        let variant = shaders::Variant::for_device(device, split);
+    fn compile(device: &wgpu::Device, split: bool, vectors: VectorLayout) -> Result<Kernels> {
+        let variant = shaders::Variant::for_device(device, split, vectors);
         let splittable =
             device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -547,6 +566,11 @@ impl Kernels {
         self.variant.subgroups
     }
 
+    /// How the solver's vectors lie in memory.
+    pub fn vectors(&self) -> VectorLayout {
+        self.variant.vectors
+    }
+
     /// Whether the device can bind the largest arrays in parts
     /// ([`SPLIT_STORAGE_BUFFERS`]), so a scene may pass the per-binding limit.
     pub fn splittable(&self) -> bool {
@@ -590,6 +614,7 @@ mod tests {
                 mlp_threads: 16,
                 split: false,
                 subgroups: false,
+                vectors: VectorLayout::Packed,
             };
             let mut found: Vec<String> = shaders::reflect(stage, variant)
                 .unwrap()

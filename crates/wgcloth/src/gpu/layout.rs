@@ -12,6 +12,47 @@ use crate::scene::Scene;
 /// wgsl/common.wgsl), the CPU's type.
 pub use crate::math::Sym3;
 
+/// How the solver's vectors (b, r, z, q, the directions, P⁻¹ and the
+/// multigrid levels': `gpu::shaders::PACKED_VECTORS`) lie in memory. The
+/// velocities, which PCG solves for, stay a `vec4` each: they are also the
+/// vertex buffer's neighbours and every stage reads them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VectorLayout {
+    /// Three packed `f32` a vertex: a quarter fewer bytes to move, for a
+    /// hardware GPU, where bytes bound an iteration.
+    Packed,
+    /// One `vec4<f32>` a vertex: one load instead of three, for a CPU
+    /// adapter, which pays per load and lane rather than per byte
+    /// (lavapipe's iterations took 5–15 % longer packed; BENCHMARKS.md).
+    Vec4,
+}
+
+impl VectorLayout {
+    /// The layout for an adapter of type `device_type`.
+    pub fn for_adapter(device_type: wgpu::DeviceType) -> VectorLayout {
+        match device_type {
+            wgpu::DeviceType::Cpu => VectorLayout::Vec4,
+            _ => VectorLayout::Packed,
+        }
+    }
+
+    /// Its name in reports and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            VectorLayout::Packed => "packed",
+            VectorLayout::Vec4 => "vec4",
+        }
+    }
+
+    /// Bytes of one vertex's entry.
+    pub fn bytes(self) -> u64 {
+        match self {
+            VectorLayout::Packed => 12,
+            VectorLayout::Vec4 => 16,
+        }
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 /// The run's constants, as every scene stage reads them (mirrors `Params`
@@ -358,11 +399,12 @@ pub struct Grid {
     pub smoothers_at: u32,
     /// First of its stencil blocks in the operators buffer (coarse levels).
     pub stencil_at: u32,
-    /// First of its right-hand side's `vec4`s in the vectors buffer.
+    /// First of its right-hand side's entries (three packed `f32` a node)
+    /// in the vectors buffer.
     pub rhs_at: u32,
-    /// First of its correction's `vec4`s in the vectors buffer.
+    /// First of its correction's entries in the vectors buffer.
     pub correction_at: u32,
-    /// First `vec4` of the work vector in the vectors buffer: the level's
+    /// First entry of the work vector in the vectors buffer: the level's
     /// residual on the way down, its guess on the way up (one region, as
     /// large as the cloth, shared by every level).
     pub work_at: u32,
@@ -506,6 +548,7 @@ mod tests {
                 mlp_threads: 8,
                 split: true,
                 subgroups: false,
+                vectors: VectorLayout::Packed,
             },
         );
         let module = naga::front::wgsl::parse_str(&source).expect("the stage parses");

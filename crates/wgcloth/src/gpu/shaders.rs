@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 
 use crate::gpu::constants;
+use crate::gpu::layout::VectorLayout;
 
 /// The stage files, by name.
 pub const STAGES: [(&str, &str); 13] = [
@@ -100,17 +101,20 @@ pub struct Variant {
     /// `wgpu::Features::SUBGROUP` and is not a browser's, whose WGSL asks
     /// for an `enable subgroups;` that naga refuses.
     pub subgroups: bool,
+    /// How the solver's vectors lie in memory ([`PACKED_VECTORS`]).
+    pub vectors: VectorLayout,
 }
 
 impl Variant {
-    /// The kernels' variant for `device`: whether they bind in parts is
-    /// the caller's choice.
-    pub fn for_device(device: &wgpu::Device, split: bool) -> Variant {
+    /// The kernels' variant for `device`: whether they bind in parts, and
+    /// the vectors' layout, are the caller's choice.
+    pub fn for_device(device: &wgpu::Device, split: bool, vectors: VectorLayout) -> Variant {
         Variant {
             mlp_threads: crate::gpu::kernels::mlp_threads(&device.limits()),
             split,
             subgroups: cfg!(not(target_arch = "wasm32"))
                 && device.features().contains(wgpu::Features::SUBGROUP),
+            vectors,
         }
     }
 }
@@ -132,8 +136,46 @@ pub const PARTS: usize = 3;
 /// Binding number of part k of a split array: its own number plus k times this.
 pub const PART_BINDING_STRIDE: u32 = 100;
 
-/// The accessors of every split array `text` declares (see [`SPLIT_ARRAYS`]).
-fn split_accessors(text: &str, split: bool) -> String {
+/// The solver's vectors, laid out as [`Variant::vectors`] says: declared
+/// `array<VectorEntry>` (`f32` packed, three a vertex, or `vec4<f32>`),
+/// read and written only through `NAME_at(i)` and `NAME_set(i, value)` of
+/// `vec3<f32>` at vertex (or coarse node) i, which [`source`] writes.
+pub const PACKED_VECTORS: [&str; 7] = ["b", "r", "zq", "p", "p_next", "inv_diag", "vectors"];
+
+/// The WGSL element type of the solver's vectors.
+fn vector_entry(vectors: VectorLayout) -> &'static str {
+    match vectors {
+        VectorLayout::Packed => "f32",
+        VectorLayout::Vec4 => "vec4<f32>",
+    }
+}
+
+/// `NAME_at` and `NAME_set` of a solver vector (see [`PACKED_VECTORS`]).
+fn vector_accessors(name: &str, ty: &str, write: bool, vectors: VectorLayout) -> String {
+    assert_eq!(ty, "VectorEntry", "vector `{name}` is declared array<{ty}>");
+    let (read, set) = match vectors {
+        VectorLayout::Packed => (
+            format!("let k = 3u * i; return vec3<f32>({name}[k], {name}[k + 1u], {name}[k + 2u]);"),
+            format!(
+                "let k = 3u * i; {name}[k] = value.x; {name}[k + 1u] = value.y; \
+                 {name}[k + 2u] = value.z;"
+            ),
+        ),
+        VectorLayout::Vec4 => (
+            format!("return {name}[i].xyz;"),
+            format!("{name}[i] = vec4<f32>(value, 0.0);"),
+        ),
+    };
+    let mut out = format!("fn {name}_at(i: u32) -> vec3<f32> {{ {read} }}\n");
+    if write {
+        out += &format!("fn {name}_set(i: u32, value: vec3<f32>) {{ {set} }}\n");
+    }
+    out
+}
+
+/// The accessors of every split array ([`SPLIT_ARRAYS`]) and solver
+/// vector ([`PACKED_VECTORS`]) `text` declares.
+fn accessors(text: &str, variant: Variant) -> String {
     let mut out = String::new();
     for line in text.lines() {
         let Some((head, declared)) = line.split_once(" var<storage, ") else {
@@ -145,12 +187,16 @@ fn split_accessors(text: &str, split: bool) -> String {
         let Some((name, ty)) = rest.split_once(": array<") else {
             continue;
         };
+        let ty = ty.trim_end_matches(">;");
+        let write = mode == "read_write";
+        if PACKED_VECTORS.contains(&name) {
+            out += &vector_accessors(name, ty, write, variant.vectors);
+            continue;
+        }
         if !SPLIT_ARRAYS.contains(&name) {
             continue;
         }
-        let ty = ty.trim_end_matches(">;");
-        let write = mode == "read_write";
-        if !split {
+        if !variant.split {
             out += &format!("fn {name}_at(k: u32) -> {ty} {{ return {name}[k]; }}\n");
             if write {
                 out += &format!("fn {name}_set(k: u32, value: {ty}) {{ {name}[k] = value; }}\n");
@@ -193,8 +239,9 @@ fn split_accessors(text: &str, split: bool) -> String {
 
 /// The shared constants ([`constants::prelude`], the network tile set to
 /// `mlp_threads` per edge), common code, the stage's includes, the stage's
-/// own code, then the accessors of its split arrays ([`SPLIT_ARRAYS`],
-/// bound in parts where `split`).
+/// own code, then the accessors of its solver vectors ([`PACKED_VECTORS`],
+/// as [`Variant::vectors`] lays them out) and split arrays
+/// ([`SPLIT_ARRAYS`], bound in parts where `split`).
 pub fn source(stage: &str, variant: Variant) -> String {
     let body = STAGES
         .iter()
@@ -216,8 +263,9 @@ pub fn source(stage: &str, variant: Variant) -> String {
         true => format!("{prelude}\n{body}"),
         false => {
             let code = format!("{includes}{body}");
-            let accessors = split_accessors(&code, variant.split);
-            format!("{prelude}\n{COMMON}\n{code}\n{accessors}")
+            let accessors = accessors(&code, variant);
+            let entry = vector_entry(variant.vectors);
+            format!("{prelude}\nalias VectorEntry = {entry};\n{COMMON}\n{code}\n{accessors}")
         }
     }
 }
@@ -326,16 +374,21 @@ mod tests {
             .collect()
     }
 
-    /// Every variant of the kernels: with and without subgroup sums, as
+    /// Every variant of the kernels: with either vector layout, with and
+    /// without subgroup sums, as
     /// compiled for a device with WebGPU's default limits, and as compiled
     /// to split the largest arrays ([`SPLIT_ARRAYS`]) where the device
     /// allows [`SPLIT_STORAGE_BUFFERS`](crate::gpu::kernels::SPLIT_STORAGE_BUFFERS).
     fn variants() -> impl Iterator<Item = Variant> {
-        [false, true].into_iter().flat_map(|split| {
-            [false, true].map(|subgroups| Variant {
-                mlp_threads: 16,
-                split,
-                subgroups,
+        let layouts = [VectorLayout::Packed, VectorLayout::Vec4];
+        layouts.into_iter().flat_map(|vectors| {
+            [false, true].into_iter().flat_map(move |split| {
+                [false, true].map(|subgroups| Variant {
+                    mlp_threads: 16,
+                    split,
+                    subgroups,
+                    vectors,
+                })
             })
         })
     }

@@ -91,7 +91,7 @@ impl GpuSim {
         let (topology, sections) = layout::topology(scene);
         let mut params = params_for(scene, &sections);
         fit_pair_list(&device.limits(), &mut params);
-        let sizes = Sizes::of(scene, &params, topology.len());
+        let sizes = Sizes::of(scene, &params, topology.len(), kernels.vectors());
         let kernels =
             match check_limits(&device.limits(), &sizes, &mut params, kernels.splittable())? {
                 false => kernels,
@@ -115,7 +115,7 @@ impl GpuSim {
         params: Params,
         topology: (Vec<u32>, Sections),
     ) -> Result<GpuSim> {
-        let buffers = Buffers::new(device, scene, &params, topology);
+        let buffers = Buffers::new(device, scene, &params, topology, kernels.vectors());
         let network = match &scene.network {
             Some(net) if params.has_rigid != 0 => {
                 let slots = (params.n_vertices + params.n_rigid_vertices) as usize;
@@ -212,6 +212,12 @@ impl GpuSim {
             .filter(|p| p.count() > 1)
             .map(|p| (p.name, p.count()))
             .collect()
+    }
+
+    /// How the solver's vectors lie in this scene's buffers (its kernels'
+    /// [`Kernels::vectors`]).
+    pub fn vector_layout(&self) -> layout::VectorLayout {
+        self.buffers.vector_layout
     }
 
     #[cfg(not(target_arch = "wasm32"))]
@@ -475,7 +481,13 @@ impl GpuSim {
     /// The assembled system of the last step: A's diagonal and per-spring
     /// blocks, and b.
     pub fn read_system(&self) -> Result<(Vec<layout::Sym3>, Vec<layout::Sym3>, Vec<Vec3>)> {
-        let b = self.read_vec3(&self.buffers.b)?;
+        let floats: Vec<f32> = self.read(&self.buffers.b)?;
+        let entry = self.vector_layout().bytes() as usize / 4;
+        let b = floats
+            .chunks(entry)
+            .take(self.params.n_vertices as usize)
+            .map(Vec3::from_slice)
+            .collect();
         let mut diagonal: Vec<layout::Sym3> = self.read(&self.buffers.matrix.buffer)?;
         let n = self.params.n_vertices as usize;
         let mut off = diagonal.split_off(n);

@@ -24,9 +24,11 @@ struct Side {
     next: Bound,
     conclude: Bound,
     finish: Bound,
-    /// With cloth–cloth contacts: the couplings' part of r = S (b − A x)
-    /// after `init` (its `p` bound to x), and of q = S A p after `spmv` or
-    /// `next` (this side's direction and scalars, which they just wrote).
+    /// With cloth–cloth contacts: x into this side's direction, for the
+    /// couplings' part of r = S (b − A x) after `init`, and of q = S A p
+    /// after `spmv` or `next` (this side's direction and scalars, which
+    /// they just wrote).
+    couple_start: Bound,
     couple_init: Bound,
     couple: Bound,
 }
@@ -64,8 +66,6 @@ impl Pcg {
                     .kernel(entry)
                     .bind_parts(device, &buffers, &[&b.topology, &b.matrix])
             };
-            let mut with_x = buffers;
-            with_x[4] = ("p", &b.v);
             Side {
                 init: bind(Entry::PcgInit),
                 init_scalars: bind(Entry::PcgInitScalars),
@@ -75,11 +75,8 @@ impl Pcg {
                 next: bind(Entry::PcgNext),
                 conclude: bind(Entry::PcgConclude),
                 finish: bind(Entry::PcgFinish),
-                couple_init: kernels.kernel(Entry::PcgCoupleInit).bind_parts(
-                    device,
-                    &with_x,
-                    &[&b.topology, &b.matrix],
-                ),
+                couple_start: bind(Entry::PcgCoupleStart),
+                couple_init: bind(Entry::PcgCoupleInit),
                 couple: bind(Entry::PcgCouple),
             }
         };
@@ -104,8 +101,9 @@ impl Pcg {
         let coupled = p.cloth_thickness > 0.0;
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
         if coupled {
+            self.sides[0].couple_start.dispatch(pass, n, WORKGROUP);
             self.sides[0].couple_init.dispatch(pass, n, WORKGROUP);
-            count += 1;
+            count += 2;
         }
         if let Some(mg) = &self.multigrid {
             count += mg.encode_cycle(pass, None);
