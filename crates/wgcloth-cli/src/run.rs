@@ -616,7 +616,9 @@ fn run_gpu(
                     .as_ref()
                     .is_some_and(|c| c.taken.elapsed() >= CHECKPOINT_INTERVAL);
         }
-        let wait = synced || submitted == steps.total;
+        // Until a step is read back the budget is the whole cap: wait for
+        // the first, so the steps behind it record what it took, not the cap.
+        let wait = synced || submitted == steps.total || !budget.informed();
         while let Some(f) = flight.next(ctx, &sim, wait)? {
             finished.push(f);
         }

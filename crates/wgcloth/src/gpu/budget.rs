@@ -68,6 +68,12 @@ impl CgBudget {
         }
     }
 
+    /// Whether a step has been counted ([`CgBudget::observe`]): until one
+    /// has, [`CgBudget::next`] is the whole cap.
+    pub fn informed(&self) -> bool {
+        !self.recent.is_empty()
+    }
+
     /// The whole cap: what a step solved again records.
     pub fn cap(&self) -> u32 {
         self.cap
@@ -186,7 +192,9 @@ mod tests {
     fn the_iteration_budget_follows_recent_steps() {
         let mut b = CgBudget::new(200, 1e-3);
         assert_eq!(b.next(), 200, "no step seen yet");
+        assert!(!b.informed());
         assert!(!b.observe(3, 200, 5e-4));
+        assert!(b.informed());
         assert_eq!(b.next(), 4 + CgBudget::MARGIN);
         b.observe(40, 200, 9e-4);
         assert_eq!(b.next(), 60 + CgBudget::MARGIN);
