@@ -23,7 +23,7 @@ pub enum VectorLayout {
     Packed,
     /// One `vec4<f32>` a vertex: one load instead of three, for a CPU
     /// adapter, which pays per load and lane rather than per byte
-    /// (lavapipe's iterations took 5–15 % longer packed; BENCHMARKS.md).
+    /// (lavapipe's solve took up to a fifth longer packed; BENCHMARKS.md).
     Vec4,
 }
 
