@@ -16,7 +16,7 @@
 @group(1) @binding(5) var<storage, read> triangle_contacts: array<u32>;
 // A: its diagonal blocks (one per vertex), then one block per spring.
 @group(1) @binding(6) var<storage, read_write> matrix: array<PackedSym3>;
-// A solver vector (`b_set`: gpu::shaders::PACKED_VECTORS).
+// A solver vector (`b_set`: gpu::shaders::SOLVER_VECTORS).
 @group(1) @binding(7) var<storage, read_write> b: array<VectorEntry>;
 
 fn stiffness_scale() -> f32 {

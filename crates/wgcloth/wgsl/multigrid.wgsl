@@ -57,7 +57,7 @@ var<private> hop: Hop;
 @group(1) @binding(2) var<storage, read_write> operators: array<PackedSym3>;
 // Every coarse level's right-hand side and correction, and the work
 // vector. It, r and zq are solver vectors, read and written through
-// `vectors_at`, `vectors_set`, ... (gpu::shaders::PACKED_VECTORS).
+// `vectors_at`, `vectors_set`, ... (gpu::shaders::SOLVER_VECTORS).
 @group(1) @binding(3) var<storage, read_write> vectors: array<VectorEntry>;
 // The PCG residual, level 0's right-hand side.
 @group(1) @binding(4) var<storage, read> r: array<VectorEntry>;

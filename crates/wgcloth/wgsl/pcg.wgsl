@@ -50,7 +50,7 @@ struct ScalarsAndSizes {
 // A: its diagonal blocks (one per vertex), then one block per spring.
 @group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
 // The solver's vectors, read and written through `b_at`, `r_set`, ...
-// (gpu::shaders::PACKED_VECTORS); x, the velocities, is a vec4 each.
+// (gpu::shaders::SOLVER_VECTORS); x, the velocities, is a vec4 each.
 @group(1) @binding(2) var<storage, read> b: array<VectorEntry>;
 @group(1) @binding(3) var<storage, read_write> x: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> r: array<VectorEntry>;

@@ -27,7 +27,7 @@
 @group(1) @binding(14) var<storage, read_write> cloth_lists: array<atomic<u32>>;
 @group(1) @binding(15) var<storage, read_write> cloth_pairs: array<ClothPair>;
 @group(1) @binding(16) var<storage, read_write> matrix: array<PackedSym3>;
-// A solver vector (`b_at`, `b_set`: gpu::shaders::PACKED_VECTORS).
+// A solver vector (`b_at`, `b_set`: gpu::shaders::SOLVER_VECTORS).
 @group(1) @binding(17) var<storage, read_write> b: array<VectorEntry>;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
 

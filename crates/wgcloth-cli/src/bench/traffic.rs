@@ -80,10 +80,7 @@ pub fn stage_multiply_adds(stage: Stage, e: &Extent) -> f64 {
 pub const fn gpu(vectors: VectorLayout) -> Layout {
     Layout {
         vector: 16,
-        solver_vector: match vectors {
-            VectorLayout::Packed => 12,
-            VectorLayout::Vec4 => 16,
-        },
+        solver_vector: vectors.bytes(),
         diag_block: size_of::<Sym3>() as u64,
         off_block: size_of::<Sym3>() as u64,
         flag: 4,

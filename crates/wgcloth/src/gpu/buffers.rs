@@ -365,7 +365,7 @@ pub(crate) struct Sizes {
     /// One `vec4<f32>` per cloth vertex: x and v.
     pub(crate) per_vertex: u64,
     /// One entry per cloth vertex of a solver vector
-    /// (`gpu::shaders::PACKED_VECTORS`, as `VectorLayout` lays it out): b,
+    /// (`gpu::shaders::SOLVER_VECTORS`, as `VectorLayout` lays it out): b,
     /// r, each p, P⁻¹ (and twice this for z and q together, `zq`).
     pub(crate) solver_vector: u64,
     pub(crate) topology: u64,

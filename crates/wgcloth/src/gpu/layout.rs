@@ -13,7 +13,7 @@ use crate::scene::Scene;
 pub use crate::math::Sym3;
 
 /// How the solver's vectors (b, r, z, q, the directions, P⁻¹ and the
-/// multigrid levels': `gpu::shaders::PACKED_VECTORS`) lie in memory. The
+/// multigrid levels': `gpu::shaders::SOLVER_VECTORS`) lie in memory. The
 /// velocities, which PCG solves for, stay a `vec4` each: they are also the
 /// vertex buffer's neighbours and every stage reads them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,7 +45,7 @@ impl VectorLayout {
     }
 
     /// Bytes of one vertex's entry.
-    pub fn bytes(self) -> u64 {
+    pub const fn bytes(self) -> u64 {
         match self {
             VectorLayout::Packed => 12,
             VectorLayout::Vec4 => 16,

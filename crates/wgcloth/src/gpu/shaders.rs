@@ -101,7 +101,7 @@ pub struct Variant {
     /// `wgpu::Features::SUBGROUP` and is not a browser's, whose WGSL asks
     /// for an `enable subgroups;` that naga refuses.
     pub subgroups: bool,
-    /// How the solver's vectors lie in memory ([`PACKED_VECTORS`]).
+    /// How the solver's vectors lie in memory ([`SOLVER_VECTORS`]).
     pub vectors: VectorLayout,
 }
 
@@ -140,7 +140,7 @@ pub const PART_BINDING_STRIDE: u32 = 100;
 /// `array<VectorEntry>` (`f32` packed, three a vertex, or `vec4<f32>`),
 /// read and written only through `NAME_at(i)` and `NAME_set(i, value)` of
 /// `vec3<f32>` at vertex (or coarse node) i, which [`source`] writes.
-pub const PACKED_VECTORS: [&str; 7] = ["b", "r", "zq", "p", "p_next", "inv_diag", "vectors"];
+pub const SOLVER_VECTORS: [&str; 7] = ["b", "r", "zq", "p", "p_next", "inv_diag", "vectors"];
 
 /// The WGSL element type of the solver's vectors.
 fn vector_entry(vectors: VectorLayout) -> &'static str {
@@ -150,7 +150,7 @@ fn vector_entry(vectors: VectorLayout) -> &'static str {
     }
 }
 
-/// `NAME_at` and `NAME_set` of a solver vector (see [`PACKED_VECTORS`]).
+/// `NAME_at` and `NAME_set` of a solver vector (see [`SOLVER_VECTORS`]).
 fn vector_accessors(name: &str, ty: &str, write: bool, vectors: VectorLayout) -> String {
     assert_eq!(ty, "VectorEntry", "vector `{name}` is declared array<{ty}>");
     let (read, set) = match vectors {
@@ -174,7 +174,7 @@ fn vector_accessors(name: &str, ty: &str, write: bool, vectors: VectorLayout) ->
 }
 
 /// The accessors of every split array ([`SPLIT_ARRAYS`]) and solver
-/// vector ([`PACKED_VECTORS`]) `text` declares.
+/// vector ([`SOLVER_VECTORS`]) `text` declares.
 fn accessors(text: &str, variant: Variant) -> String {
     let mut out = String::new();
     for line in text.lines() {
@@ -189,7 +189,7 @@ fn accessors(text: &str, variant: Variant) -> String {
         };
         let ty = ty.trim_end_matches(">;");
         let write = mode == "read_write";
-        if PACKED_VECTORS.contains(&name) {
+        if SOLVER_VECTORS.contains(&name) {
             out += &vector_accessors(name, ty, write, variant.vectors);
             continue;
         }
@@ -239,7 +239,7 @@ fn accessors(text: &str, variant: Variant) -> String {
 
 /// The shared constants ([`constants::prelude`], the network tile set to
 /// `mlp_threads` per edge), common code, the stage's includes, the stage's
-/// own code, then the accessors of its solver vectors ([`PACKED_VECTORS`],
+/// own code, then the accessors of its solver vectors ([`SOLVER_VECTORS`],
 /// as [`Variant::vectors`] lays them out) and split arrays
 /// ([`SPLIT_ARRAYS`], bound in parts where `split`).
 pub fn source(stage: &str, variant: Variant) -> String {
