@@ -357,15 +357,28 @@ fn run(args: &RunArgs) -> Result<()> {
         optional.remove(wgpu::Features::SUBGROUP);
     }
     let (mut chosen, notice) = choose_backend(args.backend, optional)?;
-    if let (Some(vectors), Chosen::Gpu { ctx, .. }) = (args.vectors, &mut chosen) {
-        let layout = match vectors {
-            Vectors::Packed => VectorLayout::Packed,
-            Vectors::Vec4 => VectorLayout::Vec4,
-        };
-        **ctx = ctx.clone().with_vectors(layout);
-    }
     if let Some(n) = notice {
         eprintln!("{n}");
+    }
+    match &mut chosen {
+        Chosen::Gpu { ctx, .. } => {
+            if let Some(vectors) = args.vectors {
+                let layout = match vectors {
+                    Vectors::Packed => VectorLayout::Packed,
+                    Vectors::Vec4 => VectorLayout::Vec4,
+                };
+                **ctx = ctx.clone().with_vectors(layout);
+            }
+        }
+        Chosen::Cpu => {
+            let gpu_only = [
+                (args.no_subgroups, "--no-subgroups"),
+                (args.vectors.is_some(), "--vectors"),
+            ];
+            for (_, flag) in gpu_only.iter().filter(|(given, _)| *given) {
+                eprintln!("notice: {flag} sets up the GPU solver; this run is on the CPU");
+            }
+        }
     }
     let steps = config.solver.steps;
     let options = args

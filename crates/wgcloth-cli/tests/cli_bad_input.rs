@@ -306,6 +306,28 @@ fn backend_auto_without_an_adapter_falls_back_to_the_cpu_with_a_notice() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("backend      cpu"));
 }
 
+/// The GPU solver's flags on a CPU run change nothing, and say so.
+#[test]
+fn gpu_solver_flags_on_a_cpu_run_get_a_notice() {
+    let out = run_tiny(&["--vectors", "vec4", "--no-subgroups"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        describe("cpu run, gpu flags", &out)
+    );
+    let err = stderr(&out);
+    for flag in ["--no-subgroups", "--vectors"] {
+        assert!(
+            err.contains(&format!(
+                "notice: {flag} sets up the GPU solver; this run is on the CPU"
+            )),
+            "{err}"
+        );
+    }
+    let plain = stderr(&run_tiny(&[]));
+    assert!(!plain.contains("GPU solver"), "{plain}");
+}
+
 #[test]
 fn validate_with_a_zero_tolerance_is_rejected() {
     let out = wgcloth(&[
