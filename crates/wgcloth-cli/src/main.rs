@@ -163,8 +163,8 @@ struct RunArgs {
     no_subgroups: bool,
     /// How the GPU solver lays out its vectors [default: packed, three
     /// floats a vertex; vec4 on a CPU adapter such as lavapipe] (to compare).
-    #[arg(long)]
-    vectors: Option<Vectors>,
+    #[arg(long, value_name = "packed|vec4", value_parser = vector_layout)]
+    vectors: Option<VectorLayout>,
     /// Write the run report as JSON.
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
@@ -203,11 +203,12 @@ struct RunArgs {
     monitor_every: u64,
 }
 
-/// `run --vectors`: wgcloth::gpu::layout::VectorLayout.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum Vectors {
-    Packed,
-    Vec4,
+/// `run --vectors`: a [`VectorLayout`] by its name.
+fn vector_layout(name: &str) -> std::result::Result<VectorLayout, String> {
+    VectorLayout::named(name).ok_or_else(|| {
+        let names: Vec<&str> = VectorLayout::ALL.iter().map(|l| l.name()).collect();
+        format!("expected one of {}", names.join(", "))
+    })
 }
 
 /// Geometry formats `run --export` writes.
@@ -362,11 +363,7 @@ fn run(args: &RunArgs) -> Result<()> {
     }
     match &mut chosen {
         Chosen::Gpu { ctx, .. } => {
-            if let Some(vectors) = args.vectors {
-                let layout = match vectors {
-                    Vectors::Packed => VectorLayout::Packed,
-                    Vectors::Vec4 => VectorLayout::Vec4,
-                };
+            if let Some(layout) = args.vectors {
                 **ctx = ctx.clone().with_vectors(layout);
             }
         }

@@ -259,6 +259,13 @@ fn unknown_model_is_a_usage_error() {
 }
 
 #[test]
+fn unknown_vector_layout_is_a_usage_error_naming_the_layouts() {
+    let out = run_tiny(&["--vectors", "vec3"]);
+    expect_clap_error("--vectors vec3", &out, "--vectors");
+    assert!(stderr(&out).contains("packed, vec4"), "{}", stderr(&out));
+}
+
+#[test]
 fn unknown_backend_is_a_usage_error() {
     let out = wgcloth(&["run", "--grid", "4", "--steps", "2", "--backend", "bogus"]);
     expect_clap_error("--backend bogus", &out, "--backend");

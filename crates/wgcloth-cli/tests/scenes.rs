@@ -260,8 +260,8 @@ fn both_vector_layouts_step_bit_for_bit() {
     let Some(ctx) = common::gpu_context() else {
         return;
     };
-    let layouts = [VectorLayout::Packed, VectorLayout::Vec4]
-        .map(|layout| Kernels::with_vectors(&ctx.device, layout).unwrap());
+    let layouts =
+        VectorLayout::ALL.map(|layout| Kernels::with_vectors(&ctx.device, layout).unwrap());
     for (preconditioner, smoother) in [
         (Preconditioner::Multigrid, Smoother::Patches),
         (Preconditioner::Multigrid, Smoother::BlockJacobi),

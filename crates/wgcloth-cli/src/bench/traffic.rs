@@ -113,9 +113,7 @@ pub const CPU: Layout = Layout {
 /// The layout a run's report says its backend used: the GPU's with the
 /// vectors it names, else the CPU's.
 pub fn of(report: &Report) -> Layout {
-    let vectors = [VectorLayout::Packed, VectorLayout::Vec4]
-        .into_iter()
-        .find(|l| report.gpu_vectors.as_deref() == Some(l.name()));
+    let vectors = report.gpu_vectors.as_deref().and_then(VectorLayout::named);
     match (report.backend.as_str(), vectors) {
         ("gpu", Some(vectors)) => gpu(vectors),
         _ => CPU,

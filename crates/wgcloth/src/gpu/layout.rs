@@ -28,6 +28,14 @@ pub enum VectorLayout {
 }
 
 impl VectorLayout {
+    /// Both layouts.
+    pub const ALL: [VectorLayout; 2] = [VectorLayout::Packed, VectorLayout::Vec4];
+
+    /// The layout of that [`VectorLayout::name`].
+    pub fn named(name: &str) -> Option<VectorLayout> {
+        Self::ALL.into_iter().find(|l| l.name() == name)
+    }
+
     /// The layout for an adapter of type `device_type`.
     pub fn for_adapter(device_type: wgpu::DeviceType) -> VectorLayout {
         match device_type {

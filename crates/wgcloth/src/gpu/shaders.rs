@@ -380,8 +380,7 @@ mod tests {
     /// to split the largest arrays ([`SPLIT_ARRAYS`]) where the device
     /// allows [`SPLIT_STORAGE_BUFFERS`](crate::gpu::kernels::SPLIT_STORAGE_BUFFERS).
     fn variants() -> impl Iterator<Item = Variant> {
-        let layouts = [VectorLayout::Packed, VectorLayout::Vec4];
-        layouts.into_iter().flat_map(|vectors| {
+        VectorLayout::ALL.into_iter().flat_map(|vectors| {
             [false, true].into_iter().flat_map(move |split| {
                 [false, true].map(|subgroups| Variant {
                     mlp_threads: 16,
