@@ -13,7 +13,7 @@
 use std::mem::take;
 use std::ops::Range;
 
-use glam::{Mat3, Vec3};
+use glam::{Mat3, Vec3, Vec4};
 use rayon::prelude::*;
 
 use crate::config::Smoother;
@@ -755,15 +755,17 @@ impl Pass<'_> {
     fn patch(self, z: &mut BandZ, (pc, pr): (usize, usize), residual: &[Vec3; PATCH as usize]) {
         let nodes = patch_nodes(self.level, (pc, pr));
         // M⁻¹ is symmetric, so its rows are its columns: twelve sums side
-        // by side.
+        // by side, four to a register (the compiler, left to itself, split
+        // them into pairs and gathered the rest).
         let inverse = &self.multigrid.patch_inverses[self.l][pr * self.px + pc];
         let res: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| residual[u / 3][u % 3]);
-        let mut d = [0f32; PATCH_UNKNOWNS];
+        let mut d = [Vec4::ZERO; PATCH_UNKNOWNS / 4];
         for (column, &r) in inverse.iter().zip(&res) {
-            for (o, m) in d.iter_mut().zip(column) {
-                *o += m * r;
+            for (o, m) in d.iter_mut().zip(column.chunks_exact(4)) {
+                *o += Vec4::from_slice(m) * r;
             }
         }
+        let d: [f32; PATCH_UNKNOWNS] = std::array::from_fn(|u| d[u / 4][u % 4]);
         for (k, node) in nodes.iter().enumerate() {
             if let Some((i, ..)) = *node {
                 let d = Vec3::from_slice(&d[3 * k..3 * k + 3]);
