@@ -35,7 +35,7 @@ use crate::bvh::{Aabb, Bvh};
 use crate::cpu::GRAIN;
 use crate::cpu::collide::{Tolerances, point_triangle};
 use crate::cpu::contact::{Coefficients, friction, response};
-use crate::cpu::separate::EDGE_PAIR;
+use crate::cpu::separate::{Candidate, EDGE_PAIR, candidates};
 use crate::math::{Sym3, closest_between_segments, closest_on_triangle, segment_parameters};
 use crate::scene::Cloth;
 
@@ -207,38 +207,20 @@ impl Sheet<'_> {
         // first's, grown by ε, overlaps the second's (as the GPU does).
         let boxed =
             |vertices: &[u32]| (vertices.iter()).fold(Aabb::EMPTY, |b, &i| b.grow(x[i as usize]));
+        let reach = |vertices: &[u32]| boxed(vertices).grown(self.thickness);
         let mut pairs: Vec<Pair> = (0..x.len() as u32)
             .into_par_iter()
             .with_min_len(GRAIN)
             .flat_map_iter(|v| {
-                let (mut found, reach) = (Vec::new(), boxed(&[v]).grown(self.thickness));
-                bvh.query_box(reach, |t| {
-                    if reach.overlaps(&boxed(&self.triangles[t as usize])) {
-                        found.extend(self.vertex_pair(x, v, t));
-                    }
+                let mut found = Vec::new();
+                let walked = (self.triangles, self.edges);
+                candidates(v, walked, bvh, (reach, boxed), |pair| match pair {
+                    Candidate::Vertex(t) => found.extend(self.vertex_pair(x, v, t)),
+                    Candidate::Edges(e, f) => found.extend(self.edge_pair(x, e, f)),
                 });
                 found
             })
             .collect();
-        pairs.par_extend(
-            self.edges
-                .par_iter()
-                .with_min_len(GRAIN)
-                .flat_map_iter(|&e| {
-                    let (mut found, reach) = (Vec::new(), boxed(&e).grown(self.thickness));
-                    bvh.query_box(reach, |t| {
-                        let tri = self.triangles[t as usize];
-                        for f in [[tri[0], tri[1]], [tri[1], tri[2]], [tri[2], tri[0]]] {
-                            let f = [f[0].min(f[1]), f[0].max(f[1])];
-                            // Each pair from its lower edge.
-                            if f > e && reach.overlaps(&boxed(&f)) {
-                                found.extend(self.edge_pair(x, e, f));
-                            }
-                        }
-                    });
-                    found
-                }),
-        );
         // An edge–edge pair is met from both triangles along its upper edge.
         pairs.par_sort_unstable_by_key(Pair::key);
         pairs.dedup_by_key(|p| p.key());

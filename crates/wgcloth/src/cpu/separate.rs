@@ -34,11 +34,7 @@ use crate::math::{closest_between_segments, closest_on_triangle};
 
 /// Every edge of `triangles` once, by vertex (lower index first), sorted.
 pub fn triangle_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    let mut edges: Vec<[u32; 2]> = triangles
-        .iter()
-        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-        .map(|[a, b]| [a.min(b), a.max(b)])
-        .collect();
+    let mut edges: Vec<[u32; 2]> = triangles.iter().flat_map(|&t| edges_of(t)).collect();
     edges.sort_unstable();
     edges.dedup();
     edges
@@ -221,44 +217,39 @@ pub fn near_pairs(
     let floor = keep.floor;
     let d: Vec<Vec3> = end.iter().zip(start).map(|(e, s)| *e - *s).collect();
     let grown = |vertices: &[u32]| swept(start, end, vertices).grown(floor);
-    let mut pairs: Vec<NearPair> = (0..start.len() as u32)
+    let found: Vec<(Vec<NearPair>, Vec<NearPair>)> = (0..start.len() as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
-        .flat_map_iter(|v| {
-            let query = grown(&[v]);
-            let mut found = Vec::new();
-            bvh.query_box(query, |t| {
-                let tri = triangles[t as usize];
-                if !tri.contains(&v) && query.overlaps(&swept(start, end, &tri)) {
-                    found.push(NearPair::at([v, tri[0], tri[1], tri[2]], false, start));
-                }
-            });
-            found
-        })
-        .filter(|pair| pair.could_fail(&d, keep))
-        .collect();
-    pairs.par_extend(
-        edges
-            .par_iter()
-            .with_min_len(GRAIN)
-            .flat_map_iter(|&e| {
-                let query = grown(&e);
-                let mut found = Vec::new();
-                bvh.query_box(query, |t| {
-                    let tri = triangles[t as usize];
-                    for f in [[tri[0], tri[1]], [tri[1], tri[2]], [tri[2], tri[0]]] {
-                        let f = [f[0].min(f[1]), f[0].max(f[1])];
-                        // Each pair from its lower edge.
-                        let apart = !e.iter().any(|v| f.contains(v));
-                        if f > e && apart && query.overlaps(&swept(start, end, &f)) {
-                            found.push(NearPair::at([e[0], e[1], f[0], f[1]], true, start));
+        .map(|v| {
+            let (mut vertex, mut edge) = (Vec::new(), Vec::new());
+            let boxed = |vertices: &[u32]| swept(start, end, vertices);
+            candidates(
+                v,
+                (triangles, edges),
+                bvh,
+                (grown, boxed),
+                |pair| match pair {
+                    Candidate::Vertex(t) => {
+                        let tri = triangles[t as usize];
+                        if !tri.contains(&v) {
+                            vertex.push(NearPair::at([v, tri[0], tri[1], tri[2]], false, start));
                         }
                     }
-                });
-                found
-            })
-            .filter(|pair| pair.could_fail(&d, keep)),
-    );
+                    Candidate::Edges(e, f) => {
+                        if !e.iter().any(|v| f.contains(v)) {
+                            edge.push(NearPair::at([e[0], e[1], f[0], f[1]], true, start));
+                        }
+                    }
+                },
+            );
+            let could_fail = |pair: &NearPair| pair.could_fail(&d, keep);
+            vertex.retain(could_fail);
+            edge.retain(could_fail);
+            (vertex, edge)
+        })
+        .collect();
+    let (vertex, edge): (Vec<_>, Vec<_>) = found.into_iter().unzip();
+    let mut pairs: Vec<NearPair> = vertex.into_iter().chain(edge).flatten().collect();
     // An edge–edge pair is met from both triangles along its upper edge.
     let first_edge_pair = pairs.partition_point(|p| !p.edges);
     pairs[first_edge_pair..].par_sort_unstable_by_key(|p| p.vertices);
@@ -270,6 +261,55 @@ pub fn near_pairs(
         }
     }
     (pairs, least)
+}
+
+/// A pair [`candidates`] names.
+#[derive(Clone, Copy)]
+pub enum Candidate {
+    /// The walk's vertex and triangle t.
+    Vertex(u32),
+    /// One of the vertex's edges and a triangle's edge after it.
+    Edges([u32; 2], [u32; 2]),
+}
+
+/// The pairs whose first primitive is vertex `v` or an edge it starts (its
+/// lower vertex; `edges` sorted) and whose boxes overlap, the first's
+/// `reach`, the second's `boxed` (an edge–edge pair perhaps twice, from
+/// both triangles along its second edge), in one walk of `bvh` (which holds
+/// the triangles' `boxed`) for the union of the first's: a walk for the
+/// vertex and one for each of its edges cost more than their tests.
+pub fn candidates(
+    v: u32,
+    (triangles, edges): (&[[u32; 3]], &[[u32; 2]]),
+    bvh: &Bvh,
+    (reach, boxed): (impl Fn(&[u32]) -> Aabb, impl Fn(&[u32]) -> Aabb),
+    mut visit: impl FnMut(Candidate),
+) {
+    let own = &edges[edges.partition_point(|e| e[0] < v)..edges.partition_point(|e| e[0] <= v)];
+    let vertex = reach(&[v]);
+    let own_reach: Vec<Aabb> = own.iter().map(|e| reach(e)).collect();
+    let query = own_reach.iter().fold(vertex, |q, b| q.union(*b));
+    bvh.query_box(query, |t| {
+        let tri = triangles[t as usize];
+        let tri_box = boxed(&tri);
+        if vertex.overlaps(&tri_box) {
+            visit(Candidate::Vertex(t));
+        }
+        for (&e, e_reach) in own.iter().zip(&own_reach) {
+            if e_reach.overlaps(&tri_box) {
+                for f in edges_of(tri) {
+                    if f > e && e_reach.overlaps(&boxed(&f)) {
+                        visit(Candidate::Edges(e, f));
+                    }
+                }
+            }
+        }
+    });
+}
+
+/// A triangle's edges, each lower vertex first.
+pub fn edges_of(t: [u32; 3]) -> [[u32; 2]; 3] {
+    [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]].map(|[a, b]| [a.min(b), a.max(b)])
 }
 
 /// A vertex's displacement bound from its least separation s:
