@@ -231,14 +231,10 @@ pub fn near_pairs(
                 |pair| match pair {
                     Candidate::Vertex(t) => {
                         let tri = triangles[t as usize];
-                        if !tri.contains(&v) {
-                            vertex.push(NearPair::at([v, tri[0], tri[1], tri[2]], false, start));
-                        }
+                        vertex.push(NearPair::at([v, tri[0], tri[1], tri[2]], false, start));
                     }
                     Candidate::Edges(e, f) => {
-                        if !e.iter().any(|v| f.contains(v)) {
-                            edge.push(NearPair::at([e[0], e[1], f[0], f[1]], true, start));
-                        }
+                        edge.push(NearPair::at([e[0], e[1], f[0], f[1]], true, start));
                     }
                 },
             );
@@ -272,8 +268,9 @@ pub enum Candidate {
     Edges([u32; 2], [u32; 2]),
 }
 
-/// The pairs whose first primitive is vertex `v` or an edge it starts (its
-/// lower vertex; `edges` sorted) and whose boxes overlap, the first's
+/// The pairs sharing no vertex whose first primitive is vertex `v` or an
+/// edge it starts (its lower vertex; `edges` sorted) and whose boxes
+/// overlap, the first's
 /// `reach`, the second's `boxed` (an edge–edge pair perhaps twice, from
 /// both triangles along its second edge), in one walk of `bvh` (which holds
 /// the triangles' `boxed`) for the union of the first's: a walk for the
@@ -292,13 +289,14 @@ pub fn candidates(
     bvh.query_box(query, |t| {
         let tri = triangles[t as usize];
         let tri_box = boxed(&tri);
-        if vertex.overlaps(&tri_box) {
+        if !tri.contains(&v) && vertex.overlaps(&tri_box) {
             visit(Candidate::Vertex(t));
         }
         for (&e, e_reach) in own.iter().zip(&own_reach) {
             if e_reach.overlaps(&tri_box) {
                 for f in edges_of(tri) {
-                    if f > e && e_reach.overlaps(&boxed(&f)) {
+                    let apart = !e.iter().any(|v| f.contains(v));
+                    if f > e && apart && e_reach.overlaps(&boxed(&f)) {
                         visit(Candidate::Edges(e, f));
                     }
                 }
