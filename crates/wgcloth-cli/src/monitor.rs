@@ -1,5 +1,6 @@
 //! Samples of a run taken every K steps (`run --monitor FILE.csv`): the
-//! state's energy and fastest vertex, the cloth triangle pairs that pass
+//! state's energy, fastest vertex and most-strained spring, the cloth
+//! triangle pairs that pass
 //! through each other, the process's resident memory and the GPU
 //! allocator's bytes. A soak reads them to show the run stays finite, its
 //! energy bounded and its memory flat.
@@ -29,6 +30,8 @@ pub struct Sample {
     pub kinetic: f64,
     /// The fastest vertex's speed, m/s.
     pub max_speed: f32,
+    /// The most-strained spring's |l − L| / L (`cpu::springs::max_strain`).
+    pub max_strain: f32,
     pub finite: bool,
     /// Cloth triangle pairs that share no vertex and intersect
     /// (`wgcloth::intersections`).
@@ -41,19 +44,20 @@ pub struct Sample {
     pub gpu_reserved_bytes: Option<u64>,
 }
 
-const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,finite,self_intersections,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
+const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,max_strain,finite,self_intersections,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
 
 impl Sample {
     fn csv(&self) -> String {
         let opt = |v: Option<u64>| v.map(|b| b.to_string()).unwrap_or_default();
         format!(
-            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{},{},{},{},{}",
+            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{:.6e},{},{},{},{},{}",
             self.step,
             self.seconds,
             self.backend,
             self.energy,
             self.kinetic,
             self.max_speed,
+            self.max_strain,
             self.finite,
             self.self_intersections,
             opt(self.rss_bytes),
@@ -125,6 +129,7 @@ impl Monitor {
             energy: energy.total(),
             kinetic: energy.kinetic,
             max_speed: v.iter().map(|v| v.length()).fold(0.0, f32::max),
+            max_strain: cpu::springs::max_strain(&scene.cloth, x),
             finite: x.iter().chain(v).all(|p| p.is_finite()),
             self_intersections: intersections::intersecting_pairs(x, &scene.cloth.triangles).len(),
             rss_bytes: resident_bytes(),
@@ -152,6 +157,11 @@ impl Monitor {
             b.map(|b| format!("{:.1} MiB", b as f64 / (1 << 20) as f64))
                 .unwrap_or_else(|| "n/a".into())
         };
+        let strained = self
+            .samples
+            .iter()
+            .max_by(|a, b| a.max_strain.total_cmp(&b.max_strain))
+            .unwrap_or(first);
         let max_rss = self.samples.iter().filter_map(|s| s.rss_bytes).max();
         let worst = self.samples.iter().map(|s| s.self_intersections).max();
         let worst = worst.unwrap_or(0);
@@ -161,11 +171,13 @@ impl Monitor {
             .filter(|s| s.self_intersections > 0)
             .count();
         format!(
-            "monitor      {} samples in {}: energy {lo:.4} to {hi:.4} J, {}\n\
+            "monitor      {} samples in {}: energy {lo:.4} to {hi:.4} J, springs strained up to {:.2} % (step {}), {}\n\
              self         {crossed} samples with intersecting cloth triangle pairs, at most {worst}\n\
              memory       resident {} at step {} → {} at step {} (max {}); GPU allocated {} → {}",
             self.samples.len(),
             self.path.display(),
+            100.0 * strained.max_strain,
+            strained.step,
             if self.samples.iter().all(|s| s.finite) {
                 "all finite"
             } else {

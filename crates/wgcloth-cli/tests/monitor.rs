@@ -66,6 +66,10 @@ fn the_cli_writes_a_row_every_k_steps() {
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     let steps: Vec<&str> = rows.iter().map(|r| r[column("step")]).collect();
     assert_eq!(steps, ["0", "10", "20", "30"]);
+    // The cloth starts at its rest lengths, then hangs under its weight.
+    let strain = |row: &Vec<&str>| row[column("max_strain")].parse::<f32>().unwrap();
+    assert_eq!(strain(&rows[0]), 0.0);
+    assert!(strain(&rows[3]) > 1e-4, "{}", strain(&rows[3]));
 
     // The first row is the rest state's energy.
     let rest = CpuSim::new(Scene::new(&hang(6)).unwrap()).energy().total();
@@ -78,6 +82,9 @@ fn the_cli_writes_a_row_every_k_steps() {
         assert_eq!(row[column("backend")], "cpu");
         assert_eq!(row[column("finite")], "true");
         assert_eq!(row[column("self_intersections")], "0", "a hanging cloth");
+        let strain: f32 = row[column("max_strain")].parse().unwrap();
+        // Hanging under its weight a 6² cloth stretches, but not by a tenth.
+        assert!((0.0..0.1).contains(&strain), "strain {strain}");
         let rss: u64 = row[column("rss_bytes")].parse().expect("resident memory");
         assert!(rss > 1 << 20, "a process holds more than 1 MiB: {rss}");
         assert_eq!(
@@ -122,6 +129,13 @@ fn gpu_samples_match_the_cpu_and_count_device_memory() {
             c.step,
             c.energy,
             g.energy
+        );
+        assert!(
+            (c.max_strain - g.max_strain).abs() <= 0.02 * c.max_strain + 1e-5,
+            "step {}: strain {} on the CPU, {} on the GPU",
+            c.step,
+            c.max_strain,
+            g.max_strain
         );
         let allocated = g.gpu_allocated_bytes.expect("the allocator reports");
         // x, v and the system alone take 13 vectors of 16 B per vertex.

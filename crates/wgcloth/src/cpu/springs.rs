@@ -46,6 +46,20 @@ pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Sy
         });
 }
 
+/// The largest |l − L| / L over all springs at positions `x`: how far the
+/// worst spring is from its rest length, as a share of it. A step that
+/// flings a vertex shows here first (BENCHMARKS.md "One linear solve a
+/// step from 128² up").
+pub fn max_strain(cloth: &Cloth, x: &[Vec3]) -> f32 {
+    cloth
+        .springs
+        .par_iter()
+        .with_min_len(GRAIN)
+        .zip(&cloth.rest_lengths)
+        .map(|(&[i, j], &rest)| ((x[j as usize] - x[i as usize]).length() - rest).abs() / rest)
+        .reduce(|| 0.0, f32::max)
+}
+
 /// Elastic potential ½ E (l − L)² summed over all springs.
 pub fn potential_energy(cloth: &Cloth, x: &[Vec3]) -> f64 {
     cloth
