@@ -1,8 +1,7 @@
 //! Samples of a run taken every K steps (`run --monitor FILE.csv`): the
 //! state's energy, fastest vertex and most-strained spring, the cloth
-//! triangle pairs that pass
-//! through each other, the process's resident memory and the GPU
-//! allocator's bytes. A soak reads them to show the run stays finite, its
+//! triangle pairs that pass through each other, the process's resident
+//! memory and the GPU allocator's bytes. A soak reads them to show the run stays finite, its
 //! energy bounded and its memory flat.
 
 use std::fs::File;

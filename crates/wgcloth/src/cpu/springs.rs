@@ -48,8 +48,8 @@ pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Sy
 
 /// The largest |l − L| / L over all springs at positions `x`: how far the
 /// worst spring is from its rest length, as a share of it. A step that
-/// flings a vertex shows here first (BENCHMARKS.md "One linear solve a
-/// step from 128² up").
+/// flings a vertex shows here (BENCHMARKS.md "One linear solve a step
+/// from 128² up").
 pub fn max_strain(cloth: &Cloth, x: &[Vec3]) -> f32 {
     cloth
         .springs
