@@ -249,6 +249,10 @@ struct SceneArgs {
     /// Time step in seconds.
     #[arg(long, value_name = "H", allow_negative_numbers = true)]
     dt: Option<f32>,
+    /// Backward Euler solves per step [default: 0, the fewest that keep
+    /// the rigid body within half the cloth's spacing in each].
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    substeps: Option<u32>,
     /// Maximum PCG iterations per step.
     #[arg(long, value_name = "I", allow_negative_numbers = true)]
     cg_iters: Option<u32>,
@@ -297,6 +301,9 @@ impl SceneArgs {
         }
         if let Some(h) = self.dt {
             c.solver.dt = h;
+        }
+        if let Some(n) = self.substeps {
+            c.solver.substeps = n;
         }
         if let Some(i) = self.cg_iters {
             c.solver.cg_iters = i;

@@ -105,6 +105,8 @@ pub struct Report {
     pub grid: [u32; 2],
     pub steps: u64,
     pub dt: f32,
+    /// Backward Euler solves per step (`Scene::substeps`).
+    pub substeps: u32,
     /// Median wall time of a step, ms.
     pub ms_per_step: f64,
     /// Mean wall time of a step, ms: the time to a converged step with the
@@ -509,6 +511,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         grid: config.cloth.grid,
         steps: sim.state.step,
         dt: config.solver.dt,
+        substeps: sim.scene.substeps,
         ms_per_step,
         ms_per_step_mean,
         stage_ms,
@@ -645,10 +648,16 @@ fn run_gpu(
                 dispatches.push(f.dispatches as f64);
             }
             since = now;
-            residuals.push(state.last_residual, state.last_iterations);
+            // The step's iterations and contacts, summed over its
+            // substeps as on the CPU; `last_iterations` is their most, what
+            // the budget of each solve follows.
+            let iterations = state
+                .cg_iterations_total
+                .wrapping_sub(last.cg_iterations_total);
+            residuals.push(state.last_residual, iterations);
             budget.observe(state.last_iterations, f.budget, state.last_residual);
-            cg_iterations += state.last_iterations as u64;
-            contacts += state.contacts_last as u64;
+            cg_iterations += iterations as u64;
+            contacts += state.contacts_total.wrapping_sub(last.contacts_total) as u64;
             let breakdown = state.cg_breakdowns > breakdowns;
             (breakdowns, last) = (state.cg_breakdowns, state);
             if health::failed(state.health, breakdown) {
@@ -726,6 +735,7 @@ fn run_gpu(
         grid: config.cloth.grid,
         steps: last.steps as u64,
         dt: config.solver.dt,
+        substeps: scene.substeps,
         ms_per_step,
         ms_per_step_mean,
         stage_ms,
@@ -884,7 +894,7 @@ impl Report {
                 })
                 .unwrap_or_default();
         format!(
-            "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s\n\
+            "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s{}\n\
              backend      {} — {}{}{}\n\
              {}\
              ms/step      {:.3} (median{dispatches}), {:.3} (mean)\n\
@@ -900,6 +910,10 @@ impl Report {
             self.grid[1],
             self.steps,
             self.dt,
+            match self.substeps {
+                1 => String::new(),
+                n => format!(", each {n} solves of {:.3} ms", 1e3 * self.dt / n as f32),
+            },
             self.backend,
             self.adapter,
             match self.gpu_subgroup_sums {

@@ -412,12 +412,26 @@ impl Default for SelfContactConfig {
     }
 }
 
+/// The most the rigid body may travel in one substep, in multiples of the
+/// cloth's shortest spring rest length: the one linear solve of a step
+/// flings vertices the body sweeps past faster than this (BENCHMARKS.md,
+/// "Substeps that keep the body within half a spacing").
+pub const MAX_BODY_TRAVEL: f32 = 0.5;
+
+/// The most substeps one step may take (`solver.substeps`).
+pub const MAX_SUBSTEPS: u32 = 64;
+
 /// Time stepping and the linear solve (`[solver]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverConfig {
     /// Time step h in s.
     pub dt: f32,
+    /// Backward Euler steps of h / n that make one step of h: 0 (the
+    /// default) takes the fewest that keep the rigid body's travel in one
+    /// within [`MAX_BODY_TRAVEL`] of the cloth's spacing
+    /// (`Scene::substeps`); at most [`MAX_SUBSTEPS`].
+    pub substeps: u32,
     /// `solver.steps`: number of time steps a run takes.
     pub steps: u64,
     /// Maximum PCG iterations (thesis: 25).
@@ -440,6 +454,7 @@ impl Default for SolverConfig {
     fn default() -> Self {
         SolverConfig {
             dt: 0.01,
+            substeps: 0,
             steps: 200,
             cg_iters: 200,
             cg_tol: 1e-3,
@@ -642,6 +657,15 @@ impl Config {
 
         let s = &self.solver;
         positive("solver.dt", &[s.dt])?;
+        if s.substeps > MAX_SUBSTEPS {
+            return Err(Error::config(
+                "solver.substeps",
+                format!(
+                    "must be at most {MAX_SUBSTEPS} (0 picks them), got {}",
+                    s.substeps
+                ),
+            ));
+        }
         if s.cg_iters == 0 {
             return Err(Error::config("solver.cg_iters", "must be at least 1"));
         }
@@ -747,6 +771,14 @@ mod tests {
         let mut c = Config::default();
         c.solver.dt = f32::NAN;
         assert!(c.validate().unwrap_err().to_string().contains("solver.dt"));
+        let mut c = Config::default();
+        c.solver.substeps = MAX_SUBSTEPS + 1;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("solver.substeps")
+        );
         let mut c = Config::default();
         c.rigid.motion.period = 0.0;
         assert!(

@@ -356,6 +356,49 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
     }
 }
 
+/// A step of substeps (`Scene::substeps`): the GPU records them in one
+/// step, its clock counting them and its step count and budget the steps,
+/// and ends where the CPU's substeps do.
+#[test]
+fn a_step_of_substeps_runs_like_the_cpu() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let mut c = Config {
+        model: ModelKind::Naive,
+        ..Default::default()
+    };
+    c.cloth.grid = [16, 16];
+    // 63 mm a step at most, against a spacing of 67 mm.
+    c.rigid.motion.period /= 8.0;
+    let scene = Scene::new(&c).unwrap();
+    assert_eq!(scene.substeps, 2);
+    let steps = 16;
+    let mut cpu = CpuSim::new(scene.clone());
+    let (mut cpu_contacts, mut cpu_iterations) = (0, 0);
+    for _ in 0..steps {
+        let s = cpu.step();
+        cpu_contacts += s.contacts;
+        cpu_iterations += s.pcg.iterations;
+    }
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let mut solved = SolvedSteps::for_scene(&gpu, &scene);
+    for _ in 0..steps {
+        solved.step(&gpu).unwrap();
+    }
+    let state = gpu.read_state().unwrap();
+    let dev = max_dev(&gpu.read_positions().unwrap(), &cpu.state.x);
+    eprintln!(
+        "{steps} steps: deviation {dev:.3e} m; contacts {} vs {cpu_contacts}; iterations {} vs {cpu_iterations}",
+        state.contacts_total, state.cg_iterations_total
+    );
+    assert_eq!((state.steps, state.clock), (steps, 2 * steps));
+    assert_eq!(cpu.state.step, steps as u64);
+    assert!(cpu_contacts > 100, "the sphere must hit the cloth");
+    assert!(dev < 1e-3, "GPU and CPU drifted {dev} m apart");
+    let ratio = state.contacts_total as f64 / cpu_contacts as f64;
+    assert!((ratio - 1.0).abs() < 0.02, "contacts {ratio}");
+    assert!(state.last_residual <= c.solver.cg_tol);
+}
+
 #[test]
 fn vertices_deep_inside_are_measured_and_pushed_out_as_on_the_cpu() {
     let Some((ctx, kernels)) = gpu() else { return };

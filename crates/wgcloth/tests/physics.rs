@@ -4,6 +4,7 @@ mod common;
 
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::springs::max_strain;
 use wgcloth::{Config, Scene};
 
 fn hang_config(grid: u32) -> Config {
@@ -99,4 +100,44 @@ fn a_sphere_crossing_the_cloth_at_10_m_per_s_leaves_no_vertex_inside() {
     // the contact band, and the cloth went with the body, not through it.
     assert!(deepest_solved > c.contact.max_depth);
     assert!(carried > 0.3, "the cloth stayed behind: the body tunnelled");
+}
+
+/// A body that sweeps past the cloth by more than half its spacing in one
+/// step flings the vertices it meets: a step is one linear solve,
+/// linearised where it starts. The substeps a scene takes by default
+/// (`Scene::substeps`) keep the cloth whole and out of the body.
+#[test]
+fn substeps_keep_a_fast_body_from_flinging_the_cloth() {
+    let run = |substeps: u32| {
+        let mut c = Config {
+            model: ModelKind::Naive,
+            ..Default::default()
+        };
+        c.cloth.grid = [32, 32];
+        // Eight times the thesis sphere's speed: 63 mm a step at most,
+        // against a spacing of 32 mm.
+        c.rigid.motion.period /= 8.0;
+        c.solver.substeps = substeps;
+        let scene = Scene::new(&c).unwrap();
+        let n = scene.substeps;
+        let mut sim = CpuSim::new(scene);
+        let (mut strain, mut deepest) = (0.0f32, 0.0f32);
+        for _ in 0..12 {
+            let s = sim.step();
+            assert!(sim.is_finite());
+            strain = strain.max(max_strain(&sim.scene.cloth, &sim.state.x));
+            deepest = deepest.max(s.max_penetration);
+        }
+        (n, strain, deepest)
+    };
+    let (n, strain, deepest) = run(0);
+    let (_, strain_one, deepest_one) = run(1);
+    eprintln!(
+        "{n} substeps: strain {strain:.3}, deepest {deepest:.4} m; one: strain {strain_one:.3}, deepest {deepest_one:.4} m"
+    );
+    assert_eq!(n, 4, "63 mm at most half of 32 mm a substep");
+    assert!(strain < 0.15, "a spring strained {strain}");
+    assert!(deepest < 2e-3, "a vertex went {deepest} m inside");
+    // What the substeps cure: without them the same run flings vertices.
+    assert!(strain_one > 1.0 && deepest_one > 0.01);
 }

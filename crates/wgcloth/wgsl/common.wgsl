@@ -21,6 +21,8 @@ struct Params {
     topology_splits: vec2<u32>, matrix_splits: vec2<u32>, operators_splits: vec2<u32>,
     self_contact: u32, self_gamma: f32, self_floor: f32, self_capacity: u32,
     cloth_thickness: f32, cloth_capacity: u32, rest_spacing: vec2<f32>, cloth_per_vertex: u32, cloth_limit: f32,
+    // Substeps of dt per step of solver.dt (Scene::substeps).
+    substeps: u32,
 }
 
 // The run's constants: group 0, alone, so a pass binds it once and each

@@ -1,7 +1,7 @@
 // Stage "integrate": x' = x + h v'; pinned vertices return to their
 // prescribed positions with zero velocity; with self-contact, x is kept
 // as where the step started (separate.wgsl holds the step back from it);
-// the clock advances; a vertex left not finite or faster than `max_speed` raises its flag in
+// the clock advances a substep; a vertex left not finite or faster than `max_speed` raises its flag in
 // `state.health` (src/health.rs diagnoses it).
 // CPU twin: src/cpu/integrate.rs.
 
@@ -22,9 +22,12 @@ fn finite3(a: vec3<f32>) -> bool {
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i == 0u {
-        // Nothing else in this pass reads the clock.
+        // Nothing else in this pass reads the clock, which counts
+        // substeps; a step ends with its last.
         state.clock += 1u;
-        state.steps += 1u;
+        if state.clock % params.substeps == 0u {
+            state.steps += 1u;
+        }
     }
     if i >= params.n_vertices {
         return;

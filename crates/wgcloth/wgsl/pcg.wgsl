@@ -451,8 +451,15 @@ fn finish() {
     if s.bb > 0.0 {
         residual = sqrt(max(s.rr, 0.0) / s.bb);
     }
-    state.last_iterations = s.iterations;
-    state.last_residual = residual;
+    // The step's most and worst over its substeps; the clock counts
+    // substeps, and integrate advances it after this pass.
+    if state.clock % params.substeps == 0u {
+        state.last_iterations = s.iterations;
+        state.last_residual = residual;
+    } else {
+        state.last_iterations = max(state.last_iterations, s.iterations);
+        state.last_residual = max(state.last_residual, residual);
+    }
     state.cg_iterations_total += s.iterations;
     state.cg_breakdowns += s.breakdown;
     state.cg_residual_max = max(state.cg_residual_max, residual);

@@ -36,25 +36,50 @@ use rigid::RigidFrame;
 /// the work (a 32² cloth's vectors stay on one thread).
 pub const GRAIN: usize = 2048;
 
-/// What one step did.
+/// What one step did, over its substeps ([`Scene::substeps`]).
 #[derive(Clone, Debug, Default)]
 pub struct StepStats {
-    /// How the step's PCG solve ended.
+    /// How the step's PCG solves ended: their iterations summed, the worst
+    /// residual, any breakdown.
     pub pcg: PcgOutcome,
-    /// Contacts found and responded to (both directions).
+    /// Contacts found and responded to (both directions), summed.
     pub contacts: usize,
-    /// Deepest cloth vertex inside the rigid surface after the solve, m,
+    /// Deepest cloth vertex inside the rigid surface after a solve, m,
     /// before the push-out moved it back onto the surface.
     pub max_penetration: f32,
-    /// What self-contact held back (`self_contact` on).
+    /// What self-contact held back (`self_contact` on): the most near
+    /// pairs of a substep, the held vertices summed, settled if every
+    /// substep was.
     pub separation: separate::Separation,
-    /// Cloth–cloth contacts responded to (`self_contact` with a thickness).
+    /// Cloth–cloth contacts responded to (`self_contact` with a
+    /// thickness), the most of a substep.
     pub self_contacts: usize,
     /// Cloth–cloth contacts dropped at vertices in more than
-    /// `self_contact::PAIRS_PER_VERTEX`.
+    /// `self_contact::PAIRS_PER_VERTEX`, summed.
     pub self_contacts_dropped: usize,
-    /// Seconds spent in each of [`Stage::ALL`].
+    /// Seconds spent in each of [`Stage::ALL`], summed.
     pub stage_seconds: [f64; Stage::ALL.len()],
+}
+
+impl StepStats {
+    /// Folds in a later substep's (see the fields).
+    fn add(&mut self, sub: &StepStats) {
+        let (pcg, next) = (&mut self.pcg, &sub.pcg);
+        pcg.iterations += next.iterations;
+        pcg.relative_residual = pcg.relative_residual.max(next.relative_residual);
+        pcg.breakdown |= next.breakdown;
+        self.contacts += sub.contacts;
+        self.max_penetration = self.max_penetration.max(sub.max_penetration);
+        let (sep, next) = (&mut self.separation, &sub.separation);
+        sep.pairs = sep.pairs.max(next.pairs);
+        sep.held += next.held;
+        sep.settled &= next.settled;
+        self.self_contacts = self.self_contacts.max(sub.self_contacts);
+        self.self_contacts_dropped += sub.self_contacts_dropped;
+        for (total, s) in self.stage_seconds.iter_mut().zip(&sub.stage_seconds) {
+            *total += s;
+        }
+    }
 }
 
 /// Cloth state: positions, velocities, time.
@@ -123,7 +148,7 @@ impl CpuSim {
         let n = cloth.vertex_count();
         let state = State::initial(&scene);
         let params = StepParams {
-            dt: cfg.solver.dt,
+            dt: scene.substep_dt(),
             gravity: Vec3::from_array(cfg.solver.gravity),
             damping_mass: cfg.cloth.damping_mass,
             damping_stiffness: cfg.cloth.damping_stiffness,
@@ -189,23 +214,32 @@ impl CpuSim {
         self.scene.rigid.as_ref().map(|_| &self.frame)
     }
 
-    /// One backward Euler step: every stage in order. The rigid body is
-    /// first moved to the end of the step, so contacts are found against
-    /// where it will be.
+    /// One step of `solver.dt`: [`Scene::substeps`] backward Euler steps
+    /// of [`Scene::substep_dt`], each every stage in order. Each first
+    /// moves the rigid body to its end, so contacts are found against
+    /// where it will be. The stats sum the substeps' counts and take their
+    /// worst.
     pub fn step(&mut self) -> StepStats {
-        let mut stats = StepStats::default();
+        let mut stats: Option<StepStats> = None;
         // One hand-over to the pool for the whole step (see `run_stage`).
         rayon::scope(|_| {
-            for stage in Stage::ALL {
-                let start = Instant::now();
-                self.run_stage_on_pool(stage, &mut stats);
-                stats.stage_seconds[stage.index()] = start.elapsed().as_secs_f64();
+            for _ in 0..self.scene.substeps {
+                let mut sub = StepStats::default();
+                for stage in Stage::ALL {
+                    let start = Instant::now();
+                    self.run_stage_on_pool(stage, &mut sub);
+                    sub.stage_seconds[stage.index()] = start.elapsed().as_secs_f64();
+                }
+                sub.contacts = self.contacts.len();
+                self.state.time += self.params.dt as f64;
+                match &mut stats {
+                    Some(stats) => stats.add(&sub),
+                    None => stats = Some(sub),
+                }
             }
         });
-        stats.contacts = self.contacts.len();
-        self.state.time += self.params.dt as f64;
         self.state.step += 1;
-        stats
+        stats.expect("a scene takes at least one substep")
     }
 
     /// Runs one stage of the current step on what the earlier stages left

@@ -83,7 +83,7 @@ pub struct Params {
     /// Most PCG iterations per step (`solver.cg_iters`); the pass records
     /// them all, and converged ones return at once.
     pub cg_max_iters: u32,
-    /// Time step h in s.
+    /// Time step of one substep in s (`Scene::substep_dt`).
     pub dt: f32,
     /// Mass of each cloth vertex in kg.
     pub vertex_mass: f32,
@@ -195,46 +195,52 @@ pub struct Params {
     /// `self_contact.mass_ratio` times the vertex mass, kg
     /// (`cpu::self_contact::Band::limit`).
     pub cloth_limit: f32,
+    /// Steps of [`Params::dt`] per step of `solver.dt` (`Scene::substeps`).
+    pub substeps: u32,
+    /// The uniform's size is a multiple of 16 bytes.
+    pub pad: [u32; 3],
 }
 
-/// Clock and run statistics kept on the GPU.
+/// Clock and run statistics kept on the GPU. A step of `solver.dt` is
+/// [`Params::substeps`] solves; its sums and maxima run over them.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct StepState {
-    /// Steps of h since t = 0 on the body's clock: the simulated time is
-    /// clock × h, formed as `f32(clock) * h` where a kernel needs it (one
+    /// Substeps of h ([`Params::dt`]) since t = 0 on the body's clock: the
+    /// simulated time is clock × h, formed as `f32(clock) * h` where a kernel needs it (one
     /// rounding, so no drift; an `f32` sum of h was 0.66 s off by step 100k).
     pub clock: u32,
     /// Steps taken.
     pub steps: u32,
-    /// PCG iterations summed over every step.
+    /// PCG iterations summed over every substep.
     pub cg_iterations_total: u32,
-    /// Steps whose PCG broke down (pᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite)).
+    /// Substeps whose PCG broke down (pᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite)).
     pub cg_breakdowns: u32,
     /// The largest relative residual |S r| / |S b| any step's PCG ended at.
     pub cg_residual_max: f32,
-    /// Contacts summed over every step (stage "measure" adds `contacts_last`).
+    /// Contacts summed over every substep (stage "measure" adds `contacts_last`).
     pub contacts_total: u32,
-    /// Contacts the last step found (stage "collide" counts them).
+    /// Contacts the last substep found (stage "collide" counts them).
     pub contacts_last: u32,
     /// The deepest the cloth has been inside the body after a solve (before
     /// the push-out moved it onto the surface), in m, as the bit pattern of a non-negative `f32` (so the kernels can take an atomic max).
     pub max_penetration_bits: u32,
-    /// PCG iterations of the last step.
+    /// PCG iterations of the last step: the most of its substeps'.
     pub last_iterations: u32,
-    /// Relative residual |S r| / |S b| the last step's PCG ended at.
+    /// Relative residual |S r| / |S b| the last step's PCG ended at: the
+    /// worst of its substeps'.
     pub last_residual: f32,
     /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
     /// pass and kept until the state is replaced.
     pub health: u32,
     /// Self-contact: the most near pairs one step found (stage "separate").
     pub self_pairs_max: u32,
-    /// Self-contact: steps whose rounds did not settle or whose pairs
+    /// Self-contact: substeps whose rounds did not settle or whose pairs
     /// overflowed the list, so that every vertex near the cloth was held.
     pub self_fallbacks: u32,
     /// Self-contact: vertex steps held back, summed over every step.
     pub self_held_total: u32,
-    /// Self-contact: steps whose near pairs overflowed the list (their
+    /// Self-contact: substeps whose near pairs overflowed the list (their
     /// rounds walked the cloth again instead: slower, the same result).
     pub self_overflows: u32,
     /// Self-contact: the most cloth–cloth contacts one step applied (stage

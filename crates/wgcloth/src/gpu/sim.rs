@@ -143,11 +143,11 @@ impl GpuSim {
                 queries: device.create_query_set(&wgpu::QuerySetDescriptor {
                     label: Some("stage timestamps"),
                     ty: wgpu::QueryType::Timestamp,
-                    count: 2 * Stage::ALL.len() as u32,
+                    count: 2 * query_passes(&params),
                 }),
                 resolve: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("timestamps"),
-                    size: (16 * Stage::ALL.len()) as u64,
+                    size: 16 * query_passes(&params) as u64,
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
                 }),
@@ -257,20 +257,25 @@ impl GpuSim {
     }
 
     /// Where each recorded step leaves its passes' timestamps (two `u64`
-    /// ticks per [`Stage::ALL`] entry; [`Self::stage_ms`] reads them), when
+    /// ticks per [`Stage::ALL`] entry and substep; [`Self::stage_ms`] reads them), when
     /// the adapter has timestamp queries.
     pub fn timestamps(&self) -> Option<&wgpu::Buffer> {
         self.timer.as_ref().map(|t| &t.resolve)
     }
 
-    /// Milliseconds of each pass from a copy of [`Self::timestamps`].
+    /// Milliseconds of each pass from a copy of [`Self::timestamps`],
+    /// summed over the step's substeps.
     pub fn stage_ms(&self, ticks: &[u64]) -> Vec<(&'static str, f64)> {
         let period = self.timer.as_ref().map_or(1.0, |t| t.period_ns) as f64;
         self.active_passes()
             .map(|stage| {
-                let k = stage.index();
-                let dt = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
-                (stage.name(), dt as f64 * period * 1e-6)
+                let ticks: u64 = (0..self.params.substeps)
+                    .map(|sub| {
+                        let q = 2 * query_pass(stage, sub) as usize;
+                        ticks[q + 1].saturating_sub(ticks[q])
+                    })
+                    .sum();
+                (stage.name(), ticks as f64 * period * 1e-6)
             })
             .collect()
     }
@@ -314,8 +319,9 @@ impl GpuSim {
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
         stage: Stage,
+        substep: u32,
     ) -> wgpu::ComputePass<'e> {
-        let k = stage.index();
+        let k = query_pass(stage, substep);
         encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(stage.name()),
             timestamp_writes: self
@@ -323,8 +329,8 @@ impl GpuSim {
                 .as_ref()
                 .map(|t| wgpu::ComputePassTimestampWrites {
                     query_set: &t.queries,
-                    beginning_of_pass_write_index: Some(2 * k as u32),
-                    end_of_pass_write_index: Some(2 * k as u32 + 1),
+                    beginning_of_pass_write_index: Some(2 * k),
+                    end_of_pass_write_index: Some(2 * k + 1),
                 }),
         })
     }
@@ -344,15 +350,16 @@ impl GpuSim {
             .filter(move |stage| stage.runs(self.params.has_rigid != 0, self.self_contact_stages()))
     }
 
-    /// Records one backward Euler step into `encoder`; nothing is read
-    /// back. Returns the number of dispatches recorded.
+    /// Records one step of `solver.dt` into `encoder`: `Scene::substeps`
+    /// backward Euler steps of `Scene::substep_dt`; nothing is read back.
+    /// Returns the number of dispatches recorded.
     pub fn encode_step(&self, encoder: &mut wgpu::CommandEncoder) -> u32 {
-        let count = self
-            .active_passes()
-            .map(|stage| self.record_stage(encoder, stage))
+        let count = (0..self.params.substeps)
+            .flat_map(|sub| self.active_passes().map(move |stage| (sub, stage)))
+            .map(|(sub, stage)| self.record_substage(encoder, stage, sub))
             .sum();
         if let Some(t) = &self.timer {
-            let queries = 2 * Stage::ALL.len() as u32;
+            let queries = 2 * query_passes(&self.params);
             encoder.resolve_query_set(&t.queries, 0..queries, &t.resolve, 0);
         }
         count
@@ -362,6 +369,16 @@ impl GpuSim {
     /// per-stage benches time them one by one); a rigid-body stage records
     /// nothing without a body. Returns the number of dispatches recorded.
     pub fn record_stage(&self, encoder: &mut wgpu::CommandEncoder, stage: Stage) -> u32 {
+        self.record_substage(encoder, stage, 0)
+    }
+
+    /// [`Self::record_stage`], its pass timed in `substep`'s queries.
+    fn record_substage(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        stage: Stage,
+        substep: u32,
+    ) -> u32 {
         let p = &self.params;
         if !stage.runs(p.has_rigid != 0, self.self_contact_stages()) {
             return 0;
@@ -373,7 +390,7 @@ impl GpuSim {
             Stage::SelfContact => s.self_contact.clear(encoder, p),
             _ => {}
         }
-        let mut pass = self.pass(encoder, stage);
+        let mut pass = self.pass(encoder, stage, substep);
         s.begin(&mut pass);
         match stage {
             Stage::Rigid => s.rigid.encode(&mut pass, p),
@@ -391,14 +408,15 @@ impl GpuSim {
     }
 
     /// Replaces the cloth state (e.g. with a CPU state, to compare a stage)
-    /// and sets the clock to `step` steps of h.
+    /// and sets the clock to `step` steps of `solver.dt`.
     pub fn upload_state(&self, x: &[Vec3], v: &[Vec3], step: u32) {
         self.queue
             .write_buffer(&self.buffers.x, 0, bytemuck::cast_slice(&vec4s(x, 1.0)));
         self.queue
             .write_buffer(&self.buffers.v, 0, bytemuck::cast_slice(&vec4s(v, 0.0)));
+        let clock = step * self.params.substeps;
         self.queue
-            .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&step));
+            .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&clock));
         // A new state starts healthy.
         let health = std::mem::offset_of!(StepState, health) as u64;
         self.queue
@@ -521,6 +539,16 @@ impl GpuSim {
         let ticks: Vec<u64> = self.read(&t.resolve)?;
         Ok(Some(self.stage_ms(&ticks)))
     }
+}
+
+/// Passes a step's timestamps cover: each stage in each substep.
+fn query_passes(params: &Params) -> u32 {
+    Stage::ALL.len() as u32 * params.substeps
+}
+
+/// The timestamp pair of `stage` in `substep`.
+fn query_pass(stage: Stage, substep: u32) -> u32 {
+    substep * Stage::ALL.len() as u32 + stage.index() as u32
 }
 
 /// The first error `scope` captured, as one line saying what was being done.

@@ -8,7 +8,9 @@ pub mod rigid;
 
 use glam::{Quat, Vec3};
 
-use crate::config::{Config, MotionKind, Pins, Rotation, SceneKind, Shape};
+use crate::config::{
+    Config, MAX_BODY_TRAVEL, MAX_SUBSTEPS, MotionKind, Pins, Rotation, SceneKind, Shape,
+};
 use crate::error::{Error, Result};
 use crate::nn::weights::Network;
 pub use cloth::Cloth;
@@ -27,6 +29,9 @@ pub struct Scene {
     pub rigid: Option<RigidBody>,
     /// The collision network, folded to physical units, for network models.
     pub network: Option<Arc<Network>>,
+    /// Backward Euler steps of [`Scene::substep_dt`] per step of
+    /// `solver.dt` ([`substeps`]).
+    pub substeps: u32,
 }
 
 fn quat(r: &Rotation) -> Quat {
@@ -94,11 +99,93 @@ impl Scene {
             }
         };
         let network = config.read_weights()?.map(|file| Arc::new(file.network()));
+        let substeps = substeps(config, &cloth, rigid.as_ref())?;
         Ok(Scene {
             config: config.clone(),
             cloth,
             rigid,
             network,
+            substeps,
         })
+    }
+
+    /// The time step each backward Euler solve takes, s: `solver.dt` over
+    /// [`Scene::substeps`].
+    pub fn substep_dt(&self) -> f32 {
+        self.config.solver.dt / self.substeps as f32
+    }
+}
+
+/// The substeps of one step: `solver.substeps`, or where that is 0 the
+/// fewest that keep the body's travel in one within [`MAX_BODY_TRAVEL`]
+/// times the cloth's shortest rest length. A step is one linear solve,
+/// linearised where it starts (thesis eq. 1): a body that sweeps past a
+/// vertex by about the cloth's spacing in one flings it out of the cloth
+/// (BENCHMARKS.md, "Substeps that keep the body within half a spacing").
+/// An error where that would take more than [`MAX_SUBSTEPS`].
+pub fn substeps(config: &Config, cloth: &Cloth, rigid: Option<&RigidBody>) -> Result<u32> {
+    let fixed = config.solver.substeps;
+    if fixed > 0 {
+        return Ok(fixed);
+    }
+    let travel = rigid.map_or(0.0, |body| body.motion.top_speed()) * config.solver.dt;
+    let spacing = cloth
+        .rest_lengths
+        .iter()
+        .copied()
+        .fold(f32::INFINITY, f32::min);
+    let needed = (travel / (MAX_BODY_TRAVEL * spacing)).ceil().max(1.0);
+    if needed > MAX_SUBSTEPS as f32 {
+        return Err(Error::config(
+            "solver.substeps",
+            format!(
+                "the body moves {:.1} mm a step against a cloth spacing of {:.2} mm, which needs {needed} substeps, more than {MAX_SUBSTEPS}; lower solver.dt",
+                1e3 * travel,
+                1e3 * spacing
+            ),
+        ));
+    }
+    Ok(needed as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The substeps a scene takes, or the error's text.
+    fn substeps_of(grid: u32, edit: impl Fn(&mut Config)) -> std::result::Result<u32, String> {
+        let mut c = Config::default();
+        c.cloth.grid = [grid, grid];
+        edit(&mut c);
+        Scene::new(&c)
+            .map(|s| s.substeps)
+            .map_err(|e| e.to_string())
+    }
+
+    /// The thesis sphere moves 7.85 mm a step at most (0.25 m at 2π / 2 s
+    /// over 0.01 s): within half the spacing of a 64² cloth (7.94 mm), and
+    /// 1.99 and 4.01 halves of the 128² and 256² spacings. No body or a
+    /// body at rest takes one solve a step; `solver.substeps` sets them;
+    /// a body too fast for `MAX_SUBSTEPS` is an error naming the field.
+    #[test]
+    fn substeps_keep_the_body_within_half_a_spacing() {
+        let default = |_: &mut Config| {};
+        assert_eq!(substeps_of(32, default), Ok(1));
+        assert_eq!(substeps_of(64, default), Ok(1));
+        assert_eq!(substeps_of(128, default), Ok(2));
+        assert_eq!(substeps_of(256, default), Ok(5));
+        assert_eq!(substeps_of(256, |c| c.scene = SceneKind::Hang), Ok(1));
+        assert_eq!(
+            substeps_of(256, |c| c.rigid.motion.kind = MotionKind::Static),
+            Ok(1)
+        );
+        assert_eq!(substeps_of(256, |c| c.solver.substeps = 3), Ok(3));
+        // Half the step, half the travel.
+        assert_eq!(substeps_of(256, |c| c.solver.dt = 0.005), Ok(3));
+        let fast = substeps_of(64, |c| c.rigid.motion.period = 0.01).unwrap_err();
+        assert!(
+            fast.contains("solver.substeps") && fast.contains("lower solver.dt"),
+            "{fast}"
+        );
     }
 }

@@ -55,6 +55,17 @@ impl Motion {
         }
     }
 
+    /// The most [`Motion::velocity`]'s length reaches, m/s.
+    pub fn top_speed(&self) -> f32 {
+        match *self {
+            Motion::Static => 0.0,
+            Motion::Linear { velocity } => velocity.length(),
+            Motion::Sinusoid {
+                amplitude, period, ..
+            } => amplitude.abs() * std::f32::consts::TAU / period,
+        }
+    }
+
     /// The body's velocity at time `t` (s), m/s: the derivative of
     /// [`Motion::displacement`].
     pub fn velocity(&self, t: f32) -> Vec3 {
