@@ -13,6 +13,10 @@
 #  2. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput and the sphere period, into bench.json,
 #     bench.png and bench.txt.
+# Both take $SUBSTEPS solves a step (default 1: the thesis's step, the one
+# the goal names and the H200 figures in BENCHMARKS.md timed; 0 takes the
+# scene's own, which keep the sphere within half the cloth's spacing a
+# solve: 17 at 1024², 17 times the work).
 # Everything printed also goes to OUT_DIR/log.txt (default target/bench-gpu),
 # a line a row, so a run cut short still says how far it got.
 # BINARY is a wgcloth built elsewhere (a machine with a GPU but no Rust
@@ -24,6 +28,7 @@ out=${1:-target/bench-gpu}
 bin=${2:-}
 name=${GPU_NAME:-nvidia}
 goal_grids=${GOAL_GRIDS:-1024}
+substeps=${SUBSTEPS:-1}
 
 if [ -z "$bin" ]; then
   cargo build --release -p wgcloth-cli
@@ -60,10 +65,10 @@ for n in $goal_grids; do
     esac
     # A run that fails or outlasts $RUN_TIMEOUT seconds leaves the bench to run.
     if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
-      $variant --report "$report"; then
+      --substeps "$substeps" $variant --report "$report"; then
       echo "the ${n}² run ${variant} failed or outlasted ${RUN_TIMEOUT:-600} s"
     fi
   done
 done
 echo "== wgcloth bench --gpu-only"
-"$bin" bench --gpu-only --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"
+"$bin" bench --gpu-only --substeps "$substeps" --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"

@@ -112,7 +112,7 @@ fn step64(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("step64/{backend}"));
         group.sample_size(10);
         for v in VARIANTS {
-            let scene = v.scene(64).expect("valid benchmark scene");
+            let scene = v.scene(64, 0).expect("valid benchmark scene");
             if backend == "cpu" {
                 let mut sim = CpuSim::new(scene);
                 group.bench_function(v.label(), |b| {
@@ -143,7 +143,7 @@ fn period(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("period/{backend}"));
         group.sample_size(10);
         for v in VARIANTS {
-            let scene = v.scene(32).expect("valid benchmark scene");
+            let scene = v.scene(32, 0).expect("valid benchmark scene");
             if backend == "cpu" {
                 group.bench_function(v.label(), |b| {
                     b.iter(|| {

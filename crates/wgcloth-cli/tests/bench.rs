@@ -28,6 +28,8 @@ fn tiny() -> BenchOptions {
         repeats: 2,
         iteration_grids: vec![16],
         backends: Backends::Both,
+        // The converged rows' solves a step (the scene's own is 1 here).
+        substeps: 2,
     }
 }
 
@@ -246,6 +248,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
             })
             .expect("the converged row");
         assert_eq!(row.report.preconditioner, c.preconditioner, "{c:?}");
+        assert_eq!((c.substeps, row.report.substeps), (2, 2), "{c:?}");
         let thesis = report
             .rows
             .iter()
@@ -256,6 +259,7 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
                     && r.report.grid[0] == c.grid
             })
             .expect("the thesis-solve row");
+        assert_eq!(thesis.report.substeps, 1, "the thesis's step is one solve");
         let ratio = row.report.ms_per_step / thesis.report.ms_per_step;
         assert!((c.times_thesis_step.unwrap() - ratio).abs() < 1e-9, "{c:?}");
     }

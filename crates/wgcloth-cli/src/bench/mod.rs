@@ -34,10 +34,12 @@ use wgcloth_learn::domain::{Rng, uniform_inputs};
 /// How a row's steps are solved.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solve {
-    /// The thesis's: 25 Jacobi-PCG iterations at tolerance 0, the same
-    /// solver work for every model.
+    /// The thesis's: one solve a step (`--substeps 1`) of 25 Jacobi-PCG
+    /// iterations at tolerance 0, the same solver work for every model.
     Thesis,
-    /// Every step to |S r| ≤ [`RESIDUAL_GOAL`] |S b| with this preconditioner.
+    /// Every solve to |S r| ≤ [`RESIDUAL_GOAL`] |S b| with this
+    /// preconditioner, and as many solves a step as the scene takes
+    /// (`Scene::substeps`).
     Converged(Preconditioner),
 }
 
@@ -109,15 +111,18 @@ impl Variant {
         }
     }
 
-    /// The sphere scene at N×N with this variant's network and solve.
-    pub fn scene(&self, grid: u32) -> Result<Scene> {
-        let mut scene = scene(SceneKind::Sphere, self.model, grid)?;
+    /// The sphere scene at N×N with this variant's network and solve, a
+    /// converged solve's steps taking `substeps` solves (0: the scene's).
+    pub fn scene(&self, grid: u32, substeps: u32) -> Result<Scene> {
+        let mut c = config(SceneKind::Sphere, self.model, grid);
         if let Solve::Converged(p) = self.solve {
-            let solver = &mut scene.config.solver;
+            let solver = &mut c.solver;
             solver.preconditioner = p;
             (solver.cg_iters, solver.cg_tol) = (self.solve.cap(), RESIDUAL_GOAL);
+            solver.substeps = substeps;
         }
-        scene.config.self_contact.enabled = self.self_contact;
+        c.self_contact.enabled = self.self_contact;
+        let mut scene = Scene::new(&c)?;
         if let Some(net) = self.network {
             scene.network = Some(Arc::new(net.read()?.network()));
             // Names the network in the report.
@@ -186,6 +191,9 @@ pub struct BenchOptions {
     pub iteration_grids: Vec<u32>,
     /// The backends whose rows it measures.
     pub backends: Backends,
+    /// Solves a step of the converged rows (`solver.substeps`; 0: the
+    /// scene's own, `Scene::substeps`). The thesis's rows take one.
+    pub substeps: u32,
 }
 
 /// Which backends a bench measures.
@@ -221,6 +229,7 @@ impl BenchOptions {
             repeats: 3,
             iteration_grids: vec![128, 256, 512],
             backends: Backends::Both,
+            substeps: 0,
         }
     }
 
@@ -275,19 +284,26 @@ impl BenchOptions {
     }
 }
 
-/// A benchmark scene: N×N cloth and the thesis's solver, 25 Jacobi-PCG
-/// iterations at tolerance 0, so every model does the same solver work.
+/// A benchmark scene: N×N cloth and the thesis's step and solver, one
+/// solve of 25 Jacobi-PCG iterations at tolerance 0, so every model does
+/// the same solver work.
 pub fn scene(kind: SceneKind, model: ModelKind, grid: u32) -> Result<Scene> {
+    Scene::new(&config(kind, model, grid))
+}
+
+/// [`scene`]'s configuration.
+fn config(kind: SceneKind, model: ModelKind, grid: u32) -> Config {
     let mut c = Config {
         scene: kind,
         model,
         ..Default::default()
     };
     c.cloth.grid = [grid, grid];
+    c.solver.substeps = 1;
     c.solver.cg_iters = Solve::Thesis.cap();
     c.solver.cg_tol = 0.0;
     c.solver.preconditioner = Preconditioner::Jacobi;
-    Scene::new(&c)
+    c
 }
 
 /// The network and its input Jacobian over one batch of contacts.
@@ -416,9 +432,11 @@ pub struct ConvergedRow {
     pub label: String,
     pub grid: u32,
     pub preconditioner: Preconditioner,
+    /// Solves a step (`Scene::substeps`).
+    pub substeps: u32,
     /// The row's median ms/step.
     pub ms_per_step: f64,
-    /// PCG iterations per step, mean and most.
+    /// PCG iterations per step (summed over its solves), mean and most.
     pub iterations_mean: f64,
     pub iterations_max: u32,
     /// The worst relative residual a step ended at, and the steps that
@@ -500,8 +518,8 @@ fn backends(which: Backends) -> Result<(Vec<Chosen>, String)> {
 }
 
 /// One step row: `v` on `backend` at `grid`².
-fn step_row(backend: &Chosen, v: Variant, grid: u32, steps: Steps) -> Result<StepRow> {
-    let scene = v.scene(grid)?;
+fn step_row(backend: &Chosen, v: Variant, grid: u32, opts: &BenchOptions) -> Result<StepRow> {
+    let scene = v.scene(grid, opts.substeps)?;
     let (particles, springs) = (scene.cloth.vertex_count(), scene.cloth.springs.len());
     let triangles = scene.cloth.triangles.len();
     let body_vertices = scene.rigid.as_ref().map_or(0, |b| b.mesh.vertices.len());
@@ -509,7 +527,7 @@ fn step_row(backend: &Chosen, v: Variant, grid: u32, steps: Steps) -> Result<Ste
         .network
         .as_ref()
         .map_or(0, |n| n.jacobian_multiply_adds());
-    let report = run::run(backend, scene, steps, Default::default())?;
+    let report = run::run(backend, scene, opts.steps, Default::default())?;
     // A run that diverged before its timed steps has no step time.
     let stage_coverage = match report.ms_per_step > 0.0 {
         true => report.stage_ms.values().sum::<f64>() / report.ms_per_step,
@@ -536,7 +554,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         for grid in grids(opts, backend) {
             for v in VARIANTS {
                 progress(&format!("step {} {} {grid}²", name(backend), v.label()));
-                let row = step_row(backend, v, grid, opts.steps)?;
+                let row = step_row(backend, v, grid, opts)?;
                 let r = &row.report;
                 progress(&match &r.divergence {
                     Some(d) => format!("  diverged at step {}: {}", d.step, d.reason),
@@ -563,7 +581,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         let mut seconds = Vec::new();
         for v in VARIANTS.into_iter().filter(|v| v.solve == Solve::Thesis) {
             progress(&format!("period {} {}", name(backend), v.label()));
-            let scene = v.scene(opts.period_grid)?;
+            let scene = v.scene(opts.period_grid, opts.substeps)?;
             let steps = Steps::all(opts.period_steps);
             let mut runs = (0..opts.repeats)
                 .map(|_| {
@@ -633,6 +651,7 @@ fn converged(rows: &[StepRow]) -> Vec<ConvergedRow> {
                 label: r.label.clone(),
                 grid,
                 preconditioner: report.preconditioner,
+                substeps: report.substeps,
                 ms_per_step: report.ms_per_step,
                 iterations_mean: report.cg_iterations_mean,
                 iterations_max: report.cg_iterations_max,
@@ -1054,10 +1073,11 @@ impl BenchReport {
             &mut out,
             &self.converged,
             format!(
-                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>11}{:>8}{:>6}{:>11}{:>7}{:>7}{:>10}\n",
+                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>7}{:>11}{:>8}{:>6}{:>11}{:>7}{:>7}{:>10}\n",
                 "backend",
                 "model",
                 "grid",
+                "solves",
                 "ms/step",
                 "iters",
                 "most",
@@ -1068,10 +1088,11 @@ impl BenchReport {
             ),
             |c| {
                 format!(
-                    "{:<8}{:<32}{:>6}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>7}{:>10}\n",
+                    "{:<8}{:<32}{:>6}{:>7}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>7}{:>10}\n",
                     c.backend,
                     c.label,
                     c.grid,
+                    c.substeps,
                     ms_or_diverged(c.ms_per_step, c.diverged_at, 11),
                     c.iterations_mean,
                     c.iterations_max,
@@ -1240,10 +1261,13 @@ mod tests {
     /// leave it out rather than divide by its zero.
     #[test]
     fn a_diverged_row_is_named_and_left_out() {
-        let steps = Steps {
-            untimed: 1,
-            total: 3,
-            first_budget: None,
+        let opts = BenchOptions {
+            steps: Steps {
+                untimed: 1,
+                total: 3,
+                first_budget: None,
+            },
+            ..BenchOptions::quick()
         };
         let model = ModelKind::Friction;
         let thesis = Variant::of(model);
@@ -1251,7 +1275,7 @@ mod tests {
         let mut rows = Vec::new();
         for grid in [6, 10, 14] {
             for v in [thesis, solved] {
-                rows.push(step_row(&Chosen::Cpu, v, grid, steps).expect("a tiny CPU run"));
+                rows.push(step_row(&Chosen::Cpu, v, grid, &opts).expect("a tiny CPU run"));
             }
         }
         let kept =
