@@ -207,8 +207,9 @@ pub struct Params {
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct StepState {
     /// Substeps of h ([`Params::dt`]) since t = 0 on the body's clock: the
-    /// simulated time is clock × h, formed as `f32(clock) * h` where a kernel needs it (one
-    /// rounding, so no drift; an `f32` sum of h was 0.66 s off by step 100k).
+    /// simulated time is clock × h, formed as `f32(clock) * h` where a
+    /// kernel needs it (one rounding, so no drift; an `f32` sum of h was
+    /// 0.66 s off by step 100k).
     pub clock: u32,
     /// Steps taken.
     pub steps: u32,

@@ -257,8 +257,8 @@ impl GpuSim {
     }
 
     /// Where each recorded step leaves its passes' timestamps (two `u64`
-    /// ticks per [`Stage::ALL`] entry and substep; [`Self::stage_ms`] reads them), when
-    /// the adapter has timestamp queries.
+    /// ticks per [`Stage::ALL`] entry and substep; [`Self::stage_ms`]
+    /// reads them), when the adapter has timestamp queries.
     pub fn timestamps(&self) -> Option<&wgpu::Buffer> {
         self.timer.as_ref().map(|t| &t.resolve)
     }
