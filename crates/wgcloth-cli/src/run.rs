@@ -476,11 +476,13 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         separated.contacts_dropped += s.self_contacts_dropped as u64;
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
         if health::failed(flags, s.pcg.breakdown) {
+            keep(&mut sim.state, &last_good);
+            let (flags, breakdown) = cpu_failing_solve(&mut sim, max_speed);
             let (matrix, b) = sim.system();
             divergence = Some(health::diagnose(&FailedStep {
                 step: k + 1,
                 flags,
-                breakdown: s.pcg.breakdown,
+                breakdown,
                 diag: &matrix.diag,
                 b,
                 x: &sim.state.x,
@@ -667,13 +669,12 @@ fn run_gpu(
                 let (x0, v0) = flight.start_of(&sim, &f)?;
                 sim.upload_state(&x0, &v0, f.step as u32);
                 sim.set_cg_budget(f.budget);
-                sim.step();
-                ctx.finish()?;
+                let (flags, breakdown) = gpu_failing_solve(ctx, &sim, scene.substeps)?;
                 let (diag, _, b) = sim.read_system()?;
                 let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
                 divergence = Some(health::diagnose(&FailedStep {
                     step: f.step + 1,
-                    flags: state.health,
+                    flags,
                     breakdown,
                     diag: &diag,
                     b: &b,
@@ -994,6 +995,51 @@ pub fn check_diverged(report: &Report) -> Result<()> {
 }
 
 /// Copies `from` into `to` without allocating.
+/// Runs the step that failed again from where it started, solve by solve
+/// (`Scene::substeps`), up to the first solve that fails: its health flags
+/// and breakdown. Its system is then the one the failure entered, which
+/// `health::diagnose` reads; after later solves it has spread. The step
+/// counts as taken.
+pub fn cpu_failing_solve(sim: &mut CpuSim, max_speed: f32) -> (u32, bool) {
+    let mut failure = (0, false);
+    for _ in 0..sim.scene.substeps {
+        let mut s = cpu::StepStats::default();
+        for stage in Stage::ALL {
+            sim.run_stage(stage, &mut s);
+        }
+        sim.state.time += sim.scene.substep_dt() as f64;
+        failure = (
+            integrate::health(&sim.state.x, &sim.state.v, max_speed),
+            s.pcg.breakdown,
+        );
+        if health::failed(failure.0, failure.1) {
+            break;
+        }
+    }
+    sim.state.step += 1;
+    failure
+}
+
+/// [`cpu_failing_solve`] on the GPU, `sim` holding the step's start.
+pub fn gpu_failing_solve(ctx: &GpuContext, sim: &GpuSim, substeps: u32) -> Result<(u32, bool)> {
+    let breakdowns = sim.read_state()?.cg_breakdowns;
+    let mut failure = (0, false);
+    for _ in 0..substeps {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        for stage in Stage::ALL {
+            sim.record_stage(&mut encoder, stage);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.finish()?;
+        let state = sim.read_state()?;
+        failure = (state.health, state.cg_breakdowns > breakdowns);
+        if health::failed(failure.0, failure.1) {
+            break;
+        }
+    }
+    Ok(failure)
+}
+
 fn keep(to: &mut State, from: &State) {
     to.x.copy_from_slice(&from.x);
     to.v.copy_from_slice(&from.v);

@@ -22,8 +22,9 @@ use wgcloth_cli::run::{self, Chosen, Steps};
 
 /// The hanging cloth at 8² (in the x-y plane, pinned at its top corners)
 /// under gravity along −z: its free edge falls out of the plane at about
-/// g h ≈ 0.098 m/s more each step.
-fn falling(max_speed: f32) -> Scene {
+/// g h ≈ 0.098 m/s more each step, a step of `substeps` solves (0: the
+/// scene's own, 1).
+fn falling(max_speed: f32, substeps: u32) -> Scene {
     let mut c = Config {
         scene: SceneKind::Hang,
         model: ModelKind::Friction,
@@ -31,6 +32,7 @@ fn falling(max_speed: f32) -> Scene {
     };
     c.cloth.grid = [8, 8];
     c.solver.max_speed = max_speed;
+    c.solver.substeps = substeps;
     c.solver.gravity = [0.0, 0.0, -9.81];
     Scene::new(&c).expect("valid scene")
 }
@@ -78,7 +80,7 @@ fn first_too_fast(scene: &Scene, max_speed: f32) -> TooFast {
 fn a_run_past_max_speed_stops_at_that_step_naming_the_fastest_vertex() {
     // The third step crosses 0.25 m/s with a margin no rounding closes.
     let max_speed = 0.25;
-    let scene = falling(max_speed);
+    let scene = falling(max_speed, 0);
     let TooFast {
         step,
         vertex,
@@ -122,23 +124,29 @@ fn a_run_past_max_speed_stops_at_that_step_naming_the_fastest_vertex() {
     }
 }
 
+/// A NaN velocity enters the system at its vertex's row. A step of two
+/// solves spreads it everywhere by the second, so the run loop solves the
+/// failing step again solve by solve (`run::cpu_failing_solve`,
+/// `run::gpu_failing_solve`) and the diagnosis reads the first's system.
 #[test]
 fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
-    let scene = falling(100.0);
+    let scene = falling(100.0, 2);
     let bad = 37usize;
     let mut cpu = CpuSim::new(scene.clone());
     cpu.step();
     let (x0, mut v0) = (cpu.state.x.clone(), cpu.state.v.clone());
     v0[bad] = Vec3::new(f32::NAN, 0.0, 0.0);
     cpu.state.v = v0.clone();
-    let stats = cpu.step();
-    let flags = wgcloth::cpu::integrate::health(&cpu.state.x, &cpu.state.v, 100.0);
+    assert!(cpu.step().pcg.breakdown);
+    cpu.state.x = x0.clone();
+    cpu.state.v = v0.clone();
+    let (flags, breakdown) = run::cpu_failing_solve(&mut cpu, 100.0);
     assert_eq!(flags & NOT_FINITE, NOT_FINITE);
     let (matrix, b) = cpu.system();
     let d = health::diagnose(&FailedStep {
         step: 2,
         flags,
-        breakdown: stats.pcg.breakdown,
+        breakdown,
         diag: &matrix.diag,
         b,
         x: &cpu.state.x,
@@ -156,6 +164,10 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     ctx.finish().expect("device healthy");
     let state = sim.read_state().expect("state");
     assert_eq!(state.health & NOT_FINITE, NOT_FINITE, "{state:?}");
+    // Both solves broke down; counted as the CPU counts: one step.
+    assert_eq!(state.cg_breakdowns, 1, "{state:?}");
+    sim.upload_state(&x0, &v0, 1);
+    let (flags, breakdown) = run::gpu_failing_solve(&ctx, &sim, scene.substeps).expect("runs");
     let (diag, _, b) = sim.read_system().expect("system");
     let (x, v) = (
         sim.read_positions().unwrap(),
@@ -163,8 +175,8 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     );
     let gpu_d = health::diagnose(&FailedStep {
         step: 2,
-        flags: state.health,
-        breakdown: false,
+        flags,
+        breakdown,
         diag: &diag,
         b: &b,
         x: &x,
@@ -185,7 +197,7 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
 #[test]
 fn the_gpu_raises_the_same_flags_as_the_cpu() {
     let Some(ctx) = gpu() else { return };
-    let scene = falling(0.05);
+    let scene = falling(0.05, 0);
     let kernels = std::sync::Arc::new(Kernels::new(&ctx.device).expect("kernels"));
     let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
     let mut cpu = CpuSim::new(scene);
@@ -254,7 +266,7 @@ fn the_cli_reports_a_divergence_in_one_line_and_keeps_the_last_good_state() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
     assert_eq!(lines.len(), 1, "{stderr}");
-    let TooFast { step, vertex, .. } = first_too_fast(&falling(0.25), 0.25);
+    let TooFast { step, vertex, .. } = first_too_fast(&falling(0.25, 0), 0.25);
     assert!(
         lines[0].contains(&format!("diverged at step {step}, vertex {vertex}")),
         "{stderr}"

@@ -57,6 +57,20 @@ struct StepState {
     // and those left out, summed.
     cloth_contacts_max: u32,
     cloth_contacts_dropped: u32,
+    // Which of cg_breakdowns, self_fallbacks and self_overflows this step
+    // has counted already (STEP_*): a step counts once, however many of its
+    // substeps. Cleared by the step's first solve (pcg.wgsl `finish`).
+    step_flags: u32,
+}
+
+const STEP_BREAKDOWN: u32 = 1u;
+const STEP_FALLBACK: u32 = 2u;
+const STEP_OVERFLOW: u32 = 4u;
+
+// `flag` where `happened` is the step's first of it (`flags` being
+// StepState.step_flags), else 0.
+fn first_in_step(flags: u32, happened: bool, flag: u32) -> u32 {
+    return select(0u, flag, happened && (flags & flag) == 0u);
 }
 
 // A cloth–cloth contact and what it adds to the system (stage

@@ -456,11 +456,14 @@ fn finish() {
     if state.clock % params.substeps == 0u {
         state.last_iterations = s.iterations;
         state.last_residual = residual;
+        state.step_flags = 0u;
     } else {
         state.last_iterations = max(state.last_iterations, s.iterations);
         state.last_residual = max(state.last_residual, residual);
     }
     state.cg_iterations_total += s.iterations;
-    state.cg_breakdowns += s.breakdown;
+    let broke = first_in_step(state.step_flags, s.breakdown != 0u, STEP_BREAKDOWN);
+    state.step_flags |= broke;
+    state.cg_breakdowns += select(0u, 1u, broke != 0u);
     state.cg_residual_max = max(state.cg_residual_max, residual);
 }

@@ -428,8 +428,14 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
     let fallback = atomicLoad(&separations[header(SELF_UNSETTLED)]) != 0u;
     if i == 0u {
         state.self_pairs_max = max(state.self_pairs_max, count);
-        state.self_fallbacks += select(0u, 1u, fallback);
-        state.self_overflows += select(0u, 1u, count > capacity());
+        // Steps, not substeps: this runs after the clock's advance, and
+        // before the next step's first solve clears the flags.
+        let flags = state.step_flags;
+        let fell_back = first_in_step(flags, fallback, STEP_FALLBACK);
+        let overflowed = first_in_step(flags, count > capacity(), STEP_OVERFLOW);
+        state.step_flags = flags | fell_back | overflowed;
+        state.self_fallbacks += select(0u, 1u, fell_back != 0u);
+        state.self_overflows += select(0u, 1u, overflowed != 0u);
     }
     if i >= params.n_vertices {
         return;

@@ -215,7 +215,9 @@ pub struct StepState {
     pub steps: u32,
     /// PCG iterations summed over every substep.
     pub cg_iterations_total: u32,
-    /// Substeps whose PCG broke down (pᵀAp ≤ 0, a non-finite scalar, or rᵀz ≤ 0 above the tolerance (a preconditioner that is not positive definite)).
+    /// Steps any of whose PCG solves broke down (pᵀAp ≤ 0, a non-finite
+    /// scalar, or rᵀz ≤ 0 above the tolerance: a preconditioner that is not
+    /// positive definite).
     pub cg_breakdowns: u32,
     /// The largest relative residual |S r| / |S b| any step's PCG ended at.
     pub cg_residual_max: f32,
@@ -236,13 +238,15 @@ pub struct StepState {
     pub health: u32,
     /// Self-contact: the most near pairs one step found (stage "separate").
     pub self_pairs_max: u32,
-    /// Self-contact: substeps whose rounds did not settle or whose pairs
-    /// overflowed the list, so that every vertex near the cloth was held.
+    /// Self-contact: steps in which a substep's rounds did not settle or
+    /// its pairs overflowed the list, so that every vertex near the cloth
+    /// was held.
     pub self_fallbacks: u32,
     /// Self-contact: vertex steps held back, summed over every step.
     pub self_held_total: u32,
-    /// Self-contact: substeps whose near pairs overflowed the list (their
-    /// rounds walked the cloth again instead: slower, the same result).
+    /// Self-contact: steps in which a substep's near pairs overflowed the
+    /// list (its rounds walked the cloth again instead: slower, the same
+    /// result).
     pub self_overflows: u32,
     /// Self-contact: the most cloth–cloth contacts one step applied (stage
     /// "self_contact").
@@ -251,6 +255,10 @@ pub struct StepState {
     /// step (past the list's capacity, or at a vertex in more than
     /// `cpu::self_contact::PAIRS_PER_VERTEX`).
     pub cloth_contacts_dropped: u32,
+    /// Which of the three step counts above this step has added to already
+    /// (bits of `STEP_*` in wgsl/common.wgsl), so that each counts a step
+    /// once whatever its substeps do; cleared by its first solve.
+    pub step_flags: u32,
 }
 
 /// A cloth–cloth contact and what it adds to the system (mirrors
