@@ -994,7 +994,6 @@ pub fn check_diverged(report: &Report) -> Result<()> {
     }
 }
 
-/// Copies `from` into `to` without allocating.
 /// Runs the step that failed again from where it started, solve by solve
 /// (`Scene::substeps`), up to the first solve that fails: its health flags
 /// and breakdown. Its system is then the one the failure entered, which
@@ -1040,6 +1039,7 @@ pub fn gpu_failing_solve(ctx: &GpuContext, sim: &GpuSim, substeps: u32) -> Resul
     Ok(failure)
 }
 
+/// Copies `from` into `to` without allocating.
 fn keep(to: &mut State, from: &State) {
     to.x.copy_from_slice(&from.x);
     to.v.copy_from_slice(&from.v);
