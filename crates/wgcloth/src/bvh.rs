@@ -213,14 +213,13 @@ impl Bvh {
         );
     }
 
-    /// Calls `visit` for every primitive whose box the ray o + t d (t ≥ 0)
-    /// passes through.
-    pub fn query_ray(&self, origin: Vec3, dir: Vec3, visit: impl FnMut(u32)) {
-        let inv = dir.recip();
+    /// Calls `visit` for every primitive whose box the ray o + t x̂ (t ≥ 0)
+    /// meets, its faces and edges included: exact comparisons.
+    pub fn query_x_ray(&self, origin: Vec3, visit: impl FnMut(u32)) {
+        let Vec3 { x, y, z } = origin;
         self.traverse(
             |b| {
-                let (t0, t1) = ((b.min - origin) * inv, (b.max - origin) * inv);
-                t0.max(t1).min_element() >= t0.min(t1).max_element().max(0.0)
+                b.max.x >= x && (b.min.y..=b.max.y).contains(&y) && (b.min.z..=b.max.z).contains(&z)
             },
             visit,
         );

@@ -139,3 +139,36 @@ fn penetration_depth_is_exact_for_a_box_and_close_for_a_sphere() {
         );
     }
 }
+
+/// The inside test casts a ray, and a ray that passes exactly through a
+/// mesh vertex or along an edge shared by two triangles must count that
+/// crossing once: every such ray of a sphere and of a box (whose faces'
+/// grid lines and diagonals the ray meets exactly), from points before,
+/// inside and past the body ([`common::on_rays_through_vertices_and_edges`]).
+#[test]
+fn a_ray_through_a_mesh_vertex_or_edge_counts_one_crossing() {
+    let bodies = [
+        TriMesh::icosphere(0.2, 3),
+        TriMesh::cuboid(Vec3::new(0.2, 0.1, 0.3), 4),
+    ]
+    .map(|mesh| RigidBody::new(mesh, Quat::IDENTITY, Vec3::ZERO, Motion::Static));
+    let (mut checked, mut wrong) = (0, Vec::new());
+    for body in &bodies {
+        for p in common::on_rays_through_vertices_and_edges(body) {
+            let Some(expected) = common::inside_convex(body, p, 1e-4) else {
+                continue;
+            };
+            checked += 1;
+            if measure::inside_body(body, p) != expected {
+                wrong.push((p, expected));
+            }
+        }
+    }
+    assert!(checked > 10_000, "{checked} points checked");
+    assert!(
+        wrong.is_empty(),
+        "{} of {checked} points misjudged, e.g. {:?}",
+        wrong.len(),
+        &wrong[..wrong.len().min(4)]
+    );
+}

@@ -446,6 +446,75 @@ fn vertices_deep_inside_are_measured_and_pushed_out_as_on_the_cpu() {
     assert!(max_dev(&x, &cpu.state.x) < 1e-4);
 }
 
+/// The GPU's inside test judges the rays that pass exactly through a mesh
+/// vertex or edge as the CPU's does (whose own test checks it against the
+/// convex body's planes): cloth vertices put on such rays, before, inside
+/// and past a static sphere at the origin, are found inside and pushed
+/// out by stage `measure` alone on both paths alike.
+#[test]
+fn rays_through_mesh_vertices_and_edges_find_the_same_vertices_inside_on_the_gpu() {
+    use wgcloth::config::MotionKind;
+    use wgcloth::cpu::measure;
+    use wgcloth::cpu::rigid::{RigidFrame, transform};
+    use wgcloth::stage::Stage;
+    let Some((ctx, kernels)) = gpu() else { return };
+    let mut c = Config::default();
+    c.cloth.grid = [128, 128];
+    c.rigid.position = [0.0; 3];
+    c.rigid.motion.kind = MotionKind::Static;
+    let scene = Scene::new(&c).unwrap();
+    let body = scene.rigid.as_ref().unwrap();
+    let n = scene.cloth.vertex_count();
+    // Those clear of the surface, where rounding decides.
+    let mut points = common::on_rays_through_vertices_and_edges(body);
+    points.retain(|&p| common::inside_convex(body, p, 1e-4).is_some());
+    assert!(
+        points.len() >= n,
+        "{} points for {n} vertices",
+        points.len()
+    );
+    // An even sample: about one point in two.
+    let x: Vec<Vec3> = (0..n).map(|i| points[i * points.len() / n]).collect();
+    let v = vec![Vec3::new(0.0, 0.0, -1.0); n];
+    let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    gpu.upload_state(&x, &v, 0);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    gpu.record_stage(&mut encoder, Stage::Rigid);
+    gpu.record_stage(&mut encoder, Stage::Measure);
+    ctx.queue.submit([encoder.finish()]);
+    let (gpu_x, gpu_v) = (
+        gpu.read_positions().unwrap(),
+        gpu.read_velocities().unwrap(),
+    );
+    let mut frame = RigidFrame::default();
+    transform(body, c.solver.dt, &mut frame);
+    let (mut cpu_x, mut cpu_v) = (x.clone(), v.clone());
+    let thickness = c.contact.thickness;
+    measure::push_out(
+        body,
+        &frame,
+        thickness,
+        &scene.cloth.pinned,
+        &mut cpu_x,
+        &mut cpu_v,
+    );
+    let pushed = (0..n).filter(|&i| cpu_x[i] != x[i]).count();
+    let otherwise: Vec<Vec3> = (0..n)
+        .filter(|&i| (gpu_x[i] != x[i]) != (cpu_x[i] != x[i]))
+        .map(|i| x[i])
+        .collect();
+    eprintln!("{pushed} of {n} vertices pushed out");
+    assert!(pushed > n / 8 && pushed < n - n / 8, "{pushed} pushed out");
+    assert!(
+        otherwise.is_empty(),
+        "the GPU judged {} vertices otherwise, e.g. at {:?}",
+        otherwise.len(),
+        &otherwise[..otherwise.len().min(4)]
+    );
+    assert!(max_dev(&gpu_x, &cpu_x) < 1e-5);
+    assert!(max_dev(&gpu_v, &cpu_v) < 1e-5);
+}
+
 #[test]
 fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let Some((ctx, kernels)) = gpu() else { return };

@@ -4,14 +4,13 @@
 
 @group(1) @binding(30) var<storage, read> bvh_nodes: array<BvhNode>;
 
-// A depth-first walk: a box query (p ± reach) or a ray query (p + s d,
-// s ≥ 0, with inv = 1 / d).
+// A depth-first walk: a box query (p ± reach) or a ray query (p + s x̂,
+// s ≥ 0, its boxes' faces and edges included: Bvh::query_x_ray).
 struct BvhWalk {
     stack: array<u32, 64>,
     top: u32,
     p: vec3<f32>,
     reach: f32,
-    inv: vec3<f32>,
     ray: bool,
 }
 
@@ -25,9 +24,8 @@ fn box_walk(p: vec3<f32>, reach: f32) -> BvhWalk {
     return w;
 }
 
-fn ray_walk(p: vec3<f32>, d: vec3<f32>) -> BvhWalk {
+fn ray_walk(p: vec3<f32>) -> BvhWalk {
     var w = box_walk(p, 0.0);
-    w.inv = 1.0 / d;
     w.ray = true;
     return w;
 }
@@ -36,11 +34,8 @@ fn walk_overlaps(w: ptr<function, BvhWalk>, node: BvhNode) -> bool {
     if !(*w).ray {
         return box_near(node.lo, node.hi, (*w).p, (*w).reach);
     }
-    let t0 = (node.lo - (*w).p) * (*w).inv;
-    let t1 = (node.hi - (*w).p) * (*w).inv;
-    let enter = max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z));
-    let exit = min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z));
-    return exit >= max(enter, 0.0);
+    let p = (*w).p;
+    return node.hi.x >= p.x && all(node.lo.yz <= p.yz) && all(p.yz <= node.hi.yz);
 }
 
 // The next leaf the query reaches, or NO_TRIANGLE when the walk is over.

@@ -16,32 +16,63 @@ fn corner(t: u32, k: u32) -> vec3<f32> {
     return body_vertices[body_index(3u * t + k)].xyz;
 }
 
-// Whether the ray o + s d (s > 0) crosses triangle t (Möller–Trumbore).
-fn ray_crosses(o: vec3<f32>, d: vec3<f32>, t: u32) -> bool {
-    let a = corner(t, 0u);
-    let e1 = corner(t, 1u) - a;
-    let e2 = corner(t, 2u) - a;
-    let pv = cross(d, e2);
-    let det = dot(e1, pv);
-    if abs(det) < 1e-12 {
-        return false;
-    }
-    let s = (o - a) / det;
-    let u = dot(s, pv);
-    let qv = cross(s, e1);
-    let v = dot(d, qv);
-    return u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dot(e2, qv) > 0.0;
+// Edge u → v of a triangle projected along the ray, the ray at the
+// origin: its edge function u × v, whether the origin lies to its left (an
+// exact zero decided as if the ray were moved by (ε, ε²), so that the two
+// triangles sharing the edge take opposite sides), and false for an edge
+// along the ray. Evaluated from the lower endpoint, so that both triangles
+// round alike (cpu::measure::projected_edge).
+struct ProjectedEdge {
+    e: f32,
+    left: bool,
+    proper: bool,
 }
 
-// Odd crossings along a direction no generated mesh is aligned with.
+fn projected_edge(u: vec2<f32>, v: vec2<f32>) -> ProjectedEdge {
+    let swapped = v.x < u.x || (v.x == u.x && v.y < u.y);
+    let lo = select(u, v, swapped);
+    let hi = select(v, u, swapped);
+    let e = lo.x * hi.y - lo.y * hi.x;
+    let w = hi - lo;
+    let tie = select(w.x > 0.0, w.y < 0.0, w.y != 0.0);
+    let left = select(tie, e > 0.0, e != 0.0);
+    return ProjectedEdge(select(e, -e, swapped), left != swapped, any(w != vec2<f32>(0.0)));
+}
+
+// Whether the ray from p along +x (cpu::measure::INSIDE_RAY) crosses
+// triangle t: the origin on the same side of its three projected edges,
+// and the crossing, whose barycentric weights are the edge functions,
+// ahead of p.
+fn ray_crosses(p: vec3<f32>, t: u32) -> bool {
+    var q: array<vec2<f32>, 3>;
+    var ahead_of: array<f32, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        let c = corner(t, k);
+        q[k] = c.yz - p.yz;
+        ahead_of[k] = c.x - p.x;
+    }
+    var ahead = 0.0;
+    var sides = 0u;
+    for (var k = 0u; k < 3u; k++) {
+        let edge = projected_edge(q[(k + 1u) % 3u], q[(k + 2u) % 3u]);
+        if !edge.proper {
+            return false;
+        }
+        sides |= select(1u, 2u, edge.left);
+        ahead += edge.e * ahead_of[k];
+    }
+    // All left, the edge functions sum to a positive area; all right, negative.
+    return sides != 3u && ahead != 0.0 && (ahead > 0.0) == (sides == 2u);
+}
+
+// Odd crossings: inside.
 fn inside(p: vec3<f32>) -> bool {
-    let d = normalize(vec3<f32>(1.0, 0.7548777, 0.5698403));
     var crossings = 0u;
-    var walk = ray_walk(p, d);
+    var walk = ray_walk(p);
     for (var leaf = next_leaf(&walk); leaf != NO_TRIANGLE; leaf = next_leaf(&walk)) {
         let node = bvh_nodes[leaf];
         for (var k = node.first; k < node.first + node.count; k++) {
-            crossings += u32(ray_crosses(p, d, bvh_primitive(k)));
+            crossings += u32(ray_crosses(p, bvh_primitive(k)));
         }
     }
     return crossings % 2u == 1u;

@@ -97,3 +97,37 @@ pub fn deepest_inside(body: &wgcloth::scene::RigidBody, t: f64, x: &[Vec3]) -> f
         .map(|&p| wgcloth::cpu::measure::penetration_depth(body, &frame, p))
         .fold(0.0, f32::max)
 }
+
+/// Points whose inside test's ray ([`wgcloth::cpu::measure::INSIDE_RAY`])
+/// passes exactly through a vertex or an edge's midpoint of `body`'s mesh,
+/// before, inside and past the body: each vertex and midpoint moved along
+/// the ray by each of eight offsets.
+pub fn on_rays_through_vertices_and_edges(body: &wgcloth::scene::RigidBody) -> Vec<Vec3> {
+    let vertices = &body.mesh.vertices;
+    let midpoints = body.mesh.triangles.iter().flat_map(|t| {
+        (0..3).map(|k| 0.5 * (vertices[t[k] as usize] + vertices[t[(k + 1) % 3] as usize]))
+    });
+    let ray = wgcloth::cpu::measure::INSIDE_RAY;
+    vertices
+        .iter()
+        .copied()
+        .chain(midpoints)
+        .flat_map(|through| {
+            [-1.0, -0.37, -0.11, -0.02, 0.02, 0.11, 0.37, 1.0].map(|s| through + s * ray)
+        })
+        .collect()
+}
+
+/// Whether body-space `p` is inside the convex mesh of `body`, or `None` within
+/// `margin` of a face's plane, where the answer is the rounding's.
+pub fn inside_convex(body: &wgcloth::scene::RigidBody, p: Vec3, margin: f32) -> Option<bool> {
+    let mut inside = true;
+    for (t, tri) in body.mesh.triangles.iter().enumerate() {
+        let distance = body.face_normals[t].dot(p - body.mesh.vertices[tri[0] as usize]);
+        if distance.abs() < margin {
+            return None;
+        }
+        inside &= distance < 0.0;
+    }
+    Some(inside)
+}
