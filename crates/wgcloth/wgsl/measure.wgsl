@@ -44,25 +44,17 @@ fn projected_edge(u: vec2<f32>, v: vec2<f32>) -> ProjectedEdge {
 // and the crossing, whose barycentric weights are the edge functions,
 // ahead of p.
 fn ray_crosses(p: vec3<f32>, t: u32) -> bool {
-    var q: array<vec2<f32>, 3>;
-    var ahead_of: array<f32, 3>;
-    for (var k = 0u; k < 3u; k++) {
-        let c = corner(t, k);
-        q[k] = c.yz - p.yz;
-        ahead_of[k] = c.x - p.x;
-    }
-    var ahead = 0.0;
-    var sides = 0u;
-    for (var k = 0u; k < 3u; k++) {
-        let edge = projected_edge(q[(k + 1u) % 3u], q[(k + 2u) % 3u]);
-        if !edge.proper {
-            return false;
-        }
-        sides |= select(1u, 2u, edge.left);
-        ahead += edge.e * ahead_of[k];
-    }
+    let a = corner(t, 0u) - p;
+    let b = corner(t, 1u) - p;
+    let c = corner(t, 2u) - p;
+    let ea = projected_edge(b.yz, c.yz);
+    let eb = projected_edge(c.yz, a.yz);
+    let ec = projected_edge(a.yz, b.yz);
+    let left = ea.left;
+    let ahead = ea.e * a.x + eb.e * b.x + ec.e * c.x;
     // All left, the edge functions sum to a positive area; all right, negative.
-    return sides != 3u && ahead != 0.0 && (ahead > 0.0) == (sides == 2u);
+    return ea.proper && eb.proper && ec.proper && eb.left == left && ec.left == left
+        && ahead != 0.0 && (ahead > 0.0) == left;
 }
 
 // Odd crossings: inside.

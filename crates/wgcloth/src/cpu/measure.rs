@@ -48,17 +48,19 @@ fn projected_edge(u: Vec2, v: Vec2) -> Option<(f32, bool)> {
 /// the origin on the same side of its three projected edges, and the
 /// crossing, whose barycentric weights are the edge functions, ahead of p.
 fn ray_crosses(p: Vec3, tri: [Vec3; 3]) -> bool {
-    let q = tri.map(|c| Vec2::new(c.y - p.y, c.z - p.z));
-    let (mut ahead, mut sides) = (0.0, [false; 2]);
-    for k in 0..3 {
-        let Some((e, left)) = projected_edge(q[(k + 1) % 3], q[(k + 2) % 3]) else {
-            return false;
-        };
-        sides[usize::from(left)] = true;
-        ahead += e * (tri[k].x - p.x);
-    }
+    let [a, b, c] = tri.map(|v| v - p);
+    let yz = |v: Vec3| Vec2::new(v.y, v.z);
+    let edges = (
+        projected_edge(yz(b), yz(c)),
+        projected_edge(yz(c), yz(a)),
+        projected_edge(yz(a), yz(b)),
+    );
+    let (Some((ea, left)), Some((eb, b_left)), Some((ec, c_left))) = edges else {
+        return false;
+    };
+    let ahead = ea * a.x + eb * b.x + ec * c.x;
     // All left, the edge functions sum to a positive area; all right, negative.
-    sides[0] != sides[1] && ahead != 0.0 && (ahead > 0.0) == sides[1]
+    b_left == left && c_left == left && ahead != 0.0 && (ahead > 0.0) == left
 }
 
 /// Whether body-space point p lies inside the closed rigid mesh: its ray
