@@ -118,8 +118,8 @@ pub fn on_rays_through_vertices_and_edges(body: &wgcloth::scene::RigidBody) -> V
         .collect()
 }
 
-/// Whether body-space `p` is inside the convex mesh of `body`, or `None` within
-/// `margin` of a face's plane, where the answer is the rounding's.
+/// Whether body-space `p` is inside the convex mesh of `body`, or `None`
+/// within `margin` of a face's plane, where the answer is the rounding's.
 pub fn inside_convex(body: &wgcloth::scene::RigidBody, p: Vec3, margin: f32) -> Option<bool> {
     let mut inside = true;
     for (t, tri) in body.mesh.triangles.iter().enumerate() {
