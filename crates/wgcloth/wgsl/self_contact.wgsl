@@ -4,13 +4,14 @@
 //
 // 1. `cells` (then separate's `tiles` and collide's `supertiles`): each
 //    grid cell's box at the step's start and the tile hierarchy over them.
-// 2. `vertices`, `edges`: each vertex against the triangles, each triangle
-//    edge against the edges, of the cells its box grown by the thickness
-//    overlaps (walk.wgsl); a vertex projecting inside a triangle, or two
-//    edges whose closest points lie inside both, closer than the
-//    thickness, sharing no vertex and 2 thickness apart in the flat rest
-//    grid, is a contact: appended to the list (up to
-//    params.cloth_capacity), each of its vertices' counts raised.
+// 2. `walks`: each vertex against the triangles, each triangle edge against
+//    the edges, of the cells its box grown by the thickness overlaps, in
+//    one walk per vertex for it and the edges it starts (walk.wgsl); a
+//    vertex projecting inside a triangle, or two edges whose closest
+//    points lie inside both, closer than the thickness, sharing no vertex
+//    and 2 thickness apart in the flat rest grid, is a contact: appended
+//    to the list (up to params.cloth_capacity), each of its vertices'
+//    counts raised.
 // 3. `link`, per contact: dropped (counted) if one of its vertices is in
 //    more than params.cloth_per_vertex contacts; else its eqs. 8–9 force
 //    and blocks (response.wgsl, as the body's contacts), and it joins each
@@ -78,53 +79,46 @@ fn note(key: vec4<u32>, beta: vec4<f32>) {
     }
 }
 
-// The vertex against cloth triangle t (Sheet::vertex_pair).
-fn vertex_against(q: Query, t: u32) {
-    let tri = vec3<u32>(cloth_index(3u * t), cloth_index(3u * t + 1u), cloth_index(3u * t + 2u));
-    if any(tri == vec3<u32>(q.a)) {
-        return;
-    }
-    let a = x[tri.x].xyz;
-    let b = x[tri.y].xyz;
-    let c = x[tri.z].xyz;
-    if !overlaps(q.lo, q.hi, min(min(a, b), c), max(max(a, b), c)) {
-        return;
-    }
+// Vertex p.x against triangle p.yzw (Sheet::vertex_pair).
+fn vertex_pair(p: vec4<u32>) {
+    let a = x[p.y].xyz;
+    let b = x[p.z].xyz;
+    let c = x[p.w].xyz;
     let cr = cross(b - a, c - a);
     let len = length(cr);
     if len == 0.0 {
         return;
     }
     let eps = params.cloth_thickness;
-    let hit = point_triangle(x[q.a].xyz, a, b, c, cr * (1.0 / len), eps, eps);
-    let key = vec4<u32>(q.a, tri);
-    if found(hit) && hit.x != 0.0 && apart_at_rest(key, false) {
-        note(key, vec4<f32>(1.0, -hit.yzw));
+    let hit = point_triangle(x[p.x].xyz, a, b, c, cr * (1.0 / len), eps, eps);
+    if found(hit) && hit.x != 0.0 && apart_at_rest(p, false) {
+        note(p, vec4<f32>(1.0, -hit.yzw));
     }
 }
 
-// The edge against edge (u, w) (Sheet::edge_pair).
-fn edge_against(q: Query, u: u32, w: u32) {
-    let f = met_edge(q, u, w);
-    if f.x == NO_TRIANGLE {
-        return;
-    }
-    let e0 = x[q.a].xyz;
-    let e1 = x[q.b].xyz;
-    let f0 = x[f.x].xyz;
-    let f1 = x[f.y].xyz;
-    if !overlaps(q.lo, q.hi, min(f0, f1), max(f0, f1)) {
-        return;
-    }
+// Edge p.xy against edge p.zw (Sheet::edge_pair).
+fn edge_pair(p: vec4<u32>) {
+    let e0 = x[p.x].xyz;
+    let e1 = x[p.y].xyz;
+    let f0 = x[p.z].xyz;
+    let f1 = x[p.w].xyz;
     let st = segment_parameters(e0, e1, f0, f1);
     if !(st.x > 0.0 && st.x < 1.0 && st.y > 0.0 && st.y < 1.0) {
         return;
     }
     let gap = (e0 + (e1 - e0) * st.x) - (f0 + (f1 - f0) * st.y);
     let distance = length(gap);
-    let key = vec4<u32>(q.a, q.b, f);
-    if distance > 0.0 && distance < params.cloth_thickness && apart_at_rest(key, true) {
-        note(vec4<u32>(q.a | EDGE_PAIR, q.b, f), vec4<f32>(1.0 - st.x, st.x, st.y - 1.0, -st.y));
+    if distance > 0.0 && distance < params.cloth_thickness && apart_at_rest(p, true) {
+        note(vec4<u32>(p.x | EDGE_PAIR, p.yzw), vec4<f32>(1.0 - st.x, st.x, st.y - 1.0, -st.y));
+    }
+}
+
+// A pair the walk met (walk.wgsl), whose boxes overlap.
+fn pair(p: vec4<u32>, edge: bool, test: bool) {
+    if edge {
+        edge_pair(p);
+    } else {
+        vertex_pair(p);
     }
 }
 
@@ -142,25 +136,21 @@ fn cells(@builtin(global_invocation_id) id: vec3<u32>) {
     bounds[cell_at(i)] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
 }
 
-@compute @workgroup_size(WORKGROUP)
-fn vertices(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i >= params.n_vertices {
-        return;
-    }
-    let eps = params.cloth_thickness;
-    walk(Query(x[i].xyz - eps, i, x[i].xyz + eps, i, false, false));
+// Where vertex i is; the walk's queries reach the thickness beyond.
+fn extent(i: u32) -> Bounds {
+    return Bounds(x[i], x[i]);
 }
 
-// Spring s, if along a triangle, against the edges near it.
+fn growth() -> f32 {
+    return params.cloth_thickness;
+}
+
+// Vertex i and the edges it starts against what lies near them.
 @compute @workgroup_size(WORKGROUP)
-fn edges(@builtin(global_invocation_id) id: vec3<u32>) {
-    let e = walked_edge(id.x);
-    if e.x == NO_TRIANGLE {
-        return;
+fn walks(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x < params.n_vertices {
+        walk(walk_of(id.x, false));
     }
-    let eps = params.cloth_thickness;
-    walk(Query(min(x[e.x].xyz, x[e.y].xyz) - eps, e.x, max(x[e.x].xyz, x[e.y].xyz) + eps, e.y, true, false));
 }
 
 // The coefficients of a contact whose most crowded vertex is in `most`

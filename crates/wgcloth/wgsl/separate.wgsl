@@ -7,22 +7,23 @@
 // 1. `prepare`, `tiles` (and collide's `supertiles`): flags cleared, each
 //    grid cell's swept box (of its corners from x_start to x), and the tile
 //    hierarchy over the cells refitted to them.
-// 2. `vertices`, `edges`: the near pairs, vertex–triangle and edge–edge
-//    pairs sharing no vertex whose swept boxes, the first grown by the
-//    floor, overlap and that could fail the relative test. A query box
-//    walks the super-tiles and tiles it overlaps, then the cells whose
-//    swept box it overlaps, and tests the cell's two triangles (a vertex)
-//    or the edges the cell owns (an edge). A pair lowers the least separation (where the step
+// 2. `walks`: the near pairs, vertex–triangle and edge–edge pairs sharing
+//    no vertex whose swept boxes, the first grown by the floor, overlap and
+//    that could fail the relative test. One walk per vertex, for it and
+//    the edges it starts (walk.wgsl), visits the super-tiles and tiles
+//    their boxes overlap, then the cells whose swept box they overlap, and
+//    tests the cell's two triangles (the vertex) or the edges the cell owns
+//    (an edge). A pair lowers the least separation (where the step
 //    started) of its four vertices (an atomic minimum over the bits of a
 //    non-negative f32, which order as the floats do) and joins the pair
 //    list (params.self_capacity long: 8 per vertex, or what one binding
 //    holds).
 // 3. cpu::separate::ROUNDS rounds of `round` (or, when the list overflowed,
-//    `recheck_vertices` and `recheck_edges`, which walk again for the same
-//    pairs), `settle` and `plan`: a pair whose sides' displacements differ
-//    by more than 2 gamma (s − floor) holds its four vertices (flag bit 1,
-//    folded into bit 0 by `settle`, so a round reads only the last one's
-//    result and the order pairs are met in does not matter). `plan` sizes
+//    `recheck`, which walks again for the same pairs), `settle` and
+//    `plan`: a pair whose sides' displacements differ by more than
+//    2 gamma (s − floor) holds its four vertices (flag bit 1, folded into
+//    bit 0 by `settle`, so a round reads only the last one's result and the
+//    order pairs are met in does not matter). `plan` sizes
 //    the next round's indirect dispatches: none once a round holds nothing
 //    new.
 // 4. `finish`: each held vertex moves at most gamma (s − floor); if the
@@ -212,13 +213,16 @@ fn hold_pair(p: vec4<u32>) {
     atomicOr(&separations[params.n_vertices + p.w], 2u);
 }
 
-fn note(q: Query, vertices: vec4<u32>) {
-    let g = gap_at_start(vertices, q.edge);
-    if !could_fail(vertices, q.edge, g) {
+// A pair the walk met (walk.wgsl): when it could fail, its separation
+// lowers its vertices' least and it joins the list; or (`test`) the pair
+// is tested as a round would.
+fn pair(vertices: vec4<u32>, edge: bool, test: bool) {
+    let g = gap_at_start(vertices, edge);
+    if !could_fail(vertices, edge, g) {
         return;
     }
-    if q.test {
-        if fails(vertices, q.edge, g) {
+    if test {
+        if fails(vertices, edge, g) {
             hold_pair(vertices);
         }
         return;
@@ -230,34 +234,7 @@ fn note(q: Query, vertices: vec4<u32>) {
     atomicMin(&separations[vertices.w], bits);
     let k = atomicAdd(&separations[header(SELF_PAIR_COUNT)], 1u);
     if k < capacity() {
-        pairs[k] = vec4<u32>(vertices.x | select(0u, EDGE_PAIR, q.edge), vertices.yzw);
-    }
-}
-
-// The vertex against cloth triangle t.
-fn vertex_against(q: Query, t: u32) {
-    let tri = vec3<u32>(cloth_index(3u * t), cloth_index(3u * t + 1u), cloth_index(3u * t + 2u));
-    if any(tri == vec3<u32>(q.a)) {
-        return;
-    }
-    let lo = min(min(swept_lo(tri.x), swept_lo(tri.y)), swept_lo(tri.z));
-    let hi = max(max(swept_hi(tri.x), swept_hi(tri.y)), swept_hi(tri.z));
-    if !overlaps(q.lo, q.hi, lo, hi) {
-        return;
-    }
-    note(q, vec4<u32>(q.a, tri));
-}
-
-// The edge against edge (u, w).
-fn edge_against(q: Query, u: u32, w: u32) {
-    let f = met_edge(q, u, w);
-    if f.x == NO_TRIANGLE {
-        return;
-    }
-    let lo = min(swept_lo(f.x), swept_lo(f.y));
-    let hi = max(swept_hi(f.x), swept_hi(f.y));
-    if overlaps(q.lo, q.hi, lo, hi) {
-        note(q, vec4<u32>(q.a, q.b, f));
+        pairs[k] = vec4<u32>(vertices.x | select(0u, EDGE_PAIR, edge), vertices.yzw);
     }
 }
 
@@ -295,46 +272,33 @@ fn tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     bounds[k] = block_bounds(cell_at(0u), params.cells_x, params.cells_y, tx, ty);
 }
 
-// Vertex i against the triangles near its path.
-fn walk_vertex(i: u32, test: bool) {
-    if i >= params.n_vertices {
-        return;
-    }
-    let f = params.self_floor;
-    walk(Query(swept_lo(i) - f, i, swept_hi(i) + f, i, false, test));
+// What vertex i sweeps; the walk's queries reach the floor beyond.
+fn extent(i: u32) -> Bounds {
+    return Bounds(vec4<f32>(swept_lo(i), 0.0), vec4<f32>(swept_hi(i), 0.0));
 }
 
-// Spring s, if along a triangle, against the edges near its path.
-fn walk_edge(s: u32, test: bool) {
-    let e = walked_edge(s);
-    if e.x == NO_TRIANGLE {
-        return;
+fn growth() -> f32 {
+    return params.self_floor;
+}
+
+// Vertex i and the edges it starts against what lies near their paths:
+// listing the near pairs, or (`test`) a round's test of them when the list
+// overflowed.
+fn walk_at(i: u32, test: bool) {
+    if i < params.n_vertices {
+        walk(walk_of(i, test));
     }
-    let f = params.self_floor;
-    let lo = min(swept_lo(e.x), swept_lo(e.y)) - f;
-    let hi = max(swept_hi(e.x), swept_hi(e.y)) + f;
-    walk(Query(lo, e.x, hi, e.y, true, test));
 }
 
 @compute @workgroup_size(WORKGROUP)
-fn vertices(@builtin(global_invocation_id) id: vec3<u32>) {
-    walk_vertex(id.x, false);
-}
-
-@compute @workgroup_size(WORKGROUP)
-fn edges(@builtin(global_invocation_id) id: vec3<u32>) {
-    walk_edge(id.x, false);
+fn walks(@builtin(global_invocation_id) id: vec3<u32>) {
+    walk_at(id.x, false);
 }
 
 // A round when the list overflowed: the walks again, testing their pairs.
 @compute @workgroup_size(WORKGROUP)
-fn recheck_vertices(@builtin(global_invocation_id) id: vec3<u32>) {
-    walk_vertex(id.x, true);
-}
-
-@compute @workgroup_size(WORKGROUP)
-fn recheck_edges(@builtin(global_invocation_id) id: vec3<u32>) {
-    walk_edge(id.x, true);
+fn recheck(@builtin(global_invocation_id) id: vec3<u32>) {
+    walk_at(id.x, true);
 }
 
 // How far vertex i may move when held (cpu::separate::displacement_bound
@@ -413,8 +377,7 @@ fn plan() {
     let listed = unsettled && count <= capacity();
     let walked = unsettled && count > capacity();
     set_dispatch(SELF_ROUND_ARGS, select(0u, groups(count), listed));
-    set_dispatch(SELF_RECHECK_VERTEX_ARGS, select(0u, groups(params.n_vertices), walked));
-    set_dispatch(SELF_RECHECK_EDGE_ARGS, select(0u, groups(params.n_springs), walked));
+    set_dispatch(SELF_RECHECK_ARGS, select(0u, groups(params.n_vertices), walked));
     set_dispatch(SELF_SETTLE_ARGS, select(0u, groups(params.n_vertices), unsettled));
 }
 

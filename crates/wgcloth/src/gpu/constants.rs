@@ -43,12 +43,10 @@ pub mod self_header {
     pub const ROUND_ARGS: u32 = 0;
     /// The next settle.
     pub const SETTLE_ARGS: u32 = 3;
-    /// The next round's vertex walks, when the list overflowed.
-    pub const RECHECK_VERTEX_ARGS: u32 = 6;
-    /// The next round's edge walks, when the list overflowed.
-    pub const RECHECK_EDGE_ARGS: u32 = 9;
+    /// The next round's walks, when the list overflowed.
+    pub const RECHECK_ARGS: u32 = 6;
     /// The dispatch buffer's length.
-    pub const DISPATCH_WORDS: u32 = 12;
+    pub const DISPATCH_WORDS: u32 = 9;
 }
 
 /// Stage "self_contact"'s list buffer (wgsl/self_contact.wgsl): this
@@ -94,7 +92,7 @@ pub mod model {
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them).
-pub const SHARED: [(&str, u32); 36] = [
+pub const SHARED: [(&str, u32); 35] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -108,8 +106,7 @@ pub const SHARED: [(&str, u32); 36] = [
     ("SELF_UNSETTLED", self_header::UNSETTLED),
     ("SELF_ROUND_ARGS", self_header::ROUND_ARGS),
     ("SELF_SETTLE_ARGS", self_header::SETTLE_ARGS),
-    ("SELF_RECHECK_VERTEX_ARGS", self_header::RECHECK_VERTEX_ARGS),
-    ("SELF_RECHECK_EDGE_ARGS", self_header::RECHECK_EDGE_ARGS),
+    ("SELF_RECHECK_ARGS", self_header::RECHECK_ARGS),
     ("CLOTH_COUNT", cloth_header::COUNT),
     ("CLOTH_DROPPED", cloth_header::DROPPED),
     ("CLOTH_HEADER", cloth_header::WORDS),

@@ -93,16 +93,13 @@ pub enum Entry {
     SeparatePrepare,
     /// Refits the cloth tiles to the boxes the step sweeps (`separate::tiles`).
     SeparateTiles,
-    /// Each vertex against the cloth triangles near it (`separate::vertices`).
-    SeparateVertices,
-    /// Each cloth edge against the edges near it (`separate::edges`).
-    SeparateEdges,
+    /// Each vertex and the edges it starts against the cloth near their
+    /// paths, listing the near pairs (`separate::walks`).
+    SeparateWalks,
     /// A round of the relative test over the listed near pairs (`separate::round`).
     SeparateRound,
-    /// A round's vertex walks when the list overflowed (`separate::recheck_vertices`).
-    SeparateRecheckVertices,
-    /// A round's edge walks when the list overflowed (`separate::recheck_edges`).
-    SeparateRecheckEdges,
+    /// A round's walks when the list overflowed (`separate::recheck`).
+    SeparateRecheck,
     /// The round's newly held vertices counted and folded in (`separate::settle`).
     SeparateSettle,
     /// The next round's dispatches (`separate::plan`).
@@ -111,10 +108,9 @@ pub enum Entry {
     SeparateFinish,
     /// Each grid cell's box at the step's start (`self_contact::cells`).
     SelfContactCells,
-    /// Each vertex's cloth–cloth contacts with triangles (`self_contact::vertices`).
-    SelfContactVertices,
-    /// Each cloth edge's contacts with edges (`self_contact::edges`).
-    SelfContactEdges,
+    /// Each vertex's and each edge it starts' cloth–cloth contacts
+    /// (`self_contact::walks`).
+    SelfContactWalks,
     /// Each contact's force and blocks, linked to its vertices (`self_contact::link`).
     SelfContactLink,
     /// Each vertex's contacts sorted and added to A and b (`self_contact::gather`).
@@ -134,7 +130,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 54] = [
+    pub const ALL: [Entry; 51] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -171,17 +167,14 @@ impl Entry {
         Entry::Measure,
         Entry::SeparatePrepare,
         Entry::SeparateTiles,
-        Entry::SeparateVertices,
-        Entry::SeparateEdges,
+        Entry::SeparateWalks,
         Entry::SeparateRound,
-        Entry::SeparateRecheckVertices,
-        Entry::SeparateRecheckEdges,
+        Entry::SeparateRecheck,
         Entry::SeparateSettle,
         Entry::SeparatePlan,
         Entry::SeparateFinish,
         Entry::SelfContactCells,
-        Entry::SelfContactVertices,
-        Entry::SelfContactEdges,
+        Entry::SelfContactWalks,
         Entry::SelfContactLink,
         Entry::SelfContactGather,
         Entry::BatchPlan,
@@ -230,17 +223,14 @@ impl Entry {
             Entry::Measure => ("measure", "main"),
             Entry::SeparatePrepare => ("separate", "prepare"),
             Entry::SeparateTiles => ("separate", "tiles"),
-            Entry::SeparateVertices => ("separate", "vertices"),
-            Entry::SeparateEdges => ("separate", "edges"),
+            Entry::SeparateWalks => ("separate", "walks"),
             Entry::SeparateRound => ("separate", "round"),
-            Entry::SeparateRecheckVertices => ("separate", "recheck_vertices"),
-            Entry::SeparateRecheckEdges => ("separate", "recheck_edges"),
+            Entry::SeparateRecheck => ("separate", "recheck"),
             Entry::SeparateSettle => ("separate", "settle"),
             Entry::SeparatePlan => ("separate", "plan"),
             Entry::SeparateFinish => ("separate", "finish"),
             Entry::SelfContactCells => ("self_contact", "cells"),
-            Entry::SelfContactVertices => ("self_contact", "vertices"),
-            Entry::SelfContactEdges => ("self_contact", "edges"),
+            Entry::SelfContactWalks => ("self_contact", "walks"),
             Entry::SelfContactLink => ("self_contact", "link"),
             Entry::SelfContactGather => ("self_contact", "gather"),
             Entry::BatchPlan => ("batch", "plan"),

@@ -14,8 +14,7 @@ pub(crate) struct SelfContact {
     /// collide's super-tiles over them).
     tiles: Bound,
     supertiles: Bound,
-    vertices: Bound,
-    edges: Bound,
+    walks: Bound,
     link: Bound,
     gather: Bound,
     lists: wgpu::Buffer,
@@ -41,8 +40,7 @@ impl SelfContact {
             cells: bind(Entry::SelfContactCells),
             tiles: bind(Entry::SeparateTiles),
             supertiles: bind(Entry::CollideSupertiles),
-            vertices: bind(Entry::SelfContactVertices),
-            edges: bind(Entry::SelfContactEdges),
+            walks: bind(Entry::SelfContactWalks),
             link: bind(Entry::SelfContactLink),
             gather: bind(Entry::SelfContactGather),
             lists: b.cloth_lists.clone(),
@@ -61,10 +59,9 @@ impl SelfContact {
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
-        self.vertices.dispatch(pass, n, WORKGROUP);
-        self.edges.dispatch(pass, p.n_springs, WORKGROUP);
+        self.walks.dispatch(pass, n, WORKGROUP);
         self.link.dispatch(pass, p.cloth_capacity, WORKGROUP);
         self.gather.dispatch(pass, n, WORKGROUP);
-        7
+        6
     }
 }

@@ -14,11 +14,9 @@ pub(crate) struct Separate {
     tiles: Bound,
     supertiles: Bound,
     prepare: Bound,
-    vertices: Bound,
-    edges: Bound,
+    walks: Bound,
     round: Bound,
-    recheck_vertices: Bound,
-    recheck_edges: Bound,
+    recheck: Bound,
     settle: Bound,
     plan: Bound,
     finish: Bound,
@@ -47,11 +45,9 @@ impl Separate {
             tiles: bind(Entry::SeparateTiles),
             supertiles: bind(Entry::CollideSupertiles),
             prepare: bind(Entry::SeparatePrepare),
-            vertices: bind(Entry::SeparateVertices),
-            edges: bind(Entry::SeparateEdges),
+            walks: bind(Entry::SeparateWalks),
             round: bind(Entry::SeparateRound),
-            recheck_vertices: bind(Entry::SeparateRecheckVertices),
-            recheck_edges: bind(Entry::SeparateRecheckEdges),
+            recheck: bind(Entry::SeparateRecheck),
             settle: bind(Entry::SeparateSettle),
             plan: bind(Entry::SeparatePlan),
             finish: bind(Entry::SeparateFinish),
@@ -72,8 +68,7 @@ impl Separate {
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
-        self.vertices.dispatch(pass, n, WORKGROUP);
-        self.edges.dispatch(pass, p.n_springs, WORKGROUP);
+        self.walks.dispatch(pass, n, WORKGROUP);
         let args = |word: u32| 4 * word as u64;
         self.plan.dispatch(pass, 1, 1);
         // Each round's dispatches are sized by `plan`: nothing once settled,
@@ -81,8 +76,7 @@ impl Separate {
         for _ in 0..ROUNDS {
             for (kernel, at) in [
                 (&self.round, self_header::ROUND_ARGS),
-                (&self.recheck_vertices, self_header::RECHECK_VERTEX_ARGS),
-                (&self.recheck_edges, self_header::RECHECK_EDGE_ARGS),
+                (&self.recheck, self_header::RECHECK_ARGS),
                 (&self.settle, self_header::SETTLE_ARGS),
             ] {
                 kernel.dispatch_indirect(pass, &self.dispatches, args(at));
@@ -90,6 +84,6 @@ impl Separate {
             self.plan.dispatch(pass, 1, 1);
         }
         self.finish.dispatch(pass, n, WORKGROUP);
-        7 + 5 * ROUNDS
+        6 + 4 * ROUNDS
     }
 }
