@@ -220,11 +220,12 @@ fn cell_pairs(w: Walk, cell: vec2<u32>) -> u32 {
     for (var m = 0u; m < 5u; m++) {
         let f = owned_edge(cell, m);
         let b = union_of(corner_extent(k, f.x), corner_extent(k, f.y));
-        let near = w.lo_x <= vec4<f32>(b.hi.x) & vec4<f32>(b.lo.x) <= w.hi_x
-            & w.lo_y <= vec4<f32>(b.hi.y) & vec4<f32>(b.lo.y) <= w.hi_y
-            & w.lo_z <= vec4<f32>(b.hi.z) & vec4<f32>(b.lo.z) <= w.hi_z;
-        let above = vec4<bool>(f.x > w.a) | (vec4<bool>(f.x == w.a) & vec4<u32>(f.y) > w.far);
-        let apart = vec4<bool>(f.x != w.a && f.y != w.a) & vec4<u32>(f.x) != w.far & vec4<u32>(f.y) != w.far;
+        // Parenthesised: WGSL (Tint) refuses a comparison mixed with `&`.
+        let near = (w.lo_x <= vec4<f32>(b.hi.x)) & (vec4<f32>(b.lo.x) <= w.hi_x)
+            & (w.lo_y <= vec4<f32>(b.hi.y)) & (vec4<f32>(b.lo.y) <= w.hi_y)
+            & (w.lo_z <= vec4<f32>(b.hi.z)) & (vec4<f32>(b.lo.z) <= w.hi_z);
+        let above = vec4<bool>(f.x > w.a) | (vec4<bool>(f.x == w.a) & (vec4<u32>(f.y) > w.far));
+        let apart = vec4<bool>(f.x != w.a && f.y != w.a) & (vec4<u32>(f.x) != w.far) & (vec4<u32>(f.y) != w.far);
         let met = select(vec4<u32>(0u), vec4<u32>(1u, 2u, 4u, 8u), near & above & apart & vec4<bool>(f.x != NO_TRIANGLE));
         bits |= (met.x | met.y | met.z | met.w) << (2u + 4u * m);
     }
