@@ -20,9 +20,10 @@
 // (one workgroup once the solve is over) and `conclude` carry the scalars.
 // `init_scalars` writes the sizes into both buffers, so an iteration that
 // goes on copies nothing, and kernels read the scalars alone: lavapipe
-// appears to execute a struct copy in a branch for every 8 invocations
-// whether they take it or not, and copying the sizes too made its
-// iterations 2.5 to 5 times as long (BENCHMARKS.md).
+// executes every branch, masked, for each 8 invocations whether they take
+// it or not (Mesa's gallivm pushes a mask for an `if`), and copying the
+// sizes too made its iterations 2.5 to 5 times as long (BENCHMARKS.md).
+// For the same reason the three ways a solve ends share one `stop`.
 
 struct Scalars {
     delta: f32,
@@ -304,25 +305,20 @@ struct Ending {
 
 fn end_iteration(lane: Lane, wg: u32) -> Ending {
     let leader = lane.index == 0u && wg == 0u;
-    if scalars_in.done != 0u {
-        if leader {
-            stop(scalars_in);
-        }
-        return Ending(false, 0.0);
+    // Once done, the one workgroup left only carries the scalars on.
+    let done = scalars_in.done != 0u;
+    var sums = vec3<f32>(0.0);
+    if !done {
+        sums = totals(lane, vec3<u32>(pq_segment(scalars_in.iterations), RZ, RR));
     }
-    let sums = totals(lane, vec3<u32>(pq_segment(scalars_in.iterations), RZ, RR));
     let pq = sums.x;
-    if !usable(pq) {
-        if leader {
-            var s = scalars_in;
-            s.breakdown = 1u;
-            stop(s);
-        }
-        return Ending(false, 0.0);
-    }
     let delta = sums.y;
     let rr = sums.z;
-    let on = going_on(rr, delta, scalars_in.threshold);
+    let broke = !done && !usable(pq);
+    let ended = !done && !broke;
+    let on = ended && going_on(rr, delta, scalars_in.threshold);
+    // One stop for the three ways to end (done before, a breakdown, the
+    // goal reached or a stall), its scalars chosen by selects.
     if leader && on {
         // The rest is as `init_scalars` wrote it (no breakdown going on).
         scalars_next.scalars.delta = delta;
@@ -330,10 +326,11 @@ fn end_iteration(lane: Lane, wg: u32) -> Ending {
         scalars_next.scalars.iterations = scalars_in.iterations + 1u;
     } else if leader {
         var s = scalars_in;
-        s.delta = delta;
-        s.rr = rr;
-        s.iterations += 1u;
-        s.breakdown = u32(stalled(rr, delta, scalars_in.threshold));
+        s.delta = select(s.delta, delta, ended);
+        s.rr = select(s.rr, rr, ended);
+        s.iterations += u32(ended);
+        let stalls = u32(stalled(rr, delta, scalars_in.threshold));
+        s.breakdown = select(select(s.breakdown, 1u, broke), stalls, ended);
         stop(s);
     }
     return Ending(on, delta / scalars_in.delta);
