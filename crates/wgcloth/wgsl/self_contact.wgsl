@@ -129,11 +129,7 @@ fn cells(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= params.cells_x * params.cells_y {
         return;
     }
-    let nx = params.cells_x + 1u;
-    let k = (i / params.cells_x) * nx + i % params.cells_x;
-    let lo = min(min(x[k].xyz, x[k + 1u].xyz), min(x[k + nx].xyz, x[k + nx + 1u].xyz));
-    let hi = max(max(x[k].xyz, x[k + 1u].xyz), max(x[k + nx].xyz, x[k + nx + 1u].xyz));
-    bounds[cell_at(i)] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
+    bounds[cell_at(i)] = cell_box(vec2<u32>(i % params.cells_x, i / params.cells_x));
 }
 
 // Where vertex i is; the walk's queries reach the thickness beyond.

@@ -251,11 +251,7 @@ fn prepare(@builtin(global_invocation_id) id: vec3<u32>) {
         atomicStore(&separations[params.n_vertices + i], 0u);
     }
     if i < params.cells_x * params.cells_y {
-        let nx = params.cells_x + 1u;
-        let k = (i / params.cells_x) * nx + i % params.cells_x;
-        let lo = min(min(swept_lo(k), swept_lo(k + 1u)), min(swept_lo(k + nx), swept_lo(k + nx + 1u)));
-        let hi = max(max(swept_hi(k), swept_hi(k + 1u)), max(swept_hi(k + nx), swept_hi(k + nx + 1u)));
-        bounds[cell_at(i)] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
+        bounds[cell_at(i)] = cell_box(vec2<u32>(i % params.cells_x, i / params.cells_x));
     }
 }
 

@@ -171,6 +171,14 @@ fn corners(cell: vec2<u32>) -> Corners {
     return Corners(a, extent(a), extent(a + 1u), extent(a + nx), extent(a + nx + 1u));
 }
 
+// The cell's box, the union of its corners' extents: what the stage
+// stores after the tiles' in `bounds` for the walks.
+fn cell_box(cell: vec2<u32>) -> Bounds {
+    let k = corners(cell);
+    let b = union_of(union_of(k.e0, k.e1), union_of(k.e2, k.e3));
+    return Bounds(vec4<f32>(b.lo.xyz, 0.0), vec4<f32>(b.hi.xyz, 0.0));
+}
+
 // The extent of corner v of the cell.
 fn corner_extent(k: Corners, v: u32) -> Bounds {
     let nx = params.cells_x + 1u;
