@@ -799,8 +799,7 @@ pub struct Validation {
     pub adapter: String,
 }
 
-/// Initial offset of the sensitivity run, m: a few f32 ulps at 1 m.
-pub const PERTURBATION: f32 = 1e-7;
+pub use wgcloth::cpu::PERTURBATION;
 
 fn max_deviation(a: &[glam::Vec3], b: &[glam::Vec3]) -> f32 {
     a.iter()
@@ -823,12 +822,7 @@ pub fn validate(
     let mut solved = SolvedSteps::for_scene(&gpu, &scene);
     let mut cpu = CpuSim::new(scene.clone());
     let mut nudged = CpuSim::new(scene);
-    for (i, x) in nudged.state.x.iter_mut().enumerate() {
-        // A fixed, irregular direction per vertex.
-        let phase = i as f32 * 2.399_963;
-        *x += PERTURBATION
-            * glam::Vec3::new(phase.cos(), phase.sin(), (0.5 * phase).cos()).normalize();
-    }
+    nudged.state.nudge(PERTURBATION);
     let mut cpu_contacts = 0;
     for k in 0..steps {
         solved.step(&gpu)?;

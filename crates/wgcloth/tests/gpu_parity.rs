@@ -8,9 +8,9 @@ use std::sync::Arc;
 use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::{CpuSim, PERTURBATION};
 use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
-use wgcloth::math::Sym3;
+use wgcloth::math::{Sym3, closest_on_triangle};
 use wgcloth::{Config, Scene};
 
 fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {
@@ -28,6 +28,45 @@ fn max_dev(a: &[Vec3], b: &[Vec3]) -> f32 {
 
 fn max_norm(a: &[Vec3]) -> f32 {
     a.iter().map(|p| p.length()).fold(0.0, f32::max)
+}
+
+/// Whether `ctx`'s adapter does f32 arithmetic as the CPU twins do.
+/// Lavapipe (a CPU adapter) compiles WGSL with LLVM for this processor and
+/// contracts no multiply-adds, so its stages agree with the CPU's to an ulp
+/// or so, and a run with contact stays within a millimetre of the CPU's. A
+/// hardware GPU fuses multiply-adds, and divides and takes square roots
+/// within the ulps WGSL allows. On an NVIDIA H200 a spring's force differed
+/// by about an ulp of its length, and 100 steps of the thesis scene at 16²
+/// drifted 1.9 cm from the CPU's, where a CPU run nudged 1e-7 m drifts
+/// 1.6 cm. Two runs there differed more than the nudged run and are not
+/// explained (BENCHMARKS.md, "Parity on the H200"): the thesis scene's
+/// contact total with friction, 2.9 % low, and the substeps' run, 1.7 cm
+/// apart against the nudged run's 0.36 mm.
+fn computes_as_the_cpu(ctx: &GpuContext) -> bool {
+    ctx.adapter.device_type == wgpu::DeviceType::Cpu
+}
+
+/// What a GPU run may differ from the CPU's by: `exact` (positions, m, and
+/// the contact totals' relative difference) where the adapter computes as
+/// the CPU does; elsewhere also up to four times what a CPU run of `steps`
+/// steps from a start nudged by [`PERTURBATION`] differs (as `wgcloth
+/// validate` allows).
+fn allowed_drift(
+    ctx: &GpuContext,
+    (scene, steps): (&Scene, usize),
+    (cpu, cpu_contacts): (&CpuSim, usize),
+    exact: (f32, f64),
+) -> (f32, f64) {
+    if computes_as_the_cpu(ctx) {
+        return exact;
+    }
+    let mut nudged = CpuSim::new(scene.clone());
+    nudged.state.nudge(PERTURBATION);
+    let contacts: usize = (0..steps).map(|_| nudged.step().contacts).sum();
+    let drift = max_dev(&nudged.state.x, &cpu.state.x);
+    let ratio = (contacts as f64 / cpu_contacts as f64 - 1.0).abs();
+    eprintln!("a CPU run nudged {PERTURBATION:e} m: {drift:.3e} m, contacts {ratio:.3}");
+    (exact.0.max(4.0 * drift), exact.1.max(4.0 * ratio))
 }
 
 fn full(blocks: &[Sym3]) -> Vec<Mat3> {
@@ -100,9 +139,20 @@ fn assembly_matches_the_cpu_on_the_same_state() {
     assert!(dev <= 1e-5 * norm, "A diagonal {dev} vs {norm}");
     let (dev, norm) = mat_dev(&full(&go), &full(&a.off));
     assert!(dev <= 1e-5 * norm, "A off-diagonal {dev} vs {norm}");
+    // b = m v + h f sums spring forces that nearly cancel gravity's: an
+    // ulp of a spring's length is a large part of it.
+    let allowed = 1e-5 * max_norm(b)
+        + if computes_as_the_cpu(&ctx) {
+            0.0
+        } else {
+            let mut nudged = cpu_after(&scene, 7);
+            nudged.state.nudge(PERTURBATION);
+            nudged.step();
+            4.0 * max_dev(nudged.system().1, b)
+        };
     assert!(
-        max_dev(&gb, b) <= 1e-5 * max_norm(b),
-        "b {} vs {}",
+        max_dev(&gb, b) <= allowed,
+        "b {} vs {} (allowed {allowed})",
         max_dev(&gb, b),
         max_norm(b)
     );
@@ -345,10 +395,15 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
             state.contacts_total
         );
         assert!(cpu_contacts > 500, "the sphere must hit the cloth");
-        assert!(dev < 1e-3, "{model:?}: GPU and CPU drifted {dev} m apart");
+        let (allowed, contacts_allowed) =
+            allowed_drift(&ctx, (&scene, steps), (&cpu, cpu_contacts), (1e-3, 0.02));
+        assert!(
+            dev < allowed,
+            "{model:?}: GPU and CPU drifted {dev} m apart (allowed {allowed})"
+        );
         let ratio = state.contacts_total as f64 / cpu_contacts as f64;
         assert!(
-            (ratio - 1.0).abs() < 0.02,
+            (ratio - 1.0).abs() < contacts_allowed,
             "{model:?}: contact totals {} vs {cpu_contacts}",
             state.contacts_total
         );
@@ -393,9 +448,18 @@ fn a_step_of_substeps_runs_like_the_cpu() {
     assert_eq!((state.steps, state.clock), (steps, 2 * steps));
     assert_eq!(cpu.state.step, steps as u64);
     assert!(cpu_contacts > 100, "the sphere must hit the cloth");
-    assert!(dev < 1e-3, "GPU and CPU drifted {dev} m apart");
+    let (allowed, contacts_allowed) = allowed_drift(
+        &ctx,
+        (&scene, steps as usize),
+        (&cpu, cpu_contacts),
+        (1e-3, 0.02),
+    );
+    assert!(
+        dev < allowed,
+        "GPU and CPU drifted {dev} m apart (allowed {allowed})"
+    );
     let ratio = state.contacts_total as f64 / cpu_contacts as f64;
-    assert!((ratio - 1.0).abs() < 0.02, "contacts {ratio}");
+    assert!((ratio - 1.0).abs() < contacts_allowed, "contacts {ratio}");
     assert!(state.last_residual <= c.solver.cg_tol);
 }
 
@@ -511,8 +575,46 @@ fn rays_through_mesh_vertices_and_edges_find_the_same_vertices_inside_on_the_gpu
         otherwise.len(),
         &otherwise[..otherwise.len().min(4)]
     );
-    assert!(max_dev(&gpu_x, &cpu_x) < 1e-5);
-    assert!(max_dev(&gpu_v, &cpu_v) < 1e-5);
+    let apart: Vec<usize> = (0..n)
+        .filter(|&i| {
+            (gpu_x[i] - cpu_x[i]).length() >= 1e-5 || (gpu_v[i] - cpu_v[i]).length() >= 1e-5
+        })
+        .collect();
+    eprintln!(
+        "positions differ by {:.3e} m at most, velocities by {:.3e} m/s; {} vertices by 1e-5 or more",
+        max_dev(&gpu_x, &cpu_x),
+        max_dev(&gpu_v, &cpu_v),
+        apart.len()
+    );
+    if computes_as_the_cpu(&ctx) {
+        assert!(apart.is_empty());
+    }
+    // Elsewhere each vertex pushed otherwise has two triangles as near as
+    // rounding tells (the nearest surface point on their shared edge or
+    // corner): which one's normal it leaves along is the rounding's.
+    for i in apart {
+        let mut d2: Vec<f32> = body
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|k| body.mesh.vertices[k as usize]);
+                (closest_on_triangle(x[i], a, b, c) - x[i]).length_squared()
+            })
+            .collect();
+        d2.sort_by(f32::total_cmp);
+        let gap = d2[1].sqrt() - d2[0].sqrt();
+        eprintln!(
+            "  vertex at {:?}: depth {:.4e} m, next triangle {gap:.2e} m further",
+            x[i],
+            d2[0].sqrt()
+        );
+        assert!(
+            gap < 1e-6,
+            "vertex at {:?}: the GPU's push-out differs with no tie ({gap} m)",
+            x[i]
+        );
+    }
 }
 
 #[test]
@@ -679,10 +781,12 @@ fn subgroup_sums_solve_as_workgroup_memory_sums_do() {
         );
         assert!(a.cg_residual_max <= 1e-4 && b.cg_residual_max <= 1e-4);
         assert_eq!((a.cg_breakdowns, b.cg_breakdowns), (0, 0));
-        // Rounding moves a step's stop by an iteration or so either way.
+        // Rounding moves a step's stop by an iteration or so either way,
+        // and on a hardware GPU a few more (an H200: 1,393 against 1,346
+        // for Jacobi's 20 steps).
         let (ia, ib) = (a.cg_iterations_total as f64, b.cg_iterations_total as f64);
         assert!(
-            ia > 20.0 && (ia - ib).abs() <= 0.02 * ib + 20.0,
+            ia > 20.0 && (ia - ib).abs() <= 0.05 * ib + 20.0,
             "{solve:?}: {ia} against {ib}"
         );
         assert!(max_dev(&pa, &pb) <= 1e-5, "{solve:?}");

@@ -105,7 +105,21 @@ impl State {
             step: 0,
         }
     }
+
+    /// Moves every vertex `by` metres, each in a fixed, irregular direction
+    /// of its own: the start of a sensitivity run, which shows how far
+    /// rounding-level differences grow (`wgcloth validate`).
+    pub fn nudge(&mut self, by: f32) {
+        for (i, x) in self.x.iter_mut().enumerate() {
+            let phase = i as f32 * 2.399_963;
+            *x += by * Vec3::new(phase.cos(), phase.sin(), (0.5 * phase).cos()).normalize();
+        }
+    }
 }
+
+/// The offset of a sensitivity run's start ([`State::nudge`]), m: a few
+/// f32 ulps at 1 m.
+pub const PERTURBATION: f32 = 1e-7;
 
 /// The CPU simulator: one scene, its cloth state, the collision model, and
 /// what each stage leaves for the next. [`step`](CpuSim::step) runs the
