@@ -738,7 +738,7 @@ fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
         v.adapter,
         v.max_deviation,
         v.sensitivity,
-        run::PERTURBATION,
+        wgcloth::cpu::PERTURBATION,
         allowed,
         args.tolerance,
         v.gpu_contacts,

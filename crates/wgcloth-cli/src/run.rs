@@ -10,7 +10,7 @@ use crate::frames::Recording;
 use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::{self, CpuSim, State, integrate};
+use wgcloth::cpu::{self, CpuSim, PERTURBATION, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::mlp::NetworkKernel;
@@ -788,8 +788,8 @@ fn run_gpu(
 /// Contact makes the dynamics discontinuous (a vertex entering the band
 /// gets k_d ḋ at once; friction switches between stick and slip), so
 /// rounding-level differences grow. `sensitivity` measures how much: the
-/// deviation between the CPU run and a CPU run whose free vertices start
-/// `PERTURBATION` m away. A GPU as faithful as f32 allows deviates by
+/// deviation between the CPU run and a CPU run whose vertices start
+/// [`PERTURBATION`] m away ([`State::nudge`]). A GPU as faithful as f32 allows deviates by
 /// about that much.
 pub struct Validation {
     pub max_deviation: f32,
@@ -798,8 +798,6 @@ pub struct Validation {
     pub gpu_contacts: u64,
     pub adapter: String,
 }
-
-pub use wgcloth::cpu::PERTURBATION;
 
 fn max_deviation(a: &[glam::Vec3], b: &[glam::Vec3]) -> f32 {
     a.iter()
