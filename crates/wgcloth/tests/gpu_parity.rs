@@ -130,6 +130,7 @@ fn assembly_matches_the_cpu_on_the_same_state() {
     let mut cpu = cpu_after(&scene, 7);
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    let start = cpu.state.clone();
     gpu.step();
     cpu.step();
 
@@ -145,7 +146,8 @@ fn assembly_matches_the_cpu_on_the_same_state() {
         + if computes_as_the_cpu(&ctx) {
             0.0
         } else {
-            let mut nudged = cpu_after(&scene, 7);
+            let mut nudged = CpuSim::new(scene.clone());
+            nudged.state = start;
             nudged.state.nudge(PERTURBATION);
             nudged.step();
             4.0 * max_dev(nudged.system().1, b)
