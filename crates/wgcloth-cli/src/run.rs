@@ -10,7 +10,8 @@ use crate::frames::Recording;
 use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::{self, CpuSim, PERTURBATION, State, integrate};
+use wgcloth::cpu::sensitivity::{Reference, Sensitivity, Spread, largest_distance};
+use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::mlp::NetworkKernel;
@@ -780,33 +781,25 @@ fn run_gpu(
 }
 
 /// GPU against CPU on the same scene: the largest position deviation (m)
-/// after `steps` steps, and the contact totals of each. `each_step` sees
-/// both after every step (its number from 1). The GPU waits for each step,
-/// and records the PCG iterations a run loop would ([`SolvedSteps`]): each
-/// step ends where one recording the whole cap ends.
+/// after `steps` steps, and the contact totals of each. The GPU waits for
+/// each step, and records the PCG iterations a run loop would
+/// ([`SolvedSteps`]): each step ends where one recording the whole cap
+/// ends. `each_step` sees both after every step (its number from 1);
+/// `progress` is called before each step of every run: the GPU's and the
+/// CPU's together, then the two of [`Sensitivity::measure`].
 ///
-/// Contact makes the dynamics discontinuous (a vertex entering the band
-/// gets k_d ḋ at once; friction switches between stick and slip), so
-/// rounding-level differences grow. `sensitivity` measures how much: the
-/// deviation between the CPU run and a CPU run whose vertices start
-/// [`PERTURBATION`] m away ([`State::nudge`]). A GPU as faithful as f32 allows deviates by
-/// about that much.
+/// A faithful GPU does not end where the CPU does: rounding grows in
+/// contact, and each solve stops elsewhere within its tolerance.
+/// `sensitivity` measures how far two faithful CPU runs end apart, and
+/// `faithful` is what the adapter's run may differ by
+/// ([`Sensitivity::faithful`]).
 pub struct Validation {
     pub max_deviation: f32,
-    pub sensitivity: f32,
+    pub sensitivity: Sensitivity,
+    pub faithful: Spread,
     pub cpu_contacts: u64,
     pub gpu_contacts: u64,
     pub adapter: String,
-}
-
-fn max_deviation(a: &[glam::Vec3], b: &[glam::Vec3]) -> f32 {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| (*p - *q).length())
-        .fold(
-            0.0f32,
-            |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
-        )
 }
 
 pub fn validate(
@@ -814,25 +807,30 @@ pub fn validate(
     scene: Scene,
     steps: u64,
     mut each_step: impl FnMut(u64, &GpuSim, &CpuSim),
+    mut progress: impl FnMut(),
 ) -> Result<Validation> {
     let kernels = ctx.kernels()?;
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene)?;
     let mut solved = SolvedSteps::for_scene(&gpu, &scene);
     let mut cpu = CpuSim::new(scene.clone());
-    let mut nudged = CpuSim::new(scene);
-    nudged.state.nudge(PERTURBATION);
     let mut cpu_contacts = 0;
     for k in 0..steps {
+        progress();
         solved.step(&gpu)?;
         cpu_contacts += cpu.step().contacts as u64;
-        nudged.step();
         each_step(k + 1, &gpu, &cpu);
     }
     ctx.finish()?;
     let x = gpu.read_positions()?;
+    let reference = Reference {
+        x: &cpu.state.x,
+        contacts: cpu_contacts,
+    };
+    let sensitivity = Sensitivity::measure(&scene, steps, reference, progress);
     Ok(Validation {
-        max_deviation: max_deviation(&x, &cpu.state.x),
-        sensitivity: max_deviation(&nudged.state.x, &cpu.state.x),
+        max_deviation: largest_distance(&x, &cpu.state.x),
+        sensitivity,
+        faithful: sensitivity.faithful(&ctx.adapter),
         cpu_contacts,
         gpu_contacts: gpu.read_state()?.contacts_total as u64,
         adapter: describe(&ctx.adapter),

@@ -17,17 +17,19 @@ fn thesis_scene_with_either_network_validates_against_the_cpu() {
         return;
     };
     for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
-        let v = wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_, _, _| {}).unwrap();
+        let v =
+            wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_, _, _| {}, || {}).unwrap();
+        let spread = v.faithful;
         eprintln!(
-            "{model:?}: deviation {:.3e} m, sensitivity {:.3e} m, contacts {} vs {}",
-            v.max_deviation, v.sensitivity, v.gpu_contacts, v.cpu_contacts
+            "{model:?}: deviation {:.3e} m, faithful runs {:.3e} m, contacts {} vs {}",
+            v.max_deviation, spread.drift, v.gpu_contacts, v.cpu_contacts
         );
         assert!(v.cpu_contacts > 500, "the sphere must hit the cloth");
         assert!(
-            v.max_deviation <= 1e-4 + 4.0 * v.sensitivity,
-            "{model:?}: {} m apart, sensitivity {} m",
+            v.max_deviation <= 1e-4 + 4.0 * spread.drift,
+            "{model:?}: {} m apart, faithful runs {} m",
             v.max_deviation,
-            v.sensitivity
+            spread.drift
         );
         let ratio = v.gpu_contacts as f64 / v.cpu_contacts as f64;
         assert!((ratio - 1.0).abs() < 0.05, "{model:?}: contacts {ratio}");

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
+use wgcloth::cpu::sensitivity::{Reference, Sensitivity};
 use wgcloth::cpu::{CpuSim, PERTURBATION};
-use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps};
+use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps, context};
 use wgcloth::math::{Sym3, closest_on_triangle};
 use wgcloth::{Config, Scene};
 
@@ -30,27 +31,18 @@ fn max_norm(a: &[Vec3]) -> f32 {
     a.iter().map(|p| p.length()).fold(0.0, f32::max)
 }
 
-/// Whether `ctx`'s adapter does f32 arithmetic as the CPU twins do.
-/// Lavapipe (a CPU adapter) compiles WGSL with LLVM for this processor and
-/// contracts no multiply-adds, so its stages agree with the CPU's to an ulp
-/// or so, and a run with contact stays within a millimetre of the CPU's. A
-/// hardware GPU fuses multiply-adds, and divides and takes square roots
-/// within the ulps WGSL allows. On an NVIDIA H200 a spring's force differed
-/// by about an ulp of its length, and 100 steps of the thesis scene at 16²
-/// drifted 1.9 cm from the CPU's, where a CPU run nudged 1e-7 m drifts
-/// 1.6 cm. Two runs there differed more than the nudged run and are not
-/// explained (BENCHMARKS.md, "Parity on the H200"): the thesis scene's
-/// contact total with friction, 2.9 % low, and the substeps' run, 1.7 cm
-/// apart against the nudged run's 0.36 mm.
 fn computes_as_the_cpu(ctx: &GpuContext) -> bool {
-    ctx.adapter.device_type == wgpu::DeviceType::Cpu
+    context::computes_as_the_cpu(&ctx.adapter)
 }
 
 /// What a GPU run may differ from the CPU's by: `exact` (positions, m, and
 /// the contact totals' relative difference) where the adapter computes as
-/// the CPU does; elsewhere also up to four times what a CPU run of `steps`
-/// steps from a start nudged by [`PERTURBATION`] differs (as `wgcloth
-/// validate` allows).
+/// the CPU does; elsewhere also up to four times what two faithful CPU
+/// runs of `steps` steps differ from the CPU's by (`wgcloth validate`'s
+/// rule, [`Sensitivity`]): one from a start nudged by a few ulps, one
+/// whose solves stop elsewhere within their tolerance. At 1e-3 two such
+/// solves ended the substeps' run 1.2 cm apart where the nudge moved it
+/// 0.36 mm, and the H200 1.7 cm.
 fn allowed_drift(
     ctx: &GpuContext,
     (scene, steps): (&Scene, usize),
@@ -60,13 +52,17 @@ fn allowed_drift(
     if computes_as_the_cpu(ctx) {
         return exact;
     }
-    let mut nudged = CpuSim::new(scene.clone());
-    nudged.state.nudge(PERTURBATION);
-    let contacts: usize = (0..steps).map(|_| nudged.step().contacts).sum();
-    let drift = max_dev(&nudged.state.x, &cpu.state.x);
-    let ratio = (contacts as f64 / cpu_contacts as f64 - 1.0).abs();
-    eprintln!("a CPU run nudged {PERTURBATION:e} m: {drift:.3e} m, contacts {ratio:.3}");
-    (exact.0.max(4.0 * drift), exact.1.max(4.0 * ratio))
+    let reference = Reference {
+        x: &cpu.state.x,
+        contacts: cpu_contacts as u64,
+    };
+    let s = Sensitivity::measure(scene, steps as u64, reference, || {});
+    eprintln!("faithful CPU runs: {s:?}");
+    let spread = s.faithful(&ctx.adapter);
+    (
+        exact.0.max(4.0 * spread.drift),
+        exact.1.max(4.0 * spread.contacts),
+    )
 }
 
 fn full(blocks: &[Sym3]) -> Vec<Mat3> {

@@ -12,6 +12,7 @@ pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
 pub mod self_contact;
+pub mod sensitivity;
 pub mod separate;
 pub mod springs;
 

@@ -57,6 +57,18 @@ pub fn describe(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
 }
 
+/// Whether the adapter does f32 arithmetic as the CPU twins do: a CPU
+/// adapter (lavapipe) compiles WGSL with LLVM for this processor and
+/// contracts no multiply-adds, so its stages agree with the CPU's to an ulp
+/// or so and its solves take the CPU's iterations. A hardware GPU fuses
+/// multiply-adds, and divides and takes square roots within the ulps WGSL
+/// allows: on an NVIDIA H200 a spring's force differed by about an ulp of
+/// its length, and its solves stopped an iteration earlier or later
+/// ([`crate::cpu::sensitivity`]).
+pub fn computes_as_the_cpu(info: &wgpu::AdapterInfo) -> bool {
+    info.device_type == wgpu::DeviceType::Cpu
+}
+
 /// The features a headless device asks for where its adapter has them:
 /// timestamp queries (the stages' timings) and subgroup operations (the
 /// solver's workgroup sums, `wgsl/sums_subgroup.wgsl`).
