@@ -33,7 +33,8 @@ pub const TIGHTER: f32 = 0.01;
 pub struct Spread {
     /// The largest distance between the two runs' final positions, m.
     pub drift: f32,
-    /// The relative difference of their contact totals, |c / c_ref − 1|.
+    /// The relative difference of their contact totals, |c / c_ref − 1|
+    /// (infinite where only the reference has none).
     pub contacts: f64,
 }
 
@@ -67,9 +68,10 @@ impl Reference<'_> {
             .sum();
         Spread {
             drift: largest_distance(&run.state.x, self.x),
-            contacts: match self.contacts {
-                0 => contacts as f64,
-                c => (contacts as f64 / c as f64 - 1.0).abs(),
+            contacts: match (self.contacts, contacts) {
+                (0, 0) => 0.0,
+                (0, _) => f64::INFINITY,
+                (c, n) => (n as f64 / c as f64 - 1.0).abs(),
             },
         }
     }
