@@ -726,7 +726,7 @@ fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
     // A faithful GPU may end as far from the CPU as another faithful CPU
     // run does (wgcloth::cpu::sensitivity).
     let s = v.sensitivity;
-    let allowed = args.tolerance + 4.0 * v.faithful.drift;
+    let allowed = args.tolerance + 4.0 * s.faithful(&ctx.adapter).drift;
     let rule = match wgcloth::gpu::context::computes_as_the_cpu(&ctx.adapter) {
         true => "the sensitivity: a CPU adapter's solves stop where the CPU's do",
         false => "the larger",

@@ -10,7 +10,7 @@ use crate::frames::Recording;
 use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::sensitivity::{Reference, Sensitivity, Spread, largest_distance};
+use wgcloth::cpu::sensitivity::{Reference, Sensitivity, largest_distance};
 use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
@@ -790,13 +790,11 @@ fn run_gpu(
 ///
 /// A faithful GPU does not end where the CPU does: rounding grows in
 /// contact, and each solve stops elsewhere within its tolerance.
-/// `sensitivity` measures how far two faithful CPU runs end apart, and
-/// `faithful` is what the adapter's run may differ by
-/// ([`Sensitivity::faithful`]).
+/// `sensitivity` measures how far two faithful CPU runs end apart;
+/// [`Sensitivity::faithful`] says what the adapter's run may differ by.
 pub struct Validation {
     pub max_deviation: f32,
     pub sensitivity: Sensitivity,
-    pub faithful: Spread,
     pub cpu_contacts: u64,
     pub gpu_contacts: u64,
     pub adapter: String,
@@ -826,11 +824,9 @@ pub fn validate(
         x: &cpu.state.x,
         contacts: cpu_contacts,
     };
-    let sensitivity = Sensitivity::measure(&scene, steps, reference, progress);
     Ok(Validation {
         max_deviation: largest_distance(&x, &cpu.state.x),
-        sensitivity,
-        faithful: sensitivity.faithful(&ctx.adapter),
+        sensitivity: Sensitivity::measure(&scene, steps, reference, progress),
         cpu_contacts,
         gpu_contacts: gpu.read_state()?.contacts_total as u64,
         adapter: describe(&ctx.adapter),

@@ -371,7 +371,7 @@ fn folding_scenes_run_2_s_without_the_cloth_passing_through_itself() {
             }
         };
         let v = validate(&ctx, scene, config.solver.steps, each_step, || {}).unwrap();
-        let spread = v.faithful;
+        let spread = v.sensitivity.faithful(&ctx.adapter);
         eprintln!(
             "{name}: most intersecting pairs CPU {} GPU {}; deviation {:.3e} m, faithful runs {:.3e} m",
             worst[0], worst[1], v.max_deviation, spread.drift

@@ -19,7 +19,7 @@ fn thesis_scene_with_either_network_validates_against_the_cpu() {
     for model in [ModelKind::FrictionNet, ModelKind::NaiveNet] {
         let v =
             wgcloth_cli::run::validate(&ctx, sphere(16, model), 100, |_, _, _| {}, || {}).unwrap();
-        let spread = v.faithful;
+        let spread = v.sensitivity.faithful(&ctx.adapter);
         eprintln!(
             "{model:?}: deviation {:.3e} m, faithful runs {:.3e} m, contacts {} vs {}",
             v.max_deviation, spread.drift, v.gpu_contacts, v.cpu_contacts

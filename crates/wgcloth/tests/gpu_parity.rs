@@ -31,10 +31,6 @@ fn max_norm(a: &[Vec3]) -> f32 {
     a.iter().map(|p| p.length()).fold(0.0, f32::max)
 }
 
-fn computes_as_the_cpu(ctx: &GpuContext) -> bool {
-    context::computes_as_the_cpu(&ctx.adapter)
-}
-
 /// What a GPU run may differ from the CPU's by: `exact` (positions, m, and
 /// the contact totals' relative difference) where the adapter computes as
 /// the CPU does; elsewhere also up to four times what two faithful CPU
@@ -49,7 +45,7 @@ fn allowed_drift(
     (cpu, cpu_contacts): (&CpuSim, usize),
     exact: (f32, f64),
 ) -> (f32, f64) {
-    if computes_as_the_cpu(ctx) {
+    if context::computes_as_the_cpu(&ctx.adapter) {
         return exact;
     }
     let reference = Reference {
@@ -139,7 +135,7 @@ fn assembly_matches_the_cpu_on_the_same_state() {
     // b = m v + h f sums spring forces that nearly cancel gravity's: an
     // ulp of a spring's length is a large part of it.
     let allowed = 1e-5 * max_norm(b)
-        + if computes_as_the_cpu(&ctx) {
+        + if context::computes_as_the_cpu(&ctx.adapter) {
             0.0
         } else {
             let mut nudged = CpuSim::new(scene.clone());
@@ -584,7 +580,7 @@ fn rays_through_mesh_vertices_and_edges_find_the_same_vertices_inside_on_the_gpu
         max_dev(&gpu_v, &cpu_v),
         apart.len()
     );
-    if computes_as_the_cpu(&ctx) {
+    if context::computes_as_the_cpu(&ctx.adapter) {
         assert!(apart.is_empty());
     }
     // Elsewhere each vertex pushed otherwise has two triangles as near as
