@@ -51,6 +51,23 @@ struct Hop {
 @group(1) @binding(6) var<storage, read> hop_list: array<Hop>;
 // The hop being worked on: the bound one, or the one `tail` is at.
 var<private> hop: Hop;
+
+// The kind of level a pipeline's dispatches work on, fixed when it is made
+// (gpu::kernels::LevelKind): lavapipe runs every branch of a kernel, masked,
+// for every 8 invocations, so a kernel that read the kind from its hop paid
+// at every node for the cloth's rows and the coarse stencils both, and for
+// both smoothers. The `_ANY`s read it from the hop, as `tail` must: it walks
+// every level in one dispatch.
+override LEVEL: u32 = LEVEL_ANY;
+override SMOOTHING: u32 = SMOOTHING_ANY;
+
+// Whether the fine level is the cloth.
+fn on_cloth() -> bool {
+    if LEVEL == LEVEL_ANY {
+        return hop.fine.level == 0u;
+    }
+    return LEVEL == LEVEL_CLOTH;
+}
 // A of the cloth: its diagonal blocks (one per vertex), then one per spring.
 @group(1) @binding(1) var<storage, read> matrix: array<PackedSym3>;
 // Every level's smoother blocks and every coarse level's stencils.
@@ -89,13 +106,13 @@ fn stencil_slot(dx: i32, dy: i32) -> u32 {
 // Block (i, j) of coarse level g, j at (dx, dy) from i. Blocks and A are
 // symmetric, so a node stores the centre and the offsets after it, and the
 // others are its neighbours' (multigrid::stored_at).
+// One load whichever node stores it: lavapipe runs both sides of a branch.
 fn stencil_block(g: Grid, i: u32, j: u32, dx: i32, dy: i32) -> Sym3 {
     let slot = stencil_slot(dx, dy);
     let centre = STENCIL / 2u;
-    if slot >= centre {
-        return sym_unpack(operators_at(g.stencil_at + i * STORED_STENCIL + slot - centre));
-    }
-    return sym_unpack(operators_at(g.stencil_at + j * STORED_STENCIL + centre - slot));
+    let mine = slot >= centre;
+    let at = select(j * STORED_STENCIL + centre - slot, i * STORED_STENCIL + slot - centre, mine);
+    return sym_unpack(operators_at(g.stencil_at + at));
 }
 
 // The coarse parents of fine coordinate c and their weights (multigrid::parents).
@@ -122,7 +139,7 @@ fn axis_weight(c: u32, coarse: u32, n_coarse: u32) -> f32 {
 
 // Whether node i of `hop.fine` is a pinned cloth vertex.
 fn filtered(i: u32) -> bool {
-    return hop.fine.level == 0u && is_pinned(i);
+    return on_cloth() && is_pinned(i);
 }
 
 // The weight of fine node i in coarse node `cc` (0 at a pinned vertex).
@@ -166,7 +183,7 @@ fn smoother(inverse: Sym3, spread: f32) -> Sym3 {
 }
 
 fn fine_rhs(j: u32) -> vec3<f32> {
-    if hop.fine.level == 0u {
+    if on_cloth() {
         return r_at(j);
     }
     return vectors_at(hop.fine.rhs_at + j);
@@ -201,20 +218,23 @@ fn work(j: u32) -> vec3<f32> {
 
 // Whether the patch smoother smooths the fine level.
 fn patched() -> bool {
-    return hop.fine.patches_at != NO_PATCHES;
+    if SMOOTHING == SMOOTHING_ANY {
+        return hop.fine.patches_at != NO_PATCHES;
+    }
+    return SMOOTHING == SMOOTHING_PATCHES;
 }
 
 // The fine level's smoothed vector, which the patch smoother keeps in
 // place: z on the cloth, the correction on a coarse level.
 fn smoothed(j: u32) -> vec3<f32> {
-    if hop.fine.level == 0u {
+    if on_cloth() {
         return zq_at(j);
     }
     return vectors_at(hop.fine.correction_at + j);
 }
 
 fn set_smoothed(j: u32, value: vec3<f32>) {
-    if hop.fine.level == 0u {
+    if on_cloth() {
         zq_set(j, value);
     } else {
         vectors_set(hop.fine.correction_at + j, value);
@@ -270,7 +290,7 @@ fn row_guess(i: u32, up: bool, colours: vec2<u32>) -> vec3<f32> {
     let every = all(colours == ALL_COLOURS);
     let c = coords(g, i);
     var acc = vec3<f32>(0.0);
-    if g.level == 0u {
+    if on_cloth() {
         if every || counted(vec2<i32>(c), colours) {
             acc = sym_mul(sym_unpack(matrix_at(i)), guess(i, up));
         }
@@ -352,7 +372,7 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
             if wi == 0.0 {
                 continue;
             }
-            if g.level == 0u {
+            if on_cloth() {
                 add_entry(cc, wi, i, sym_unpack(matrix_at(i)));
                 for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
                     add_entry(cc, wi, adjacent_vertex(k), sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))));
@@ -385,7 +405,7 @@ fn galerkin(@builtin(global_invocation_id) id: vec3<u32>) {
         operators_set(hop.coarse.smoothers_at + I, sym_pack(smoother(centre, spread)));
     }
     // The patch smoother needs no cloth smoother: a pass over A saved.
-    if g.level == 0u && !patched() {
+    if on_cloth() && !patched() {
         for (var y = 2u * cc.y; y < min(2u * cc.y + 2u, g.ny); y++) {
             for (var x = 2u * cc.x; x < min(2u * cc.x + 2u, g.nx); x++) {
                 let i = y * g.nx + x;
@@ -587,8 +607,8 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
         rz = up_at(id.x);
     }
     // Only the cloth's rᵀz is PCG's: coarser levels sum nothing (the
-    // branch is uniform, read from the bound hop).
-    if bound_hop.fine.level == 0u {
+    // branch is uniform: the pipeline's level, or the bound hop's).
+    if LEVEL == LEVEL_CLOTH || (LEVEL == LEVEL_ANY && bound_hop.fine.level == 0u) {
         let s = workgroup_sum(lane, rz);
         if lane.index == 0u {
             store_partial(RZ, wg.x, s);
@@ -604,7 +624,7 @@ fn up_at(i: u32) -> f32 {
         return dot(ri, smoothed(i));
     }
     let zi = work(i) + sym_mul(sym_unpack(operators_at(g.smoothers_at + i)), ri - row_guess(i, true, ALL_COLOURS));
-    if g.level == 0u {
+    if on_cloth() {
         zq_set(i, zi);
         return dot(ri, zi);
     }
@@ -720,7 +740,7 @@ fn patch_factor() -> bool {
 
 // Node i's diagonal block of the fine level's operator.
 fn diagonal(i: u32) -> Sym3 {
-    if hop.fine.level == 0u {
+    if on_cloth() {
         return sym_unpack(matrix_at(i));
     }
     return stencil_block(hop.fine, i, i, 0, 0);
@@ -768,12 +788,12 @@ fn patches(@builtin(global_invocation_id) id: vec3<u32>) {
         set_patch_block(k, k, diagonal(i));
         for (var b = 0u; b < PATCH; b++) {
             let cb = first + vec2<u32>(b % 2u, b / 2u);
-            if b != k && g.level > 0u && !held(cb) {
+            if b != k && !on_cloth() && !held(cb) {
                 let d = vec2<i32>(cb) - vec2<i32>(c);
                 set_patch_block(k, b, stencil_block(g, i, cb.y * g.nx + cb.x, d.x, d.y));
             }
         }
-        if g.level == 0u {
+        if on_cloth() {
             for (var a = adjacency_begin(i); a < adjacency_begin(i + 1u); a++) {
                 let cj = vec2<u32>(vec2<i32>(c) + spring_offset(g, i, adjacent_vertex(a)));
                 if cj.x >= first.x && cj.x < first.x + 2u && cj.y >= first.y && cj.y < first.y + 2u && !held(cj) {

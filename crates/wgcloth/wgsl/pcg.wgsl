@@ -19,11 +19,12 @@
 // over, so a converged solve records iterations that cost nothing; `next`
 // (one workgroup once the solve is over) and `conclude` carry the scalars.
 // `init_scalars` writes the sizes into both buffers, so an iteration that
-// goes on copies nothing, and kernels read the scalars alone: lavapipe
+// goes on copies only its scalars, and kernels read them alone: lavapipe
 // executes every branch, masked, for each 8 invocations whether they take
 // it or not (Mesa's gallivm pushes a mask for an `if`), and copying the
 // sizes too made its iterations 2.5 to 5 times as long (BENCHMARKS.md).
-// For the same reason the three ways a solve ends share one `stop`.
+// For the same reason every way an iteration ends writes its scalars in
+// one store, and a stop's sizes are zeroed one per invocation, not in a loop.
 
 struct Scalars {
     delta: f32,
@@ -151,14 +152,14 @@ fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
     return rr > threshold && delta > 0.0;
 }
 
-// Ends the solve with scalars `s`: later iterations dispatch no workgroups.
-fn stop(s: Scalars) {
-    scalars_next.scalars = s;
-    scalars_next.scalars.done = 1u;
-    scalars_next.scalars.next_groups[0] = 1u;
-    for (var l = 0u; l < MAX_LEVELS; l++) {
-        scalars_next.groups[3u * l] = 0u;
-        scalars_next.patch_groups[3u * l] = 0u;
+// Once the solve is over, later iterations dispatch no workgroups: level l's
+// sizes zeroed by invocation l of the first workgroup, one store each where
+// a loop in the leader cost lavapipe 48 masked stores in every 8 invocations
+// of every workgroup (about a tenth of a Jacobi iteration at 256²).
+fn stop_levels(lane: Lane, wg: u32) {
+    if wg == 0u && lane.index < MAX_LEVELS {
+        scalars_next.groups[3u * lane.index] = 0u;
+        scalars_next.patch_groups[3u * lane.index] = 0u;
     }
 }
 
@@ -317,21 +318,24 @@ fn end_iteration(lane: Lane, wg: u32) -> Ending {
     let broke = !done && !usable(pq);
     let ended = !done && !broke;
     let on = ended && going_on(rr, delta, scalars_in.threshold);
-    // One stop for the three ways to end (done before, a breakdown, the
-    // goal reached or a stall), its scalars chosen by selects.
-    if leader && on {
-        // The rest is as `init_scalars` wrote it (no breakdown going on).
-        scalars_next.scalars.delta = delta;
-        scalars_next.scalars.rr = rr;
-        scalars_next.scalars.iterations = scalars_in.iterations + 1u;
-    } else if leader {
-        var s = scalars_in;
-        s.delta = select(s.delta, delta, ended);
-        s.rr = select(s.rr, rr, ended);
-        s.iterations += u32(ended);
+    // The next scalars for the four ways an iteration ends (it goes on, the
+    // solve was over before, a breakdown, the goal reached or a stall),
+    // written in one store by the leader.
+    var s = scalars_in;
+    s.delta = select(s.delta, delta, ended);
+    s.rr = select(s.rr, rr, ended);
+    s.iterations += u32(ended);
+    if !on {
         let stalls = u32(stalled(rr, delta, scalars_in.threshold));
         s.breakdown = select(select(s.breakdown, 1u, broke), stalls, ended);
-        stop(s);
+        s.done = 1u;
+        s.next_groups[0] = 1u;
+    }
+    if leader {
+        scalars_next.scalars = s;
+    }
+    if !on {
+        stop_levels(lane, wg);
     }
     return Ending(on, delta / scalars_in.delta);
 }

@@ -89,10 +89,34 @@ pub mod model {
     pub const FRICTION_CONTACT_NET: u32 = 4;
 }
 
+/// The kind of level a multigrid pipeline's dispatches work on, its WGSL
+/// override `LEVEL` (`gpu::kernels::LevelKind`).
+pub mod level {
+    /// Read from the bound hop (`multigrid::tail`, which walks them all).
+    pub const ANY: u32 = 0;
+    /// The cloth, level 0.
+    pub const CLOTH: u32 = 1;
+    /// A coarse level.
+    pub const COARSE: u32 = 2;
+}
+
+// `pcg::stop_levels` zeroes level l's sizes from invocation l of a workgroup.
+const _: () = assert!(multigrid::MAX_LEVELS <= WORKGROUP);
+
+/// How that level is smoothed, the WGSL override `SMOOTHING`.
+pub mod smoothing {
+    /// Read from the bound hop.
+    pub const ANY: u32 = 0;
+    /// The patch smoother.
+    pub const PATCHES: u32 = 1;
+    /// Damped block Jacobi.
+    pub const BLOCKS: u32 = 2;
+}
+
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
-/// name them).
-pub const SHARED: [(&str, u32); 35] = [
+/// name them, nor `level::COARSE` and `smoothing::BLOCKS`).
+pub const SHARED: [(&str, u32); 39] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -127,6 +151,10 @@ pub const SHARED: [(&str, u32); 35] = [
     ("PATCH_COLOURS", multigrid::PATCH_COLOURS as u32),
     ("PATCH_BLOCKS", multigrid::PATCH_BLOCKS),
     ("NO_PATCHES", multigrid::NO_PATCHES),
+    ("LEVEL_ANY", level::ANY),
+    ("LEVEL_CLOTH", level::CLOTH),
+    ("SMOOTHING_ANY", smoothing::ANY),
+    ("SMOOTHING_PATCHES", smoothing::PATCHES),
     // Set per device (`Kernels::new`); this is the declared default.
     ("MLP_THREADS", 16),
 ];

@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
 use crate::gpu::buffers::Parts;
+use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
 use crate::gpu::shaders::{self, Binding, STAGES};
 
@@ -184,6 +185,22 @@ impl Entry {
         Entry::ForceLines,
     ];
 
+    /// Whether its pipelines are made per kind of level ([`LevelKind`]):
+    /// every multigrid kernel bound to one level's hop (`tail` walks them all).
+    pub const fn by_level(self) -> bool {
+        matches!(
+            self,
+            Entry::MgGalerkin
+                | Entry::MgResidual
+                | Entry::MgDown
+                | Entry::MgGuess
+                | Entry::MgUp
+                | Entry::MgPatches
+                | Entry::MgPatchDown
+                | Entry::MgPatchUp
+        )
+    }
+
     /// The WGSL file (stage) and the entry point in it.
     pub const fn wgsl(self) -> (&'static str, &'static str) {
         match self {
@@ -245,13 +262,62 @@ impl Entry {
 /// One entry point's pipeline, with a bind group layout of just the
 /// bindings it uses (so it fits WebGPU's per-stage limits).
 pub struct Kernel {
-    pipeline: wgpu::ComputePipeline,
+    pipelines: Pipelines,
     /// The layout of its own bind group (group 1 of a scene stage, whose
     /// group 0 is `params`; group 0 of a standalone one) and what is in it.
     layout: wgpu::BindGroupLayout,
     group: u32,
     bindings: BTreeMap<String, Binding>,
     entry: Entry,
+}
+
+enum Pipelines {
+    One(wgpu::ComputePipeline),
+    /// A multigrid kernel's per [`LevelKind`] ([`Entry::by_level`]), each
+    /// made the first time a scene binds one: a scene uses two of the four.
+    ByLevel {
+        module: wgpu::ShaderModule,
+        layout: wgpu::PipelineLayout,
+        made: [OnceLock<wgpu::ComputePipeline>; LevelKind::COUNT],
+    },
+}
+
+/// The kind of level a multigrid kernel's dispatches work on, fixed in
+/// its pipeline (the WGSL overrides `LEVEL` and `SMOOTHING`). Lavapipe
+/// runs every branch of a kernel, masked, for every 8 invocations, so a
+/// kernel that read the kind from its hop paid at every node for the
+/// cloth's rows and the coarse stencils both, and for both smoothers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LevelKind {
+    /// The cloth (level 0), else a coarse level.
+    pub cloth: bool,
+    /// Smoothed by patches, else by block Jacobi.
+    pub patches: bool,
+}
+
+impl LevelKind {
+    const COUNT: usize = 4;
+
+    fn index(self) -> usize {
+        2 * usize::from(self.cloth) + usize::from(self.patches)
+    }
+
+    /// The overrides' values.
+    fn constants(self) -> [(&'static str, f64); 2] {
+        let level = if self.cloth {
+            constants::level::CLOTH
+        } else {
+            constants::level::COARSE
+        };
+        let smoothing = match self.patches {
+            true => constants::smoothing::PATCHES,
+            false => constants::smoothing::BLOCKS,
+        };
+        [
+            ("LEVEL", f64::from(level)),
+            ("SMOOTHING", f64::from(smoothing)),
+        ]
+    }
 }
 
 /// A kernel bound to one scene's buffers: ready to record (a scene
@@ -303,6 +369,39 @@ impl Kernel {
         buffers: &[(&str, &wgpu::Buffer)],
         parted: &[&Parts],
     ) -> Bound {
+        self.bind_level(device, buffers, parted, None)
+    }
+
+    /// [`Kernel::bind_parts`] for a multigrid kernel's dispatches on one
+    /// kind of level ([`Entry::by_level`]), with its pipeline for them.
+    pub(crate) fn bind_level(
+        &self,
+        device: &wgpu::Device,
+        buffers: &[(&str, &wgpu::Buffer)],
+        parted: &[&Parts],
+        kind: Option<LevelKind>,
+    ) -> Bound {
+        let pipeline = match (&self.pipelines, kind) {
+            (Pipelines::One(pipeline), None) => pipeline,
+            (
+                Pipelines::ByLevel {
+                    module,
+                    layout,
+                    made,
+                },
+                Some(kind),
+            ) => made[kind.index()].get_or_init(|| {
+                let (stage, name) = self.entry.wgsl();
+                Kernels::compute_pipeline(
+                    device,
+                    (module, layout),
+                    &format!("{stage}::{name} {kind:?}"),
+                    name,
+                    &kind.constants(),
+                )
+            }),
+            _ => panic!("{:?} bound with level kind {kind:?}", self.entry),
+        };
         let entries: Vec<wgpu::BindGroupEntry> = self
             .bindings
             .iter()
@@ -328,7 +427,7 @@ impl Kernel {
             entries: &entries,
         });
         Bound {
-            pipeline: self.pipeline.clone(),
+            pipeline: pipeline.clone(),
             index: self.group,
             group,
         }
@@ -528,21 +627,48 @@ impl Kernels {
             bind_group_layouts: &groups,
             immediate_size: 0,
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(&label),
-            layout: Some(&pipeline_layout),
-            module,
-            entry_point: Some(name),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipelines = match entry.by_level() {
+            true => Pipelines::ByLevel {
+                module: module.clone(),
+                layout: pipeline_layout,
+                made: Default::default(),
+            },
+            false => Pipelines::One(Self::compute_pipeline(
+                device,
+                (module, &pipeline_layout),
+                &label,
+                name,
+                &[],
+            )),
+        };
         Kernel {
-            pipeline,
+            pipelines,
             layout,
             group,
             bindings,
             entry,
         }
+    }
+
+    /// Entry point `name` of `module` with the overrides `constants`.
+    fn compute_pipeline(
+        device: &wgpu::Device,
+        (module, layout): (&wgpu::ShaderModule, &wgpu::PipelineLayout),
+        label: &str,
+        name: &str,
+        constants: &[(&str, f64)],
+    ) -> wgpu::ComputePipeline {
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(layout),
+            module,
+            entry_point: Some(name),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants,
+                ..Default::default()
+            },
+            cache: None,
+        })
     }
 
     /// Whether the device is a CPU adapter (lavapipe).

@@ -6,7 +6,7 @@
 
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
-use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::kernels::{Bound, Entry, Kernels, LevelKind};
 use crate::gpu::layout::{Grid, ScalarsAndSizes};
 use crate::multigrid::{
     NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
@@ -51,19 +51,26 @@ impl Multigrid {
         grids: &[Grid],
     ) -> Option<Multigrid> {
         let last = grids.len().checked_sub(1).filter(|&l| l > 0)?;
+        let buffers = |l: usize, colour: usize| {
+            [
+                ("bound_hop", &b.hops[l][colour]),
+                ("hop_list", &b.hop_list),
+                ("vectors", &b.vectors),
+                ("r", &b.r),
+                ("zq", &b.zq),
+                ("partials", &b.partials),
+            ]
+        };
+        let parted = [&b.topology, &b.matrix, &b.operators];
+        // Each kernel bound to hop l works on level l, fixed in its pipeline.
         let bind = |entry, l: usize, colour: usize| {
-            kernels.kernel(entry).bind_parts(
-                device,
-                &[
-                    ("bound_hop", &b.hops[l][colour]),
-                    ("hop_list", &b.hop_list),
-                    ("vectors", &b.vectors),
-                    ("r", &b.r),
-                    ("zq", &b.zq),
-                    ("partials", &b.partials),
-                ],
-                &[&b.topology, &b.matrix, &b.operators],
-            )
+            let kind = LevelKind {
+                cloth: l == 0,
+                patches: grids[l].patches_at != NO_PATCHES,
+            };
+            kernels
+                .kernel(entry)
+                .bind_level(device, &buffers(l, colour), &parted, Some(kind))
         };
         let nodes: Vec<u32> = grids.iter().map(|g| g.nodes() as u32).collect();
         let cpu_adapter = device.adapter_info().device_type == wgpu::DeviceType::Cpu;
@@ -85,7 +92,10 @@ impl Multigrid {
             galerkin: hops(Entry::MgGalerkin, last),
             residual: hops(Entry::MgResidual, tail),
             down: hops(Entry::MgDown, tail),
-            tail: bind(Entry::MgTail, tail, 0),
+            // The tail walks every level from its first: it reads each one's kind.
+            tail: kernels
+                .kernel(Entry::MgTail)
+                .bind_parts(device, &buffers(tail, 0), &parted),
             guess: hops(Entry::MgGuess, tail),
             up: hops(Entry::MgUp, ups),
             patches,
