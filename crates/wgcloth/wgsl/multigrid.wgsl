@@ -56,8 +56,9 @@ var<private> hop: Hop;
 // (gpu::kernels::LevelKind): lavapipe runs every branch of a kernel, masked,
 // for every 8 invocations, so a kernel that read the kind from its hop paid
 // at every node for the cloth's rows and the coarse stencils both, and for
-// both smoothers. The `_ANY`s read it from the hop, as `tail` must: it walks
-// every level in one dispatch.
+// both smoothers. Every level above the coarsest is smoothed alike (`tail`
+// smooths the coarsest with its own code); LEVEL_ANY reads the level from
+// the hop, as `tail` must where it starts at the cloth.
 override LEVEL: u32 = LEVEL_ANY;
 override SMOOTHING: u32 = SMOOTHING_ANY;
 

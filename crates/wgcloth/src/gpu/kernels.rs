@@ -186,13 +186,14 @@ impl Entry {
     ];
 
     /// Whether its pipelines are made per kind of level ([`LevelKind`]):
-    /// every multigrid kernel bound to one level's hop (`tail` walks them all).
+    /// every multigrid kernel of the V-cycle and its setup.
     pub const fn by_level(self) -> bool {
         matches!(
             self,
             Entry::MgGalerkin
                 | Entry::MgResidual
                 | Entry::MgDown
+                | Entry::MgTail
                 | Entry::MgGuess
                 | Entry::MgUp
                 | Entry::MgPatches
@@ -289,25 +290,37 @@ enum Pipelines {
 /// cloth's rows and the coarse stencils both, and for both smoothers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LevelKind {
-    /// The cloth (level 0), else a coarse level.
-    pub cloth: bool,
-    /// Smoothed by patches, else by block Jacobi.
+    /// Which levels.
+    pub levels: Levels,
+    /// Smoothed by patches, else by block Jacobi (`tail`'s coarsest level
+    /// is always block Jacobi, and smoothed by its own code).
     pub patches: bool,
 }
 
+/// Which levels a multigrid pipeline works on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Levels {
+    /// The cloth, level 0.
+    Cloth,
+    /// Coarse levels.
+    Coarse,
+    /// Each hop's own: `tail` when it starts at the cloth.
+    Any,
+}
+
 impl LevelKind {
-    const COUNT: usize = 4;
+    const COUNT: usize = 6;
 
     fn index(self) -> usize {
-        2 * usize::from(self.cloth) + usize::from(self.patches)
+        2 * self.levels as usize + usize::from(self.patches)
     }
 
     /// The overrides' values.
     fn constants(self) -> [(&'static str, f64); 2] {
-        let level = if self.cloth {
-            constants::level::CLOTH
-        } else {
-            constants::level::COARSE
+        let level = match self.levels {
+            Levels::Cloth => constants::level::CLOTH,
+            Levels::Coarse => constants::level::COARSE,
+            Levels::Any => constants::level::ANY,
         };
         let smoothing = match self.patches {
             true => constants::smoothing::PATCHES,

@@ -6,7 +6,7 @@
 
 use crate::gpu::buffers::{Buffers, groups};
 use crate::gpu::constants::WORKGROUP;
-use crate::gpu::kernels::{Bound, Entry, Kernels, LevelKind};
+use crate::gpu::kernels::{Bound, Entry, Kernels, LevelKind, Levels};
 use crate::gpu::layout::{Grid, ScalarsAndSizes};
 use crate::multigrid::{
     NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
@@ -62,15 +62,25 @@ impl Multigrid {
             ]
         };
         let parted = [&b.topology, &b.matrix, &b.operators];
-        // Each kernel bound to hop l works on level l, fixed in its pipeline.
-        let bind = |entry, l: usize, colour: usize| {
+        // Every level above the coarsest is smoothed alike.
+        let patched = grids[0].patches_at != NO_PATCHES;
+        let bind_as = |entry, l: usize, colour: usize, levels| {
             let kind = LevelKind {
-                cloth: l == 0,
-                patches: grids[l].patches_at != NO_PATCHES,
+                levels,
+                patches: patched,
             };
             kernels
                 .kernel(entry)
                 .bind_level(device, &buffers(l, colour), &parted, Some(kind))
+        };
+        // Each kernel bound to hop l works on level l, fixed in its pipeline.
+        let bind = |entry, l: usize, colour: usize| {
+            let levels = if l == 0 {
+                Levels::Cloth
+            } else {
+                Levels::Coarse
+            };
+            bind_as(entry, l, colour, levels)
         };
         let nodes: Vec<u32> = grids.iter().map(|g| g.nodes() as u32).collect();
         let cpu_adapter = device.adapter_info().device_type == wgpu::DeviceType::Cpu;
@@ -81,7 +91,7 @@ impl Multigrid {
                 .map(|l| std::array::from_fn(|c| bind(entry, l, c)))
                 .collect()
         };
-        let patches = (grids[0].patches_at != NO_PATCHES).then(|| Patches {
+        let patches = patched.then(|| Patches {
             inverses: hops(Entry::MgPatches, last),
             down: colours(Entry::MgPatchDown, tail),
             up: colours(Entry::MgPatchUp, tail),
@@ -92,10 +102,17 @@ impl Multigrid {
             galerkin: hops(Entry::MgGalerkin, last),
             residual: hops(Entry::MgResidual, tail),
             down: hops(Entry::MgDown, tail),
-            // The tail walks every level from its first: it reads each one's kind.
-            tail: kernels
-                .kernel(Entry::MgTail)
-                .bind_parts(device, &buffers(tail, 0), &parted),
+            // The tail walks every level from its first.
+            tail: bind_as(
+                Entry::MgTail,
+                tail,
+                0,
+                if tail == 0 {
+                    Levels::Any
+                } else {
+                    Levels::Coarse
+                },
+            ),
             guess: hops(Entry::MgGuess, tail),
             up: hops(Entry::MgUp, ups),
             patches,
