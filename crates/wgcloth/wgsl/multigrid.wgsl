@@ -52,15 +52,15 @@ struct Hop {
 // The hop being worked on: the bound one, or the one `tail` is at.
 var<private> hop: Hop;
 
-// The kind of level a pipeline's dispatches work on, fixed when it is made
+// The kind of level a pipeline's dispatches work on, set when it is made
 // (gpu::kernels::LevelKind): lavapipe runs every branch of a kernel, masked,
 // for every 8 invocations, so a kernel that read the kind from its hop paid
 // at every node for the cloth's rows and the coarse stencils both, and for
-// both smoothers. Every level above the coarsest is smoothed alike (`tail`
-// smooths the coarsest with its own code); LEVEL_ANY reads the level from
-// the hop, as `tail` must where it starts at the cloth.
-override LEVEL: u32 = LEVEL_ANY;
-override SMOOTHING: u32 = SMOOTHING_ANY;
+// both smoothers. LEVEL_ANY reads the level from the hop, as `tail` must
+// where it starts at the cloth. Every level above the coarsest is smoothed
+// alike (`tail` smooths the coarsest with its own code).
+override LEVEL: u32;
+override PATCHES: bool;
 
 // Whether the fine level is the cloth.
 fn on_cloth() -> bool {
@@ -219,10 +219,7 @@ fn work(j: u32) -> vec3<f32> {
 
 // Whether the patch smoother smooths the fine level.
 fn patched() -> bool {
-    if SMOOTHING == SMOOTHING_ANY {
-        return hop.fine.patches_at != NO_PATCHES;
-    }
-    return SMOOTHING == SMOOTHING_PATCHES;
+    return PATCHES;
 }
 
 // The fine level's smoothed vector, which the patch smoother keeps in

@@ -103,20 +103,10 @@ pub mod level {
 // `pcg::stop_levels` zeroes level l's sizes from invocation l of a workgroup.
 const _: () = assert!(multigrid::MAX_LEVELS <= WORKGROUP);
 
-/// How that level is smoothed, the WGSL override `SMOOTHING`.
-pub mod smoothing {
-    /// Read from the bound hop.
-    pub const ANY: u32 = 0;
-    /// The patch smoother.
-    pub const PATCHES: u32 = 1;
-    /// Damped block Jacobi.
-    pub const BLOCKS: u32 = 2;
-}
-
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
-/// name them, nor `level::COARSE` and `smoothing::BLOCKS`).
-pub const SHARED: [(&str, u32); 39] = [
+/// name them, nor `level::COARSE`).
+pub const SHARED: [(&str, u32); 37] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -153,8 +143,6 @@ pub const SHARED: [(&str, u32); 39] = [
     ("NO_PATCHES", multigrid::NO_PATCHES),
     ("LEVEL_ANY", level::ANY),
     ("LEVEL_CLOTH", level::CLOTH),
-    ("SMOOTHING_ANY", smoothing::ANY),
-    ("SMOOTHING_PATCHES", smoothing::PATCHES),
     // Set per device (`Kernels::new`); this is the declared default.
     ("MLP_THREADS", 16),
 ];

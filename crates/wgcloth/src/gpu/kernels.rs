@@ -185,8 +185,9 @@ impl Entry {
         Entry::ForceLines,
     ];
 
-    /// Whether its pipelines are made per kind of level ([`LevelKind`]):
-    /// every multigrid kernel of the V-cycle and its setup.
+    /// Whether its pipelines are made per kind of level ([`LevelKind`]),
+    /// each with the WGSL overrides its file declares without a default:
+    /// every multigrid kernel, of the V-cycle and of its setup.
     pub const fn by_level(self) -> bool {
         matches!(
             self,
@@ -275,7 +276,7 @@ pub struct Kernel {
 enum Pipelines {
     One(wgpu::ComputePipeline),
     /// A multigrid kernel's per [`LevelKind`] ([`Entry::by_level`]), each
-    /// made the first time a scene binds one: a scene uses two of the four.
+    /// made the first time a scene binds one: a scene uses up to two.
     ByLevel {
         module: wgpu::ShaderModule,
         layout: wgpu::PipelineLayout,
@@ -284,7 +285,7 @@ enum Pipelines {
 }
 
 /// The kind of level a multigrid kernel's dispatches work on, fixed in
-/// its pipeline (the WGSL overrides `LEVEL` and `SMOOTHING`). Lavapipe
+/// its pipeline (the WGSL overrides `LEVEL` and `PATCHES`). Lavapipe
 /// runs every branch of a kernel, masked, for every 8 invocations, so a
 /// kernel that read the kind from its hop paid at every node for the
 /// cloth's rows and the coarse stencils both, and for both smoothers.
@@ -322,13 +323,9 @@ impl LevelKind {
             Levels::Coarse => constants::level::COARSE,
             Levels::Any => constants::level::ANY,
         };
-        let smoothing = match self.patches {
-            true => constants::smoothing::PATCHES,
-            false => constants::smoothing::BLOCKS,
-        };
         [
             ("LEVEL", f64::from(level)),
-            ("SMOOTHING", f64::from(smoothing)),
+            ("PATCHES", f64::from(u8::from(self.patches))),
         ]
     }
 }
