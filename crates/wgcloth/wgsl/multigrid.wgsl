@@ -604,9 +604,9 @@ fn up(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     if id.x < nodes(hop.fine) {
         rz = up_at(id.x);
     }
-    // Only the cloth's rᵀz is PCG's: coarser levels sum nothing (the
-    // branch is uniform: the pipeline's level, or the bound hop's).
-    if LEVEL == LEVEL_CLOTH || (LEVEL == LEVEL_ANY && bound_hop.fine.level == 0u) {
+    // Only the cloth's rᵀz is PCG's: coarser levels sum nothing (`up` is
+    // bound to one level, so the branch is the pipeline's, uniform).
+    if LEVEL == LEVEL_CLOTH {
         let s = workgroup_sum(lane, rz);
         if lane.index == 0u {
             store_partial(RZ, wg.x, s);
