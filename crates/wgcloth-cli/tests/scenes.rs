@@ -296,6 +296,35 @@ fn both_vector_layouts_step_bit_for_bit() {
     }
 }
 
+/// Where a grid's neighbours lie within 2ε at rest (here the thickness is
+/// 0.53 spacings), the walks pass over the cells and triangles all near
+/// their vertex at rest, and each pair tests its vertices' rest distances
+/// before any geometry (`Sheet::vertices_near_at_rest`; `passed_over` and
+/// `vertices_near_at_rest` in wgsl/self_contact.wgsl): the GPU still finds
+/// what the CPU does, contact for contact, on the folded pleat scene.
+#[test]
+fn both_paths_find_the_same_contacts_where_neighbours_are_near_at_rest() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let mut config = scene_config("pleat");
+    let spacing = config.cloth.size[0] / (config.cloth.grid[0] - 1) as f32;
+    config.self_contact.thickness = 0.53 * spacing;
+    let scene = Scene::new(&config).unwrap();
+    let (cpu, gpu, stats) = folded(&ctx, &scene, 4);
+    assert_eq!(stats.self_contacts_dropped, 0);
+    let (pairs, _) = cpu.self_contacts();
+    let edge_pairs = pairs.iter().filter(|p| p.edges).count();
+    assert!(
+        edge_pairs >= 20 && pairs.len() - edge_pairs >= 20,
+        "{}",
+        pairs.len()
+    );
+    let keys: Vec<[u32; 4]> = pairs.iter().map(self_contact::Pair::key).collect();
+    let got = gpu.read_cloth_contacts().unwrap();
+    assert_eq!(got.iter().map(|p| p.key).collect::<Vec<_>>(), keys);
+}
+
 /// `scene`'s CPU state with the cloth's top 1/`part` folded down onto the
 /// rest, 3 mm above it, turned and shifted a little and sliding.
 fn folded_state(scene: &Scene, part: usize) -> CpuSim {

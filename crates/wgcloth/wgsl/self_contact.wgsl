@@ -50,6 +50,39 @@ fn rest_point(i: u32) -> vec3<f32> {
     return vec3<f32>(f32(i % nx) * params.rest_spacing.x, f32(i / nx) * params.rest_spacing.y, 0.0);
 }
 
+// Whether vertices i and j lie within 2 thickness of each other at rest
+// (Sheet::near_at_rest).
+fn near_at_rest(i: u32, j: u32) -> bool {
+    let d = rest_point(i) - rest_point(j);
+    let reach = 2.0 * params.cloth_thickness;
+    return dot(d, d) < reach * reach;
+}
+
+// Whether no pair of vertex a with the cell can count: every corner of it
+// is near a at rest, and so every vertex of the pair's second side is
+// near a, which is on its first (Sheet::near_triangle). Most cells a walk
+// meets in a fine flat cloth; none where the grid's spacing is 2
+// thickness or more, and then no cell is asked.
+fn passed_over(a: u32, cell: vec2<u32>) -> bool {
+    if min(params.rest_spacing.x, params.rest_spacing.y) >= 2.0 * params.cloth_thickness {
+        return false;
+    }
+    let nx = params.cells_x + 1u;
+    let c = cell.y * nx + cell.x;
+    return near_at_rest(a, c) && near_at_rest(a, c + 1u) && near_at_rest(a, c + nx) && near_at_rest(a, c + nx + 1u);
+}
+
+// Whether a vertex of the pair's first side lies within 2 thickness of one
+// of its second side's at rest, so that it is not apart at rest
+// (Sheet::vertices_near_at_rest): tested before any geometry.
+fn vertices_near_at_rest(p: vec4<u32>, edge: bool) -> bool {
+    let near = near_at_rest(p.x, p.z) || near_at_rest(p.x, p.w);
+    if edge {
+        return near || near_at_rest(p.y, p.z) || near_at_rest(p.y, p.w);
+    }
+    return near || near_at_rest(p.x, p.y);
+}
+
 // Whether the two sides lie 2 thickness apart at rest (Sheet::apart_at_rest).
 fn apart_at_rest(p: vec4<u32>, edge: bool) -> bool {
     let a = rest_point(p.x);
@@ -81,6 +114,9 @@ fn note(key: vec4<u32>, beta: vec4<f32>) {
 
 // Vertex p.x against triangle p.yzw (Sheet::vertex_pair).
 fn vertex_pair(p: vec4<u32>) {
+    if vertices_near_at_rest(p, false) {
+        return;
+    }
     let a = x[p.y].xyz;
     let b = x[p.z].xyz;
     let c = x[p.w].xyz;
@@ -98,6 +134,9 @@ fn vertex_pair(p: vec4<u32>) {
 
 // Edge p.xy against edge p.zw (Sheet::edge_pair).
 fn edge_pair(p: vec4<u32>) {
+    if vertices_near_at_rest(p, true) {
+        return;
+    }
     let e0 = x[p.x].xyz;
     let e1 = x[p.y].xyz;
     let f0 = x[p.z].xyz;

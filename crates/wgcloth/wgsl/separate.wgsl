@@ -277,6 +277,11 @@ fn growth() -> f32 {
     return params.self_floor;
 }
 
+// Every pair sharing no vertex is near when its boxes are.
+fn passed_over(a: u32, cell: vec2<u32>) -> bool {
+    return false;
+}
+
 // Vertex i and the edges it starts against what lies near their paths:
 // listing the near pairs, or (`test`) a round's test of them when the list
 // overflowed.

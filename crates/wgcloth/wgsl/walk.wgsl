@@ -9,7 +9,9 @@
 //
 // The stage gives `extent(i)`, vertex i's own box (separate: what it
 // sweeps; self_contact: where it is), `growth()`, how far a query's box
-// reaches beyond its vertices' (the floor; the thickness), and
+// reaches beyond its vertices' (the floor; the thickness),
+// `passed_over(a, cell)`, whether none of vertex a's pairs with the cell
+// can count (self_contact: its corners are all near a at rest), and
 // `pair(p, edge, test)`, its test of a pair: vertex p.x against triangle
 // p.yzw, or (edge) edge p.xy against edge p.zw, lower ends first.
 //
@@ -255,6 +257,9 @@ fn walk(w: Walk) {
         let cell = next_cell(w, &at);
         if cell.x == NO_TRIANGLE {
             break;
+        }
+        if passed_over(w.a, cell) {
+            continue;
         }
         var found = cell_pairs(w, cell);
         while found != 0u {

@@ -335,12 +335,12 @@ impl CpuSim {
                         // Collide refits it when there is a body.
                         collide::refit_cloth(cloth, &mut self.cloth_bvh, x);
                     }
-                    let sheet = self_contact::Sheet {
-                        triangles: &cloth.triangles,
-                        edges: &self.edges,
-                        rest: &self.rest_grid,
-                        thickness: keep.thickness,
-                    };
+                    let sheet = self_contact::Sheet::new(
+                        &cloth.triangles,
+                        &self.edges,
+                        &self.rest_grid,
+                        keep.thickness,
+                    );
                     let found = sheet.find(x, &self.cloth_bvh, self_contact::PAIRS_PER_VERTEX);
                     let band = self_contact::Band {
                         coefficients: self.scene.config.contact.coefficients(),

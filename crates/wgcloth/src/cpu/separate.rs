@@ -228,6 +228,7 @@ pub fn near_pairs(
                 (triangles, edges),
                 bvh,
                 (grown, boxed),
+                |_| false,
                 |pair| match pair {
                     Candidate::Vertex(t) => {
                         let tri = triangles[t as usize];
@@ -274,12 +275,14 @@ pub enum Candidate {
 /// `reach`, the second's `boxed` (an edge–edge pair perhaps twice, from
 /// both triangles along its second edge), in one walk of `bvh` (which holds
 /// the triangles' `boxed`) for the union of the first's: a walk for the
-/// vertex and one for each of its edges cost more than their tests.
+/// vertex and one for each of its edges cost more than their tests. The
+/// triangles `skip` names are passed over, none of their pairs named.
 pub fn candidates(
     v: u32,
     (triangles, edges): (&[[u32; 3]], &[[u32; 2]]),
     bvh: &Bvh,
     (reach, boxed): (impl Fn(&[u32]) -> Aabb, impl Fn(&[u32]) -> Aabb),
+    skip: impl Fn([u32; 3]) -> bool,
     mut visit: impl FnMut(Candidate),
 ) {
     let own = &edges[edges.partition_point(|e| e[0] < v)..edges.partition_point(|e| e[0] <= v)];
@@ -288,6 +291,9 @@ pub fn candidates(
     let query = own_reach.iter().fold(vertex, |q, b| q.union(*b));
     bvh.query_box(query, |t| {
         let tri = triangles[t as usize];
+        if skip(tri) {
+            return;
+        }
         let tri_box = boxed(&tri);
         if !tri.contains(&v) && vertex.overlaps(&tri_box) {
             visit(Candidate::Vertex(t));
