@@ -58,13 +58,19 @@ fn near_at_rest(i: u32, j: u32) -> bool {
     return dot(d, d) < reach * reach;
 }
 
+// Whether the grid's neighbours lie within 2 thickness at rest
+// (Sheet::neighbours_near); else no vertex is near another, and neither
+// shortcut below asks.
+fn neighbours_near() -> bool {
+    return min(params.rest_spacing.x, params.rest_spacing.y) < 2.0 * params.cloth_thickness;
+}
+
 // Whether no pair of vertex a with the cell can count: every corner of it
 // is near a at rest, and so every vertex of the pair's second side is
 // near a, which is on its first (Sheet::near_triangle). Most cells a walk
-// meets in a fine flat cloth; none where the grid's spacing is 2
-// thickness or more, and then no cell is asked.
+// meets in a fine flat cloth.
 fn passed_over(a: u32, cell: vec2<u32>) -> bool {
-    if min(params.rest_spacing.x, params.rest_spacing.y) >= 2.0 * params.cloth_thickness {
+    if !neighbours_near() {
         return false;
     }
     let nx = params.cells_x + 1u;
@@ -76,6 +82,9 @@ fn passed_over(a: u32, cell: vec2<u32>) -> bool {
 // of its second side's at rest, so that it is not apart at rest
 // (Sheet::vertices_near_at_rest): tested before any geometry.
 fn vertices_near_at_rest(p: vec4<u32>, edge: bool) -> bool {
+    if !neighbours_near() {
+        return false;
+    }
     let near = near_at_rest(p.x, p.z) || near_at_rest(p.x, p.w);
     if edge {
         return near || near_at_rest(p.y, p.z) || near_at_rest(p.y, p.w);
