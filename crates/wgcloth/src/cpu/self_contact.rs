@@ -220,10 +220,11 @@ impl<'a> Sheet<'a> {
 
     /// Whether no pair of vertex `v` or an edge it starts with triangle
     /// `tri` is apart at rest: each of its vertices is near `v`, which
-    /// each such pair holds on its first side.
+    /// each such pair holds on its first side (asked only where the
+    /// grid's neighbours are near, as [`Sheet::vertices_near_at_rest`]).
     #[inline(always)]
     fn near_triangle(&self, v: u32, tri: [u32; 3]) -> bool {
-        tri.iter().all(|&j| self.near_at_rest(v, j))
+        self.neighbours_near && tri.iter().all(|&j| self.near_at_rest(v, j))
     }
 
     /// The vertex–triangle contact of vertex `v` and triangle `t`.
@@ -272,7 +273,7 @@ impl<'a> Sheet<'a> {
             .flat_map_iter(|v| {
                 let mut found = Vec::new();
                 let walked = (self.triangles, self.edges);
-                let skip = |tri| self.neighbours_near && self.near_triangle(v, tri);
+                let skip = |tri| self.near_triangle(v, tri);
                 candidates(v, walked, bvh, (reach, boxed), skip, |pair| match pair {
                     Candidate::Vertex(t) => found.extend(self.vertex_pair(x, v, t)),
                     Candidate::Edges(e, f) => found.extend(self.edge_pair(x, e, f)),
