@@ -297,9 +297,9 @@ fn both_vector_layouts_step_bit_for_bit() {
 }
 
 /// Where a grid's neighbours lie within 2ε at rest (here the thickness is
-/// 0.53 spacings), the walks pass over the cells and triangles all near
-/// their vertex at rest, and each pair tests its vertices' rest distances
-/// before any geometry (`Sheet::vertices_near_at_rest`; `passed_over` and
+/// 0.53 spacings), the walks pass over the cells and triangles whose pairs
+/// with their vertex the rule refuses, and each pair tests its vertices'
+/// rest distances before any geometry (`Sheet::vertices_near_at_rest`; `passed_over` and
 /// `vertices_near_at_rest` in wgsl/self_contact.wgsl): the GPU still finds
 /// what the CPU does, contact for contact, on the folded pleat scene.
 #[test]
@@ -307,10 +307,7 @@ fn both_paths_find_the_same_contacts_where_neighbours_are_near_at_rest() {
     let Some(ctx) = common::gpu_context() else {
         return;
     };
-    let mut config = scene_config("pleat");
-    let spacing = config.cloth.size[0] / (config.cloth.grid[0] - 1) as f32;
-    config.self_contact.thickness = 0.53 * spacing;
-    let scene = Scene::new(&config).unwrap();
+    let (scene, _) = pleat_with_thickness(0.53);
     let (cpu, gpu, stats) = folded(&ctx, &scene, 4);
     assert_eq!(stats.self_contacts_dropped, 0);
     let (pairs, _) = cpu.self_contacts();
@@ -323,6 +320,58 @@ fn both_paths_find_the_same_contacts_where_neighbours_are_near_at_rest() {
     let keys: Vec<[u32; 4]> = pairs.iter().map(self_contact::Pair::key).collect();
     let got = gpu.read_cloth_contacts().unwrap();
     assert_eq!(got.iter().map(|p| p.key).collect::<Vec<_>>(), keys);
+}
+
+/// A cell with a corner within 2ε of the walk's vertex at rest, on the
+/// diagonal its triangles share, may still hold a contact with it: its
+/// left edge, 2ε apart at rest, carried under one of the vertex's edges.
+/// The walks pass over only cells and triangles each of whose pairs the
+/// rule refuses (wgsl/self_contact.wgsl `passed_over`,
+/// `separate::candidates`), so both paths find it.
+#[test]
+fn the_walks_keep_a_contact_with_a_cell_that_has_a_corner_near_at_rest() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    // 2ε = 1.5 spacings: the rest neighbours within it are those 1 and √2
+    // spacings away.
+    let (scene, spacing) = pleat_with_thickness(0.75);
+    let nx = scene.cloth.nx;
+    let mut cpu = CpuSim::new(scene.clone());
+    let x = &mut cpu.state.x;
+    let (right, up) = (x[1] - x[0], x[nx as usize] - x[0]);
+    let below = right.cross(up).normalize() * (-0.3 * spacing);
+    // Cell (cx, cy), its diagonal from (cx + 1, cy) to (cx, cy + 1), and
+    // vertex a √2 spacings from its corner (cx + 1, cy) alone; the vertex's
+    // edge up and the cell's left edge are 2 spacings apart.
+    let (cx, cy) = (10, 4);
+    assert_eq!((cx + cy) % 2, 0);
+    let a = (cy - 1) * nx + cx + 2;
+    let e = [a, a + nx];
+    let f = [cy * nx + cx, (cy + 1) * nx + cx];
+    let middle = (x[e[0] as usize] + x[e[1] as usize]) / 2.0;
+    x[f[0] as usize] = middle - 0.5 * right + below;
+    x[f[1] as usize] = middle + 0.5 * right + below;
+    let (cpu, gpu, stats) = staged(&ctx, &scene, cpu);
+    assert_eq!(stats.self_contacts_dropped, 0);
+    let (pairs, _) = cpu.self_contacts();
+    let keys: Vec<[u32; 4]> = pairs.iter().map(self_contact::Pair::key).collect();
+    let pair = [e[0], e[1], f[0], f[1]];
+    assert!(
+        pairs.iter().any(|p| p.vertices == pair),
+        "{pair:?} in {keys:?}"
+    );
+    let got = gpu.read_cloth_contacts().unwrap();
+    assert_eq!(got.iter().map(|p| p.key).collect::<Vec<_>>(), keys);
+}
+
+/// The pleat scene with its self-contact thickness `spacings` of its
+/// grid's spacing, and the spacing.
+fn pleat_with_thickness(spacings: f32) -> (Scene, f32) {
+    let mut config = scene_config("pleat");
+    let spacing = config.cloth.size[0] / (config.cloth.grid[0] - 1) as f32;
+    config.self_contact.thickness = spacings * spacing;
+    (Scene::new(&config).unwrap(), spacing)
 }
 
 /// `scene`'s CPU state with the cloth's top 1/`part` folded down onto the
@@ -357,7 +406,14 @@ fn folded(
     scene: &Scene,
     part: usize,
 ) -> (CpuSim, GpuSim, StepStats) {
-    let mut cpu = folded_state(scene, part);
+    staged(ctx, scene, folded_state(scene, part))
+}
+
+fn staged(
+    ctx: &wgcloth::gpu::GpuContext,
+    scene: &Scene,
+    mut cpu: CpuSim,
+) -> (CpuSim, GpuSim, StepStats) {
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, scene).unwrap();
     gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
     let mut stats = StepStats::default();

@@ -11,7 +11,8 @@
 // sweeps; self_contact: where it is), `growth()`, how far a query's box
 // reaches beyond its vertices' (the floor; the thickness),
 // `passed_over(a, cell)`, whether none of vertex a's pairs with the cell
-// can count (self_contact: its corners are all near a at rest), and
+// can count (self_contact: each of its triangles has two vertices near a
+// at rest), and
 // `pair(p, edge, test)`, its test of a pair: vertex p.x against triangle
 // p.yzw, or (edge) edge p.xy against edge p.zw, lower ends first.
 //
@@ -195,6 +196,14 @@ fn cell_triangle(cell: vec2<u32>, t: u32) -> vec3<u32> {
     return vec3<u32>(cloth_index(k), cloth_index(k + 1u), cloth_index(k + 2u));
 }
 
+// The cell's diagonal, the edge its two triangles share, lower end first
+// (alternating as scene::cloth lays them).
+fn cell_diagonal(cell: vec2<u32>) -> vec2<u32> {
+    let nx = params.cells_x + 1u;
+    let a = cell.y * nx + cell.x;
+    return select(vec2<u32>(a, a + nx + 1u), vec2<u32>(a + 1u, a + nx), (cell.x + cell.y) % 2u == 0u);
+}
+
 // Edge m (0 to 4) of those the cell owns, lower end first, so that each is
 // met once: its bottom, its left and its diagonal (alternating as
 // scene::cloth lays them), and its right and top on the grid's last column
@@ -205,7 +214,7 @@ fn owned_edge(cell: vec2<u32>, m: u32) -> vec2<u32> {
     let nx = params.cells_x + 1u;
     let a = cell.y * nx + cell.x;
     let up = a + nx;
-    let diagonal = select(vec2<u32>(a, up + 1u), vec2<u32>(a + 1u, up), (cell.x + cell.y) % 2u == 0u);
+    let diagonal = cell_diagonal(cell);
     // Selects, not an array: lavapipe would keep an array in memory.
     let top_or_right = select(vec2<u32>(up, up + 1u), vec2<u32>(a + 1u, up + 1u), m == 3u);
     let e = select(select(select(top_or_right, diagonal, m == 2u), vec2<u32>(a, up), m == 1u), vec2<u32>(a, a + 1u), m == 0u);

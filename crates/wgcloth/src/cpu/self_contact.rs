@@ -202,13 +202,18 @@ impl<'a> Sheet<'a> {
     /// within ε (at 256² their exact tests took three fifths of its step).
     #[inline(always)]
     fn vertices_near_at_rest(&self, vertices: [u32; 4], edges: bool) -> bool {
-        if !self.neighbours_near {
-            return false;
-        }
         let [a, b, c, d] = vertices;
         let first: &[u32] = if edges { &[a, b] } else { &[a] };
         let second: &[u32] = if edges { &[c, d] } else { &[b, c, d] };
-        (first.iter()).any(|&i| second.iter().any(|&j| self.near_at_rest(i, j)))
+        (first.iter()).any(|&i| second.iter().any(|&j| self.refused(i, j)))
+    }
+
+    /// Whether every pair with vertex i on one side and j on the other is
+    /// refused before any geometry: the two lie within 2ε of each other at
+    /// rest (asked only where the grid's neighbours do, else no two do).
+    #[inline(always)]
+    fn refused(&self, i: u32, j: u32) -> bool {
+        self.neighbours_near && self.near_at_rest(i, j)
     }
 
     /// Whether vertices i and j lie within 2ε of each other at rest.
@@ -216,15 +221,6 @@ impl<'a> Sheet<'a> {
     fn near_at_rest(&self, i: u32, j: u32) -> bool {
         let reach = 2.0 * self.thickness;
         self.rest[i as usize].distance_squared(self.rest[j as usize]) < reach * reach
-    }
-
-    /// Whether no pair of vertex `v` or an edge it starts with triangle
-    /// `tri` is apart at rest: each of its vertices is near `v`, which
-    /// each such pair holds on its first side (asked only where the
-    /// grid's neighbours are near, as [`Sheet::vertices_near_at_rest`]).
-    #[inline(always)]
-    fn near_triangle(&self, v: u32, tri: [u32; 3]) -> bool {
-        self.neighbours_near && tri.iter().all(|&j| self.near_at_rest(v, j))
     }
 
     /// The vertex–triangle contact of vertex `v` and triangle `t`.
@@ -273,8 +269,8 @@ impl<'a> Sheet<'a> {
             .flat_map_iter(|v| {
                 let mut found = Vec::new();
                 let walked = (self.triangles, self.edges);
-                let skip = |tri| self.near_triangle(v, tri);
-                candidates(v, walked, bvh, (reach, boxed), skip, |pair| match pair {
+                let refused = |i, j| self.refused(i, j);
+                candidates(v, walked, bvh, (reach, boxed), refused, |pair| match pair {
                     Candidate::Vertex(t) => found.extend(self.vertex_pair(x, v, t)),
                     Candidate::Edges(e, f) => found.extend(self.edge_pair(x, e, f)),
                 });
@@ -564,8 +560,9 @@ mod tests {
     /// A fine sheet folded over itself, where 2ε spans three spacings: the
     /// contacts are those whose nearest points lie 2ε apart at rest, found
     /// here by testing every pair with no shortcut. The walk passes over
-    /// the triangles near its vertex at rest, and the pairs test their
-    /// vertices' rest distances first; neither may lose a contact.
+    /// the triangles two of whose vertices are near its vertex at rest,
+    /// and the pairs test their vertices' rest distances first; neither
+    /// may lose a contact.
     #[test]
     fn the_rest_shortcuts_keep_every_contact_of_a_fold() {
         let (nx, ny, spacing) = (14u32, 6u32, 3e-3f32);
@@ -627,7 +624,7 @@ mod tests {
         let sheet = Sheet::new(&t, &edges, &rest, THICKNESS);
         let mut passed_over = 0;
         for (v, &tri) in (0..x.len() as u32).flat_map(|v| t.iter().map(move |tri| (v, tri))) {
-            if !sheet.near_triangle(v, tri) {
+            if !separate::passed_over(tri.map(|j| sheet.refused(v, j))) {
                 continue;
             }
             passed_over += 1;

@@ -228,7 +228,7 @@ pub fn near_pairs(
                 (triangles, edges),
                 bvh,
                 (grown, boxed),
-                |_| false,
+                |_, _| false,
                 |pair| match pair {
                     Candidate::Vertex(t) => {
                         let tri = triangles[t as usize];
@@ -275,14 +275,17 @@ pub enum Candidate {
 /// `reach`, the second's `boxed` (an edge–edge pair perhaps twice, from
 /// both triangles along its second edge), in one walk of `bvh` (which holds
 /// the triangles' `boxed`) for the union of the first's: a walk for the
-/// vertex and one for each of its edges cost more than their tests. The
-/// triangles `skip` names are passed over, none of their pairs named.
+/// vertex and one for each of its edges cost more than their tests.
+///
+/// No pair is named with a vertex i on one side and j on the other where
+/// `refused(i, j)`, which is asked before the pair's boxes are, and the
+/// triangles it makes [`passed_over`] are passed over whole.
 pub fn candidates(
     v: u32,
     (triangles, edges): (&[[u32; 3]], &[[u32; 2]]),
     bvh: &Bvh,
     (reach, boxed): (impl Fn(&[u32]) -> Aabb, impl Fn(&[u32]) -> Aabb),
-    skip: impl Fn([u32; 3]) -> bool,
+    refused: impl Fn(u32, u32) -> bool,
     mut visit: impl FnMut(Candidate),
 ) {
     let own = &edges[edges.partition_point(|e| e[0] < v)..edges.partition_point(|e| e[0] <= v)];
@@ -291,24 +294,35 @@ pub fn candidates(
     let query = own_reach.iter().fold(vertex, |q, b| q.union(*b));
     bvh.query_box(query, |t| {
         let tri = triangles[t as usize];
-        if skip(tri) {
+        let refused_with_v = tri.map(|j| refused(v, j));
+        if passed_over(refused_with_v) {
             return;
         }
         let tri_box = boxed(&tri);
-        if !tri.contains(&v) && vertex.overlaps(&tri_box) {
+        if !tri.contains(&v) && refused_with_v == [false; 3] && vertex.overlaps(&tri_box) {
             visit(Candidate::Vertex(t));
         }
         for (&e, e_reach) in own.iter().zip(&own_reach) {
             if e_reach.overlaps(&tri_box) {
                 for f in edges_of(tri) {
                     let apart = !e.iter().any(|v| f.contains(v));
-                    if f > e && apart && e_reach.overlaps(&boxed(&f)) {
+                    let kept = || !e.iter().any(|&i| f.iter().any(|&j| refused(i, j)));
+                    if f > e && apart && kept() && e_reach.overlaps(&boxed(&f)) {
                         visit(Candidate::Edges(e, f));
                     }
                 }
             }
         }
     });
+}
+
+/// Whether [`candidates`] passes over a triangle whose vertices are, in
+/// turn, refused or not with the walk's vertex v: two of them are. Every
+/// pair the walk names holds v on its first side and, on its second, the
+/// triangle or one of its edges, each of which holds one of any two of its
+/// vertices.
+pub fn passed_over(refused_with_v: [bool; 3]) -> bool {
+    refused_with_v.iter().filter(|&&r| r).count() >= 2
 }
 
 /// A triangle's edges, each lower vertex first.
