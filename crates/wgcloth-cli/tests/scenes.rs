@@ -297,11 +297,12 @@ fn both_vector_layouts_step_bit_for_bit() {
 }
 
 /// Where a grid's neighbours lie within 2ε at rest (here the thickness is
-/// 0.53 spacings), the walks pass over the cells and triangles whose pairs
-/// with their vertex the rule refuses, and each pair tests its vertices'
-/// rest distances before any geometry (`Sheet::vertices_near_at_rest`; `passed_over` and
-/// `vertices_near_at_rest` in wgsl/self_contact.wgsl): the GPU still finds
-/// what the CPU does, contact for contact, on the folded pleat scene.
+/// 0.53 spacings), the walks name no pair one of whose vertices is near
+/// one of the other side's at rest (`separate::candidates`;
+/// `refused_corners` in wgsl/self_contact.wgsl), and each pair tests its
+/// vertices' rest distances before any geometry
+/// (`Sheet::vertices_near_at_rest`): the GPU still finds what the CPU
+/// does, contact for contact, on the folded pleat scene.
 #[test]
 fn both_paths_find_the_same_contacts_where_neighbours_are_near_at_rest() {
     let Some(ctx) = common::gpu_context() else {
@@ -325,9 +326,9 @@ fn both_paths_find_the_same_contacts_where_neighbours_are_near_at_rest() {
 /// A cell with a corner within 2ε of the walk's vertex at rest, on the
 /// diagonal its triangles share, may still hold a contact with it: its
 /// left edge, 2ε apart at rest, carried under one of the vertex's edges.
-/// The walks pass over only cells and triangles each of whose pairs the
-/// rule refuses (wgsl/self_contact.wgsl `passed_over`,
-/// `separate::candidates`), so both paths find it.
+/// The walks refuse only pairs the rule refuses (`separate::candidates`
+/// and `passed_over`; wgsl/walk.wgsl `cell_pairs` with
+/// wgsl/self_contact.wgsl `refused_corners`), so both paths find it.
 #[test]
 fn the_walks_keep_a_contact_with_a_cell_that_has_a_corner_near_at_rest() {
     let Some(ctx) = common::gpu_context() else {

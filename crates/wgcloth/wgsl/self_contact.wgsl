@@ -65,23 +65,38 @@ fn neighbours_near() -> bool {
     return min(params.rest_spacing.x, params.rest_spacing.y) < 2.0 * params.cloth_thickness;
 }
 
-// Whether no pair of vertex a with the cell can count: each of its two
-// triangles has two vertices near a at rest (both ends of the diagonal
-// they share, or one and both other corners), so each of their edges has
-// one, and every pair holds a on its first side (separate::candidates
-// passes over such a triangle). Most cells a walk meets in a fine flat
-// cloth.
-fn passed_over(a: u32, cell: vec2<u32>) -> bool {
+// The cell's corners within 2 thickness at rest of the walk's vertex
+// (bits 0 to 3: bottom left, bottom right, top left, top right) and of the
+// far end of its edge k (bits 4 + 4k on): no pair across them counts
+// (Sheet::refused), so the walk names none (cell_pairs), as the CPU's
+// refuses them before their boxes; none where the grid's neighbours are
+// not near. In a fine flat cloth, most pairs a walk meets.
+fn refused_corners(w: Walk, cell: vec2<u32>) -> u32 {
     if !neighbours_near() {
-        return false;
+        return 0u;
     }
-    let d = cell_diagonal(cell);
-    let nx = params.cells_x + 1u;
-    let c = cell.y * nx + cell.x;
-    // The two corners off the diagonal.
-    let o = select(vec2<u32>(c + 1u, c + nx), vec2<u32>(c, c + nx + 1u), d.x == c + 1u);
-    let on_diagonal = u32(near_at_rest(a, d.x)) + u32(near_at_rest(a, d.y));
-    return on_diagonal == 2u || (on_diagonal == 1u && near_at_rest(a, o.x) && near_at_rest(a, o.y));
+    let s = params.rest_spacing;
+    // The corners' rest points (rest_point), x and y; z is 0.
+    let cx = vec4<f32>(f32(cell.x), f32(cell.x + 1u), f32(cell.x), f32(cell.x + 1u)) * s.x;
+    let cy = vec4<f32>(f32(cell.y), f32(cell.y), f32(cell.y + 1u), f32(cell.y + 1u)) * s.y;
+    var bits = near_corners(w.a, cx, cy);
+    for (var k = 0u; k < 4u; k++) {
+        if w.far[k] != NO_TRIANGLE {
+            bits |= near_corners(w.far[k], cx, cy) << (4u + 4u * k);
+        }
+    }
+    return bits;
+}
+
+// The corners at (cx, cy) within 2 thickness of vertex i at rest
+// (near_at_rest), as bits.
+fn near_corners(i: u32, cx: vec4<f32>, cy: vec4<f32>) -> u32 {
+    let p = rest_point(i);
+    let dx = p.x - cx;
+    let dy = p.y - cy;
+    let reach = 2.0 * params.cloth_thickness;
+    let near = dx * dx + dy * dy < vec4<f32>(reach * reach);
+    return dot(select(vec4<u32>(0u), vec4<u32>(1u, 2u, 4u, 8u), near), vec4<u32>(1u));
 }
 
 // Whether a vertex of the pair's first side lies within 2 thickness of one

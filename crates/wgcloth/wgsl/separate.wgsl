@@ -278,8 +278,8 @@ fn growth() -> f32 {
 }
 
 // Every pair sharing no vertex is near when its boxes are.
-fn passed_over(a: u32, cell: vec2<u32>) -> bool {
-    return false;
+fn refused_corners(w: Walk, cell: vec2<u32>) -> u32 {
+    return 0u;
 }
 
 // Vertex i and the edges it starts against what lies near their paths:

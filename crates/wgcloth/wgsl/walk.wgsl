@@ -10,11 +10,11 @@
 // The stage gives `extent(i)`, vertex i's own box (separate: what it
 // sweeps; self_contact: where it is), `growth()`, how far a query's box
 // reaches beyond its vertices' (the floor; the thickness),
-// `passed_over(a, cell)`, whether none of vertex a's pairs with the cell
-// can count (self_contact: each of its triangles has two vertices near a
-// at rest), and
-// `pair(p, edge, test)`, its test of a pair: vertex p.x against triangle
-// p.yzw, or (edge) edge p.xy against edge p.zw, lower ends first.
+// `refused_corners(w, cell)`, the cell's corners across which no pair of
+// the walk's vertex (bits 0 to 3) or of the far end of its edge k (bits
+// 4 + 4k on) counts (self_contact: those near it at rest; separate: none),
+// and `pair(p, edge, test)`, its test of a pair: vertex p.x against
+// triangle p.yzw, or (edge) edge p.xy against edge p.zw, lower ends first.
 //
 // Lavapipe runs every branch, taken or not, masked, for each 8 invocations,
 // and every loop's body at least once, so a test nested in the hierarchy's
@@ -196,14 +196,6 @@ fn cell_triangle(cell: vec2<u32>, t: u32) -> vec3<u32> {
     return vec3<u32>(cloth_index(k), cloth_index(k + 1u), cloth_index(k + 2u));
 }
 
-// The cell's diagonal, the edge its two triangles share, lower end first
-// (alternating as scene::cloth lays them).
-fn cell_diagonal(cell: vec2<u32>) -> vec2<u32> {
-    let nx = params.cells_x + 1u;
-    let a = cell.y * nx + cell.x;
-    return select(vec2<u32>(a, a + nx + 1u), vec2<u32>(a + 1u, a + nx), (cell.x + cell.y) % 2u == 0u);
-}
-
 // Edge m (0 to 4) of those the cell owns, lower end first, so that each is
 // met once: its bottom, its left and its diagonal (alternating as
 // scene::cloth lays them), and its right and top on the grid's last column
@@ -214,7 +206,7 @@ fn owned_edge(cell: vec2<u32>, m: u32) -> vec2<u32> {
     let nx = params.cells_x + 1u;
     let a = cell.y * nx + cell.x;
     let up = a + nx;
-    let diagonal = cell_diagonal(cell);
+    let diagonal = select(vec2<u32>(a, up + 1u), vec2<u32>(a + 1u, up), (cell.x + cell.y) % 2u == 0u);
     // Selects, not an array: lavapipe would keep an array in memory.
     let top_or_right = select(vec2<u32>(up, up + 1u), vec2<u32>(a + 1u, up + 1u), m == 3u);
     let e = select(select(select(top_or_right, diagonal, m == 2u), vec2<u32>(a, up), m == 1u), vec2<u32>(a, a + 1u), m == 0u);
@@ -222,17 +214,29 @@ fn owned_edge(cell: vec2<u32>, m: u32) -> vec2<u32> {
     return select(vec2<u32>(NO_TRIANGLE), e, owned);
 }
 
+// Corner vertex v's bit among the cell's corners (`refused_corners`'
+// order: bottom left, bottom right, top left, top right).
+fn corner_bit(k: Corners, v: u32) -> u32 {
+    let nx = params.cells_x + 1u;
+    return select(select(select(8u, 4u, v == k.a + nx), 2u, v == k.a + 1u), 1u, v == k.a);
+}
+
 // The cell's pairs for the walk, as bits: bit t (0, 1) the vertex against
 // its triangle t, bit 2 + 4 m + k the walk's edge k against its edge m
 // (each edge pair from its lower edge, as on the CPU); each where the
-// two boxes overlap and the pair shares no vertex.
-fn cell_pairs(w: Walk, cell: vec2<u32>) -> u32 {
+// two boxes overlap, the pair shares no vertex and no vertex of one side
+// is refused with one of the other's (`refused`, from
+// `refused_corners`), which the boxes are not tested for.
+fn cell_pairs(w: Walk, cell: vec2<u32>, refused: u32) -> u32 {
     let k = corners(cell);
+    let by_a = refused & 15u;
+    let by_far = vec4<u32>(refused >> 4u, refused >> 8u, refused >> 12u, refused >> 16u) & vec4<u32>(15u);
     var bits = 0u;
     for (var t = 0u; t < 2u; t++) {
         let tri = cell_triangle(cell, t);
         let b = union_of(union_of(corner_extent(k, tri.x), corner_extent(k, tri.y)), corner_extent(k, tri.z));
-        if !any(tri == vec3<u32>(w.a)) && overlaps(w.vertex.lo.xyz, w.vertex.hi.xyz, b) {
+        let kept = (by_a & (corner_bit(k, tri.x) | corner_bit(k, tri.y) | corner_bit(k, tri.z))) == 0u;
+        if !any(tri == vec3<u32>(w.a)) && kept && overlaps(w.vertex.lo.xyz, w.vertex.hi.xyz, b) {
             bits |= 1u << t;
         }
     }
@@ -245,7 +249,9 @@ fn cell_pairs(w: Walk, cell: vec2<u32>) -> u32 {
             & (w.lo_z <= vec4<f32>(b.hi.z)) & (vec4<f32>(b.lo.z) <= w.hi_z);
         let above = vec4<bool>(f.x > w.a) | (vec4<bool>(f.x == w.a) & (vec4<u32>(f.y) > w.far));
         let apart = vec4<bool>(f.x != w.a && f.y != w.a) & (vec4<u32>(f.x) != w.far) & (vec4<u32>(f.y) != w.far);
-        let met = select(vec4<u32>(0u), vec4<u32>(1u, 2u, 4u, 8u), near & above & apart & vec4<bool>(f.x != NO_TRIANGLE));
+        let ends = vec4<u32>(corner_bit(k, f.x) | corner_bit(k, f.y));
+        let kept = ((by_far | vec4<u32>(by_a)) & ends) == vec4<u32>(0u);
+        let met = select(vec4<u32>(0u), vec4<u32>(1u, 2u, 4u, 8u), near & above & apart & kept & vec4<bool>(f.x != NO_TRIANGLE));
         bits |= (met.x | met.y | met.z | met.w) << (2u + 4u * m);
     }
     return bits;
@@ -267,10 +273,7 @@ fn walk(w: Walk) {
         if cell.x == NO_TRIANGLE {
             break;
         }
-        if passed_over(w.a, cell) {
-            continue;
-        }
-        var found = cell_pairs(w, cell);
+        var found = cell_pairs(w, cell, refused_corners(w, cell));
         while found != 0u {
             let j = firstTrailingBit(found);
             found &= found - 1u;
