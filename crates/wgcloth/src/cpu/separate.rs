@@ -304,9 +304,13 @@ pub fn candidates(
         }
         for (&e, e_reach) in own.iter().zip(&own_reach) {
             if e_reach.overlaps(&tri_box) {
-                for f in edges_of(tri) {
+                for (f, ends) in edges_of(tri).into_iter().zip(TRIANGLE_EDGES) {
                     let apart = !e.iter().any(|v| f.contains(v));
-                    let kept = || !e.iter().any(|&i| f.iter().any(|&j| refused(i, j)));
+                    // e is [v, w], and v's answers are in hand.
+                    let kept = || {
+                        !ends.iter().any(|&k| refused_with_v[k])
+                            && !f.iter().any(|&j| refused(e[1], j))
+                    };
                     if f > e && apart && kept() && e_reach.overlaps(&boxed(&f)) {
                         visit(Candidate::Edges(e, f));
                     }
@@ -325,9 +329,13 @@ pub fn passed_over(refused_with_v: [bool; 3]) -> bool {
     refused_with_v.iter().filter(|&&r| r).count() >= 2
 }
 
+/// A triangle's edges by the places of their ends in it, as [`edges_of`]
+/// lists them.
+const TRIANGLE_EDGES: [[usize; 2]; 3] = [[0, 1], [1, 2], [2, 0]];
+
 /// A triangle's edges, each lower vertex first.
 pub fn edges_of(t: [u32; 3]) -> [[u32; 2]; 3] {
-    [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]].map(|[a, b]| [a.min(b), a.max(b)])
+    TRIANGLE_EDGES.map(|[a, b]| [t[a].min(t[b]), t[a].max(t[b])])
 }
 
 /// A vertex's displacement bound from its least separation s:
