@@ -9,8 +9,9 @@ mod common;
 use std::path::Path;
 
 use wgcloth::bvh::Bvh;
-use wgcloth::config::{Config, Preconditioner, Smoother};
+use wgcloth::config::{Config, ModelKind, Preconditioner, Smoother};
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
+use wgcloth::cpu::springs::max_strain;
 use wgcloth::cpu::{CpuSim, StepStats, integrate, self_contact, separate};
 use wgcloth::gpu::layout::VectorLayout;
 use wgcloth::gpu::{GpuSim, Kernels};
@@ -433,10 +434,52 @@ fn staged(
     (cpu, gpu, stats)
 }
 
+/// The drape's cloth falls onto its sphere, which does not move: its fall
+/// (`scene::fall_speed`, at most 2.8 m/s) sets its substeps, 2 a step at
+/// 32² and 15 at 256². Dropped from 1.5 m it meets the sphere at 5.2 m/s,
+/// 1.6 spacings of its 32² cloth a step of 0.01 s: one solve a step
+/// stretches its springs past twice their length there, and the 4 substeps
+/// its fall takes keep them whole.
+#[test]
+fn the_drapes_fall_takes_the_substeps_that_keep_its_springs_whole() {
+    let config = scene_config("drape");
+    for (grid, substeps) in [(32, 2), (64, 4), (128, 8), (256, 15)] {
+        let mut c = config.clone();
+        c.cloth.grid = [grid, grid];
+        assert_eq!(Scene::new(&c).unwrap().substeps, substeps, "{grid}²");
+    }
+    let run = |substeps: u32| {
+        let mut c = config.clone();
+        (c.model, c.self_contact.enabled) = (ModelKind::Naive, false);
+        c.cloth.center[1] = 1.5;
+        c.solver.substeps = substeps;
+        let scene = Scene::new(&c).unwrap();
+        let n = scene.substeps;
+        let mut sim = CpuSim::new(scene);
+        // The cloth reaches the sphere at step 54.
+        let strain = (0..58)
+            .map(|_| {
+                sim.step();
+                assert!(sim.is_finite());
+                max_strain(&sim.scene.cloth, &sim.state.x)
+            })
+            .fold(0.0, f32::max);
+        (n, strain)
+    };
+    let (n, strain) = run(0);
+    let (_, strain_one) = run(1);
+    eprintln!("{n} substeps: strain {strain:.3}; one: strain {strain_one:.3}");
+    assert_eq!(n, 4, "up to 56 mm a step at most half of 32 mm a substep");
+    // The soft cloth's own weight on the sphere stretches it by some 20 %.
+    assert!(strain < 0.3, "a spring strained {strain}");
+    assert!(strain_one > 1.0, "one solve a step strained {strain_one}");
+}
+
 /// Issue 23's guarantee on the scenes that fold the cloth: 2 s (200 steps)
 /// with not one pair of cloth triangles crossing after any step, on the
 /// CPU and on the GPU, finite, and the GPU within the scene's own
-/// sensitivity of the CPU (`wgcloth validate`'s test).
+/// sensitivity of the CPU (`wgcloth validate`'s test). Each scene does
+/// fold: without self-contact the CPU's cloth passes through itself.
 #[test]
 fn folding_scenes_run_2_s_without_the_cloth_passing_through_itself() {
     let Some(ctx) = common::gpu_context() else {
@@ -448,6 +491,17 @@ fn folding_scenes_run_2_s_without_the_cloth_passing_through_itself() {
         assert_eq!(config.solver.steps as f32 * config.solver.dt, 2.0);
         let scene = Scene::new(&config).unwrap();
         let triangles = scene.cloth.triangles.clone();
+        let mut free = config.clone();
+        free.self_contact.enabled = false;
+        let mut sim = CpuSim::new(Scene::new(&free).unwrap());
+        let crossed = (0..free.solver.steps)
+            .map(|_| {
+                sim.step();
+                intersecting_pairs(&sim.state.x, &triangles).len()
+            })
+            .max();
+        eprintln!("{name} without self-contact: most intersecting pairs {crossed:?}");
+        assert!(crossed > Some(0), "{name} does not fold onto itself");
         let mut worst = [0usize; 2];
         let each_step = |k, gpu: &GpuSim, cpu: &CpuSim| {
             let gpu_x = gpu.read_positions().unwrap();

@@ -412,9 +412,10 @@ impl Default for SelfContactConfig {
     }
 }
 
-/// The most the rigid body may travel in one substep, in multiples of the
-/// cloth's shortest spring rest length: the one linear solve of a step
-/// flings vertices the body sweeps past faster than this (BENCHMARKS.md,
+/// The most the rigid body and the cloth may close in one substep, in
+/// multiples of the cloth's shortest spring rest length: the one linear
+/// solve of a step flings vertices the body sweeps past faster than this,
+/// and stretches a cloth that falls onto the body as fast (BENCHMARKS.md,
 /// "Substeps that keep the body within half a spacing").
 pub const MAX_BODY_TRAVEL: f32 = 0.5;
 
@@ -428,8 +429,9 @@ pub struct SolverConfig {
     /// Time step h in s.
     pub dt: f32,
     /// Backward Euler steps of h / n that make one step of h: 0 (the
-    /// default) takes the fewest that keep the rigid body's travel in one
-    /// within [`MAX_BODY_TRAVEL`] of the cloth's spacing
+    /// default) takes the fewest that keep how far the rigid body and the
+    /// cloth close in one (the body's top speed, and an unpinned cloth's
+    /// fall onto it) within [`MAX_BODY_TRAVEL`] of the cloth's spacing
     /// (`Scene::substeps`); at most [`MAX_SUBSTEPS`].
     pub substeps: u32,
     /// `solver.steps`: number of time steps a run takes.

@@ -117,18 +117,25 @@ impl Scene {
 }
 
 /// The substeps of one step: `solver.substeps`, or where that is 0 the
-/// fewest that keep the body's travel in one within [`MAX_BODY_TRAVEL`]
-/// times the cloth's shortest rest length. A step is one linear solve,
-/// linearised where it starts (thesis eq. 1): a body that sweeps past a
-/// vertex by about the cloth's spacing in one flings it out of the cloth
-/// (BENCHMARKS.md, "Substeps that keep the body within half a spacing").
-/// An error where that would take more than [`MAX_SUBSTEPS`].
+/// fewest that keep how far the body and the cloth close in one within
+/// [`MAX_BODY_TRAVEL`] times the cloth's shortest rest length. A step is
+/// one linear solve, linearised where it starts (thesis eq. 1): a body
+/// that sweeps past a vertex by about the cloth's spacing in one flings it
+/// out of the cloth, and a cloth that falls onto the body as fast is
+/// stretched as far (BENCHMARKS.md, "Substeps that keep the body within
+/// half a spacing", "A falling cloth closes on the body too"). They close
+/// at most at the body's top speed plus [`fall_speed`]. An error where
+/// that would take more than [`MAX_SUBSTEPS`].
 pub fn substeps(config: &Config, cloth: &Cloth, rigid: Option<&RigidBody>) -> Result<u32> {
     let fixed = config.solver.substeps;
     if fixed > 0 {
         return Ok(fixed);
     }
-    let travel = rigid.map_or(0.0, |body| body.motion.top_speed()) * config.solver.dt;
+    let gravity = Vec3::from_array(config.solver.gravity);
+    let closing = rigid.map_or(0.0, |body| {
+        body.motion.top_speed() + fall_speed(cloth, body, gravity)
+    });
+    let travel = closing * config.solver.dt;
     let spacing = cloth
         .rest_lengths
         .iter()
@@ -139,13 +146,32 @@ pub fn substeps(config: &Config, cloth: &Cloth, rigid: Option<&RigidBody>) -> Re
         return Err(Error::config(
             "solver.substeps",
             format!(
-                "the body moves {:.1} mm a step against a cloth spacing of {:.2} mm, which needs {needed} substeps, more than {MAX_SUBSTEPS}; lower solver.dt",
+                "the body and the cloth close by up to {:.1} mm a step against a cloth spacing of {:.2} mm, which needs {needed} substeps, more than {MAX_SUBSTEPS}; lower solver.dt",
                 1e3 * travel,
                 1e3 * spacing
             ),
         ));
     }
     Ok(needed as u32)
+}
+
+/// The fastest an unpinned cloth, falling from rest, can meet the body,
+/// m/s: √(2 |g| Δh) by its energy, Δh from its highest vertex down to the
+/// lowest point the body reaches. A body moving away as it falls is met
+/// slower than its speed plus that, so the start is the lowest a linear
+/// motion needs. A cloth on pins hangs from them where it starts: 0.
+pub fn fall_speed(cloth: &Cloth, body: &RigidBody, gravity: Vec3) -> f32 {
+    let g = gravity.length();
+    if g == 0.0 || cloth.pinned.contains(&true) {
+        return 0.0;
+    }
+    let down = gravity / g;
+    let height = |p: Vec3| -p.dot(down);
+    let highest = (cloth.rest_positions.iter()).fold(f32::NEG_INFINITY, |h, &p| h.max(height(p)));
+    let lowest = (body.mesh.vertices.iter()).fold(f32::INFINITY, |h, &v| {
+        h.min(height(body.rotation * v + body.position))
+    }) - body.motion.deepest(down);
+    (2.0 * g * (highest - lowest).max(0.0)).sqrt()
 }
 
 #[cfg(test)]
@@ -182,10 +208,43 @@ mod tests {
         assert_eq!(substeps_of(256, |c| c.solver.substeps = 3), Ok(3));
         // Half the step, half the travel.
         assert_eq!(substeps_of(256, |c| c.solver.dt = 0.005), Ok(3));
+        // A cloth on pins hangs from them: the thesis cloth's pins alone
+        // keep its 256² step at 5.
+        let fallen = |c: &mut Config| c.cloth.pins = Pins::None;
+        assert!(substeps_of(256, fallen).unwrap() > 5);
         let fast = substeps_of(64, |c| c.rigid.motion.period = 0.01).unwrap_err();
         assert!(
             fast.contains("solver.substeps") && fast.contains("lower solver.dt"),
             "{fast}"
         );
+    }
+
+    /// An unpinned cloth falls onto the body at √(2 g Δh), Δh from its top
+    /// down to the body's lowest point (the thesis cloth's top 0.5 m up, its
+    /// sphere of 0.2 m at 0.15 m down: Δh = 0.85 m), to a vertical swing's
+    /// bottom too (0.25 m lower); on its pins or without gravity it does
+    /// not fall.
+    #[test]
+    fn fall_speed_is_a_fall_from_the_cloths_top_to_the_bodys_lowest_point() {
+        let fall = |edit: &dyn Fn(&mut Config)| {
+            let mut c = Config::default();
+            c.cloth.pins = Pins::None;
+            c.rigid.motion.kind = MotionKind::Static;
+            edit(&mut c);
+            let scene = Scene::new(&c).unwrap();
+            let g = Vec3::from_array(c.solver.gravity);
+            fall_speed(&scene.cloth, scene.rigid.as_ref().unwrap(), g)
+        };
+        let energy = |h: f32| (2.0 * 9.81 * h).sqrt();
+        // The icosphere's lowest vertex lies within 1 mm of its pole.
+        let speed = fall(&|_| {});
+        assert!((energy(0.849)..=energy(0.85)).contains(&speed), "{speed}");
+        let swing = fall(&|c| {
+            c.rigid.motion.kind = MotionKind::Sinusoid;
+            c.rigid.motion.axis = [0.0, 1.0, 0.0];
+        });
+        assert!((energy(1.099)..=energy(1.1)).contains(&swing), "{swing}");
+        assert_eq!(fall(&|c| c.cloth.pins = Pins::TopCorners), 0.0);
+        assert_eq!(fall(&|c| c.solver.gravity = [0.0; 3]), 0.0);
     }
 }

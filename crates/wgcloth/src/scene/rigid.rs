@@ -66,6 +66,20 @@ impl Motion {
         }
     }
 
+    /// How far beyond [`RigidBody::position`] along unit `direction` the
+    /// motion carries the body that [`fall_speed`](crate::scene::fall_speed)
+    /// must count, m: a sinusoid's swing along it; none for a body at rest,
+    /// nor for a linear motion, which a falling cloth meets at most at its
+    /// speed plus the fall to where it starts.
+    pub fn deepest(&self, direction: Vec3) -> f32 {
+        match *self {
+            Motion::Sinusoid {
+                axis, amplitude, ..
+            } => (amplitude * axis.dot(direction)).abs(),
+            Motion::Static | Motion::Linear { .. } => 0.0,
+        }
+    }
+
     /// The body's velocity at time `t` (s), m/s: the derivative of
     /// [`Motion::displacement`].
     pub fn velocity(&self, t: f32) -> Vec3 {
