@@ -125,21 +125,24 @@ pub fn penetration_depth(body: &RigidBody, frame: &RigidFrame, x: Vec3) -> f32 {
 /// the full penalty ε k_n), and loses the velocity with which it moves
 /// into the body relative to the surface (an inelastic impact). Contacts
 /// only see points within `max_depth` of a face, so this is what keeps a
-/// vertex from staying inside, or a fast body from tunnelling. Returns how
-/// deep the deepest vertex (pinned ones too) was before it moved, m.
+/// vertex from staying inside, or a fast body from tunnelling. Each vertex
+/// it moves is marked in `moved`, which stage `separate` then does not
+/// move: the body wins. Returns how deep the deepest vertex (pinned ones
+/// too) was before it moved, m.
 pub fn push_out(
     body: &RigidBody,
     frame: &RigidFrame,
     thickness: f32,
     pinned: &[bool],
-    x: &mut [Vec3],
-    v: &mut [Vec3],
+    (x, v): (&mut [Vec3], &mut [Vec3]),
+    moved: &mut [bool],
 ) -> f32 {
     x.par_iter_mut()
         .with_min_len(GRAIN)
         .zip(v.par_iter_mut())
+        .zip(moved.par_iter_mut())
         .zip(pinned)
-        .map(|((xi, vi), &pinned)| {
+        .map(|(((xi, vi), moved), &pinned)| {
             let Some(out) = way_out(body, frame.to_body(*xi)) else {
                 return 0.0;
             };
@@ -147,6 +150,7 @@ pub fn push_out(
                 let n = frame.rotation * out.normal;
                 *xi = frame.rotation * out.surface + frame.translation + thickness * n;
                 *vi += (frame.velocity.dot(n) - vi.dot(n)).max(0.0) * n;
+                *moved = true;
             }
             out.depth
         })

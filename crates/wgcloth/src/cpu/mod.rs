@@ -6,6 +6,7 @@ pub mod assemble;
 pub mod body_grid;
 pub mod collide;
 pub mod contact;
+pub mod impact;
 pub mod integrate;
 pub mod measure;
 pub mod multigrid;
@@ -30,6 +31,7 @@ use assemble::StepParams;
 use body_grid::BodyGrid;
 use collide::{Contact, Tolerances};
 use contact::{Model, Response};
+use impact::Impact;
 use pcg::{BlockMatrix, PcgOutcome, PcgScratch};
 use rigid::RigidFrame;
 
@@ -48,9 +50,9 @@ pub struct StepStats {
     /// Deepest cloth vertex inside the rigid surface after a solve, m,
     /// before the push-out moved it back onto the surface.
     pub max_penetration: f32,
-    /// What self-contact held back (`self_contact` on): the most near
-    /// pairs of a substep, the held vertices summed, settled if every
-    /// substep was.
+    /// What self-contact changed (`self_contact` on): the most near pairs
+    /// of a detection, the vertices pushed, zoned and held summed, settled
+    /// if no substep reached the last resort.
     pub separation: separate::Separation,
     /// Cloth–cloth contacts responded to (`self_contact` with a
     /// thickness), the most of a substep.
@@ -73,7 +75,10 @@ impl StepStats {
         self.max_penetration = self.max_penetration.max(sub.max_penetration);
         let (sep, next) = (&mut self.separation, &sub.separation);
         sep.pairs = sep.pairs.max(next.pairs);
+        sep.pushed += next.pushed;
+        sep.zoned += next.zoned;
         sep.held += next.held;
+        sep.detections += next.detections;
         sep.settled &= next.settled;
         self.self_contacts = self.self_contacts.max(sub.self_contacts);
         self.self_contacts_dropped += sub.self_contacts_dropped;
@@ -148,6 +153,9 @@ pub struct CpuSim {
     edges: Vec<[u32; 2]>,
     /// Positions at the start of the step (self-contact only).
     x_start: Vec<Vec3>,
+    /// The vertices the body pushed out this step, which stage `separate`
+    /// does not move.
+    backed: Vec<bool>,
     /// The cloth in its flat rest grid (self-contact forces only).
     rest_grid: Vec<Vec3>,
     /// The last step's cloth–cloth contacts and what each added.
@@ -190,6 +198,7 @@ impl CpuSim {
                 Vec::new()
             },
             x_start: Vec::new(),
+            backed: vec![false; n],
             rest_grid: if cfg.self_contact.enabled && cfg.self_contact.thickness > 0.0 {
                 self_contact::rest_grid(cloth)
             } else {
@@ -389,30 +398,36 @@ impl CpuSim {
             }
             Stage::Measure => {
                 if let Some(body) = body {
+                    self.backed.fill(false);
                     stats.max_penetration = measure::push_out(
                         body,
                         &self.frame,
                         self.tolerances.thickness,
                         &cloth.pinned,
-                        x,
-                        v,
+                        (x, v),
+                        &mut self.backed,
                     );
                 }
             }
             Stage::Separate => {
                 let keep = &self.scene.config.self_contact;
                 if keep.enabled {
-                    // Collide refits it to where the next step starts.
-                    let swept = separate::swept_boxes(&self.x_start, x, &cloth.triangles);
-                    self.cloth_bvh.refit(|t| swept[t as usize]);
+                    let fixed: Vec<bool> = (cloth.pinned.iter().zip(&self.backed))
+                        .map(|(&pinned, &backed)| pinned || backed)
+                        .collect();
                     let within = separate::Within {
                         triangles: &cloth.triangles,
                         edges: &self.edges,
-                        bvh: &self.cloth_bvh,
-                        keep,
+                        impact: Impact {
+                            keep,
+                            mu: self.scene.config.contact.mu,
+                            fixed: &fixed,
+                        },
                         h,
                     };
-                    stats.separation = within.keep_apart(&self.x_start, x, v);
+                    // Collide refits the BVH to where the next step starts.
+                    stats.separation =
+                        within.keep_apart(&self.x_start, x, v, &mut self.cloth_bvh);
                 }
             }
         }

@@ -1,9 +1,10 @@
 //! Stage "separate": each cloth vertex's step, from where it started to
-//! where the solve and the push-out left it, held back where the cloth
-//! would otherwise pass through itself (issue 23). Twin of
-//! wgsl/separate.wgsl. After Offset Geometric Contact (Chen et al. 2025),
-//! with the pairs found by their swept boxes and tested on their relative
-//! motion, so that a cloth moving as one is never held back.
+//! where the solve and the push-out left it, changed where the cloth would
+//! otherwise pass through itself (issue 23). Twin of wgsl/separate.wgsl.
+//! The pairs are found and tested as in Offset Geometric Contact (Chen et
+//! al. 2025), on their relative motion, so that a cloth moving as one is
+//! never touched; what a failing pair does is `impact`'s: impulses that
+//! keep momentum and obey Coulomb, then impact zones.
 //!
 //! Two moving triangles first touch as a vertex reaching a triangle or an
 //! edge reaching an edge. A pair sharing no vertex can come within `floor`
@@ -12,13 +13,19 @@
 //! near pairs ([`near_pairs`]), each with its separation s at the start.
 //! Every point of a primitive moves by a convex sum of its vertices'
 //! displacements, so a pair whose displacements differ by at most
-//! 2 gamma (s − floor) from one side to the other ends the step above
-//! floor + (1 − 2 gamma)(s − floor) ([`hold`]). A pair that fails holds its
-//! four vertices to `gamma (s_v − floor)` each (s_v: the vertex's least
-//! separation), and a pair of four held vertices always passes; shortening
-//! a step along itself shrinks its swept box, so no other pair becomes near.
-//! The floor is needed: without it a gap closing geometrically reaches the
-//! spacing of f32 positions, whose rounding then crosses it.
+//! 2 gamma (s − floor) from one side to the other, across a slab between
+//! them, ends the step above floor + (1 − 2 gamma)(s − floor)
+//! ([`NearPair::passes`]). The floor is needed: without it a gap closing
+//! geometrically reaches the spacing of f32 positions, whose rounding then
+//! crosses it.
+//!
+//! A step ([`Within::keep_apart`]) finds the near pairs of its steps, and
+//! while any fails, changes the steps ([`impact`](crate::cpu::impact)) and
+//! finds them again, since a changed step sweeps a box of its own: up to
+//! [`DETECTIONS`] times. Where the last still finds one failing, the last
+//! resort holds the vertices of near pairs to `gamma (s_v − floor)` along
+//! their steps ([`hold`]): held steps shrink their swept boxes, so it needs
+//! no other detection. It is counted, and the scenes never reach it.
 //!
 //! The broad phase is the cloth's BVH refitted to the swept boxes. A
 //! vertex's least separation is the least over its pairs, which the GPU
@@ -30,6 +37,7 @@ use rayon::prelude::*;
 use crate::bvh::{Aabb, Bvh};
 use crate::config::SelfContactConfig;
 use crate::cpu::GRAIN;
+use crate::cpu::impact::Impact;
 use crate::math::{closest_between_segments, closest_on_triangle};
 
 /// Every edge of `triangles` once, by vertex (lower index first), sorted.
@@ -40,8 +48,11 @@ pub fn triangle_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
     edges
 }
 
-/// Rounds of the relative test ([`hold`]) before a step falls back to
-/// holding every vertex in a near pair to its bound.
+/// Detections of near pairs a step runs: each but the last followed by
+/// `impact`'s rounds where a pair fails, the last by the last resort.
+pub const DETECTIONS: u32 = 4;
+/// Rounds of the relative test ([`hold`]) before the last resort holds
+/// every vertex in a near pair to its bound.
 pub const ROUNDS: u32 = 8;
 /// Near pairs the GPU's list holds per cloth vertex (wgsl/separate.wgsl);
 /// past that the step falls back as when the rounds do not settle.
@@ -135,7 +146,7 @@ impl NearPair {
     }
 
     /// Whether the primitives touch at the start: no slab between them.
-    fn touching(&self) -> bool {
+    pub fn touching(&self) -> bool {
         self.slabs[0].normal == Vec3::ZERO
     }
 
@@ -143,7 +154,7 @@ impl NearPair {
     /// separation), and the planes' where wider than the floor (a plane
     /// slab as thin as two coplanar edges' says nothing of how near they
     /// come within it).
-    fn usable(&self, keep: &SelfContactConfig) -> impl Iterator<Item = &Slab> {
+    pub fn usable(&self, keep: &SelfContactConfig) -> impl Iterator<Item = &Slab> {
         let [nearest, plane] = &self.slabs;
         let plane = (plane.normal != Vec3::ZERO && plane.width > keep.floor).then_some(plane);
         std::iter::once(nearest).chain(plane)
@@ -196,6 +207,11 @@ pub fn swept(start: &[Vec3], end: &[Vec3], vertices: &[u32]) -> Aabb {
     })
 }
 
+/// Where steps `d` from `start` end, as both paths compute them.
+pub fn ends(start: &[Vec3], d: &[Vec3]) -> Vec<Vec3> {
+    start.iter().zip(d).map(|(s, d)| *s + *d).collect()
+}
+
 /// Each triangle's swept box, what the BVH is refitted to.
 pub fn swept_boxes(start: &[Vec3], end: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Aabb> {
     triangles.iter().map(|t| swept(start, end, t)).collect()
@@ -204,18 +220,20 @@ pub fn swept_boxes(start: &[Vec3], end: &[Vec3], triangles: &[[u32; 3]]) -> Vec<
 /// The near pairs: those sharing no vertex whose swept boxes, the first
 /// grown by the floor, overlap and that [could fail](NearPair::could_fail)
 /// (vertex–triangle, then edge–edge, each once), and each vertex's least
-/// separation at the start over them (+∞ in none). Pairs that cannot fail need no bound, so they
-/// are left out of both. `bvh` holds [`swept_boxes`].
+/// separation at the start over them (+∞ in none), for steps `d` from
+/// `start`. Pairs that cannot fail need no bound, so they are left out of
+/// both. `bvh` holds the [`swept_boxes`] to [`ends`].
 pub fn near_pairs(
     start: &[Vec3],
-    end: &[Vec3],
+    d: &[Vec3],
     triangles: &[[u32; 3]],
     edges: &[[u32; 2]],
     bvh: &Bvh,
     keep: &SelfContactConfig,
 ) -> (Vec<NearPair>, Vec<f32>) {
     let floor = keep.floor;
-    let d: Vec<Vec3> = end.iter().zip(start).map(|(e, s)| *e - *s).collect();
+    let end = ends(start, d);
+    let end = &end;
     let grown = |vertices: &[u32]| swept(start, end, vertices).grown(floor);
     let found: Vec<(Vec<NearPair>, Vec<NearPair>)> = (0..start.len() as u32)
         .into_par_iter()
@@ -239,7 +257,7 @@ pub fn near_pairs(
                     }
                 },
             );
-            let could_fail = |pair: &NearPair| pair.could_fail(&d, keep);
+            let could_fail = |pair: &NearPair| pair.could_fail(d, keep);
             vertex.retain(could_fail);
             edge.retain(could_fail);
             (vertex, edge)
@@ -400,12 +418,18 @@ pub fn hold(
 /// What a step's self-contact did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Separation {
-    /// Near pairs found (an edge–edge pair perhaps twice).
+    /// Near pairs found, the most of a detection (an edge–edge pair perhaps
+    /// twice).
     pub pairs: usize,
-    /// Vertices whose step was shortened.
+    /// Vertices whose step impulses changed.
+    pub pushed: usize,
+    /// Vertices moved in impact zones.
+    pub zoned: usize,
+    /// Vertices the last resort held to their bounds.
     pub held: usize,
-    /// False when the rounds did not settle and every vertex in a near
-    /// pair was held to its bound.
+    /// Detections of near pairs run.
+    pub detections: u32,
+    /// False when the last resort ran.
     pub settled: bool,
 }
 
@@ -415,44 +439,73 @@ pub struct Within<'a> {
     pub triangles: &'a [[u32; 3]],
     /// Their edges ([`triangle_edges`]).
     pub edges: &'a [[u32; 2]],
-    /// The triangles' BVH, refitted to their [`swept_boxes`].
-    pub bvh: &'a Bvh,
-    /// Gamma and floor.
-    pub keep: &'a SelfContactConfig,
+    /// The failsafe's test, friction, and the vertices it may not move.
+    pub impact: Impact<'a>,
     /// The time step, s.
     pub h: f32,
 }
 
 impl Within<'_> {
-    /// The step from `start` to `x`, held back where the cloth would
-    /// otherwise pass through itself: each vertex [`hold`] names (every
-    /// vertex in a near pair, when it does not settle) moved at most its
-    /// bound along its step, and its velocity set to the step it took
-    /// over h.
-    pub fn keep_apart(&self, start: &[Vec3], x: &mut [Vec3], v: &mut [Vec3]) -> Separation {
-        let (pairs, least) = near_pairs(start, x, self.triangles, self.edges, self.bvh, self.keep);
-        let d: Vec<Vec3> = x.iter().zip(start).map(|(x, s)| *x - *s).collect();
-        let bounds: Vec<f32> = least
-            .iter()
-            .map(|&s| displacement_bound(s, self.keep))
-            .collect();
-        let rounds = hold(&pairs, &d, &bounds, self.keep);
-        let settled = rounds.is_some();
-        let held = rounds.unwrap_or_else(|| least.iter().map(|s| s.is_finite()).collect());
-        let mut shortened = 0;
-        for i in 0..x.len() {
-            if held[i] && d[i].length() > bounds[i] {
-                let kept = within(d[i], bounds[i]);
-                x[i] = start[i] + kept;
-                v[i] = kept / self.h;
-                shortened += 1;
+    /// The step from `start` to `x`, changed where the cloth would
+    /// otherwise pass through itself: up to [`DETECTIONS`] detections of
+    /// the near pairs (`bvh` refitted to their swept boxes), each where a
+    /// pair fails but the last followed by `impact`'s impulse and zone
+    /// rounds; where the last finds a pair failing, the last resort
+    /// ([`hold`]). A changed vertex ends at its start plus its step, and
+    /// its velocity changes by its step's change over h.
+    pub fn keep_apart(
+        &self,
+        start: &[Vec3],
+        x: &mut [Vec3],
+        v: &mut [Vec3],
+        bvh: &mut Bvh,
+    ) -> Separation {
+        let keep = self.impact.keep;
+        let n = x.len();
+        let solved: Vec<Vec3> = x.iter().zip(start).map(|(x, s)| *x - *s).collect();
+        let mut d = solved.clone();
+        let mut label: Vec<u32> = (0..n as u32).collect();
+        let (mut zoned, mut pushed) = (vec![false; n], vec![false; n]);
+        let mut done = Separation {
+            settled: true,
+            ..Separation::default()
+        };
+        for detection in 0..DETECTIONS {
+            let swept = swept_boxes(start, &ends(start, &d), self.triangles);
+            bvh.refit(|t| swept[t as usize]);
+            let (pairs, least) = near_pairs(start, &d, self.triangles, self.edges, bvh, keep);
+            done.detections += 1;
+            done.pairs = done.pairs.max(pairs.len());
+            if pairs.iter().all(|p| p.passes(|v| d[v as usize], keep)) {
+                break;
             }
+            if detection + 1 == DETECTIONS {
+                let bounds: Vec<f32> = least
+                    .iter()
+                    .map(|&s| displacement_bound(s, keep))
+                    .collect();
+                let rounds = hold(&pairs, &d, &bounds, keep);
+                let held = rounds.unwrap_or_else(|| least.iter().map(|s| s.is_finite()).collect());
+                for i in 0..n {
+                    if held[i] && d[i].length() > bounds[i] {
+                        d[i] = within(d[i], bounds[i]);
+                        done.held += 1;
+                    }
+                }
+                done.settled = false;
+                break;
+            }
+            self.impact.impulse_rounds(&pairs, &mut d, &mut pushed);
+            self.impact
+                .zone_rounds(&pairs, &mut d, &mut label, &mut zoned);
         }
-        Separation {
-            pairs: pairs.len(),
-            held: shortened,
-            settled,
+        for i in (0..n).filter(|&i| d[i] != solved[i]) {
+            x[i] = start[i] + d[i];
+            v[i] += (d[i] - solved[i]) / self.h;
         }
+        done.pushed = pushed.iter().filter(|&&p| p).count();
+        done.zoned = zoned.iter().filter(|&&z| z).count();
+        done
     }
 }
 
@@ -556,7 +609,8 @@ mod tests {
         keep: &SelfContactConfig,
     ) -> (Vec<NearPair>, Vec<f32>) {
         let bvh = Bvh::build(&swept_boxes(start, end, t));
-        near_pairs(start, end, t, edges, &bvh, keep)
+        let d: Vec<Vec3> = end.iter().zip(start).map(|(e, s)| *e - *s).collect();
+        near_pairs(start, &d, t, edges, &bvh, keep)
     }
 
     const KEEP: SelfContactConfig = SelfContactConfig {

@@ -1,0 +1,328 @@
+//! What stage "separate" does to the near pairs that would close below the
+//! floor (twin of wgsl/impact.wgsl): it changes their vertices' steps by
+//! impulses, equal and opposite within each pair, so the cloth's momentum
+//! is kept (to the fixed point's 2^-32 m), and friction is bounded by
+//! Coulomb's law. Nothing is reset: a vertex no failing pair touches keeps
+//! its step, and one that is pushed keeps what the push did not change.
+//!
+//! 1. **Impulse rounds.** A failing pair's two sides (the vertex and the
+//!    triangle, or the two edges) are pushed apart along the slab it fails
+//!    needing the least push, the free vertices of each side moving as
+//!    one, just far enough that the pair passes, and friction takes at
+//!    most μ times that push off their relative tangential step. The two
+//!    sides' shares keep momentum: equal masses, so a vertex moves three
+//!    times as far as the triangle it meets. A vertex the failsafe may not
+//!    move (pinned, or pushed out by the body, which wins) stays, and the
+//!    other side's free vertices take its share. Each pair's change is divided by the most
+//!    failing pairs at any of its vertices (a Jacobi sweep that does not
+//!    overshoot a vertex between pairs), and the changes are summed in
+//!    fixed point, whose sums do not depend on the order pairs are met
+//!    in (the GPU adds them with integer atomics).
+//! 2. **Impact zones** (Bridson, Fedkiw & Anderson 2002), for what the
+//!    rounds leave: the vertices of each pair still failing join one zone
+//!    (labels lowered to the least of the pair's, then each label to its
+//!    label's label), and each zone moves as one by the mean step of its
+//!    vertices, or of those it may not move when it has any: momentum is
+//!    kept, and no pair within a zone closes at all.
+
+use glam::Vec3;
+
+use crate::config::SelfContactConfig;
+use crate::cpu::separate::NearPair;
+
+/// Impulse rounds a detection of near pairs runs before impact zones.
+pub const IMPULSE_ROUNDS: u32 = 8;
+/// Rounds of impact zones a detection runs after its impulse rounds.
+pub const ZONE_ROUNDS: u32 = 8;
+
+/// Fixed-point units a metre: steps are summed as integers of 2^-32 m.
+const UNITS: f32 = 4_294_967_296.0;
+/// The largest |step| fixed point holds, m (a step beyond is a run that
+/// has already diverged).
+const LARGEST: f32 = 1_073_741_824.0;
+
+/// `x` m in fixed point: |x| (at most [`LARGEST`]) times 2^32, truncated,
+/// with x's sign; 0 where x is not finite. The GPU builds the same integer
+/// as two words: whole metres, then the fraction, each exact in f32.
+pub fn to_fixed(x: f32) -> i64 {
+    if !x.is_finite() {
+        return 0;
+    }
+    let w = x.abs().min(LARGEST) * UNITS;
+    let high = (w / UNITS).trunc();
+    let low = w - high * UNITS;
+    let q = ((high as i64) << 32) + low as i64;
+    if x < 0.0 { -q } else { q }
+}
+
+/// A fixed-point sum back in metres: its high word times 2^32 plus its low
+/// word, in f32 (the GPU's operations, rounding alike), times 2^-32.
+pub fn from_fixed(q: i64) -> f32 {
+    let high = (q >> 32) as i32 as f32;
+    let low = q as u32 as f32;
+    (high * UNITS + low) / UNITS
+}
+
+/// Each component of `v` in fixed point.
+fn fixed3(v: Vec3) -> [i64; 3] {
+    v.to_array().map(to_fixed)
+}
+
+/// A sum of fixed-point vectors back in metres.
+fn vec3_of(q: [i64; 3]) -> Vec3 {
+    Vec3::from_array(q.map(from_fixed))
+}
+
+/// How the failsafe treats the cloth: the pair test's gamma and floor, the
+/// friction coefficient, and the vertices it may not move.
+pub struct Impact<'a> {
+    /// Gamma and floor.
+    pub keep: &'a SelfContactConfig,
+    /// μ, the `[contact]` one.
+    pub mu: f32,
+    /// Per vertex: pinned, or held by the body this step.
+    pub fixed: &'a [bool],
+}
+
+/// A failing pair's push ([`Impact::push`]): its free first-side vertices
+/// each move by `first` times `change`, its free second-side ones by
+/// −`second` times it, and its vertices the failsafe may not move not at
+/// all. With free vertices on both sides the factors are the other side's
+/// free count, so the two sides' momenta are equal and opposite.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Push {
+    /// The change, m: t along the slab's normal, less up to μ t of the
+    /// relative tangential step.
+    pub change: Vec3,
+    /// The first side's factor.
+    pub first: u32,
+    /// The second side's factor.
+    pub second: u32,
+}
+
+impl Impact<'_> {
+    /// The push that makes a failing pair pass, or `None` where it passes
+    /// or no push can (it touches, with no slab, or a slab's failing
+    /// vertex pair holds no free vertex): a zone must take it.
+    ///
+    /// Free vertices move by a common t along the slab's normal n, the
+    /// first side's by `first` t and the second's by −`second` t, so a
+    /// vertex pair (a, b) of the two sides closes by w_a first + w_b second
+    /// times t less (w: 1 free, 0 not). Across each usable slab, t is the
+    /// least that brings every vertex pair's approach n·(d_b − d_a) to
+    /// 63/64 of the slab's allowance (so rounding does not leave it
+    /// failing by an ulp); the slab needing the least t is taken. Friction
+    /// then takes up to μ t off the relative tangential step of the two
+    /// sides' mean steps, no more than stops it (Coulomb, with the push's
+    /// momentum as the normal impulse).
+    pub fn push(&self, pair: &NearPair, d: &[Vec3]) -> Option<Push> {
+        if pair.touching() {
+            return None;
+        }
+        let step = |v: u32| d[v as usize];
+        let free = |v: u32| !self.fixed[v as usize];
+        let (p, q) = pair.sides();
+        let count = |side: &[u32]| side.iter().filter(|&&v| free(v)).count() as u32;
+        let (first, second) = match (count(p), count(q)) {
+            (0, 0) => return None,
+            (0, _) => (0, 1),
+            (_, 0) => (1, 0),
+            (free_p, free_q) => (free_q, free_p),
+        };
+        let mut best: Option<(f32, Vec3)> = None;
+        for slab in pair.usable(self.keep) {
+            let n = slab.normal;
+            let allowance = slab.allowance(self.keep);
+            let target = allowance - allowance / 64.0;
+            let (mut most, mut t, mut pushable) = (0.0f32, 0.0f32, true);
+            for &a in p {
+                for &b in q {
+                    let approach = n.dot(step(b) - step(a));
+                    most = most.max(approach);
+                    if approach > target {
+                        let rate = (free(a) as u32 * first + free(b) as u32 * second) as f32;
+                        pushable &= rate > 0.0;
+                        t = t.max((approach - target) / rate);
+                    }
+                }
+            }
+            if most <= allowance {
+                return None;
+            }
+            if pushable && best.is_none_or(|(least, _)| t < least) {
+                best = Some((t, n));
+            }
+        }
+        let (t, n) = best?;
+        let mean = |side: &[u32]| {
+            let sum = side.iter().fold(Vec3::ZERO, |s, &v| s + step(v));
+            sum / side.len() as f32
+        };
+        let relative = mean(p) - mean(q);
+        let tangential = relative - n * n.dot(relative);
+        let slide = tangential.length();
+        // How fast the relative mean step changes with the change.
+        let rate = (count(p) * first) as f32 / p.len() as f32
+            + (count(q) * second) as f32 / q.len() as f32;
+        let friction = match slide > 0.0 {
+            true => tangential * ((slide / rate).min(self.mu * t) / slide),
+            false => Vec3::ZERO,
+        };
+        Some(Push {
+            change: n * t - friction,
+            first,
+            second,
+        })
+    }
+
+    /// Whether the pair passes with steps `d` ([`NearPair::passes`]).
+    fn passes(&self, pair: &NearPair, d: &[Vec3]) -> bool {
+        pair.passes(|v| d[v as usize], self.keep)
+    }
+
+    /// The fixed-point change of each of a pair's four vertices by its
+    /// push divided among `shared` pairs: the change's integers b, times
+    /// the first side's factor for a free first-side vertex and minus the
+    /// second's for a free second-side one, so that with free vertices on
+    /// both sides their sum is zero to the unit.
+    pub fn shares(&self, pair: &NearPair, push: Push, shared: u32) -> [[i64; 3]; 4] {
+        let base = fixed3(push.change / shared as f32);
+        let split = pair.sides().0.len();
+        std::array::from_fn(|k| {
+            let v = pair.vertices[k];
+            let factor = match (self.fixed[v as usize], k < split) {
+                (true, _) => 0,
+                (false, true) => push.first as i64,
+                (false, false) => -(push.second as i64),
+            };
+            base.map(|b| factor * b)
+        })
+    }
+
+    /// Up to [`IMPULSE_ROUNDS`] rounds over `pairs`, each changing `d` by
+    /// every failing pair's [`shares`](Impact::shares) of its
+    /// [`push`](Impact::push) divided among the most failing pairs at any
+    /// of its vertices, summed in fixed point; `moved` marks each vertex a
+    /// round changed. Stops at the first round in which no pair fails.
+    pub fn impulse_rounds(&self, pairs: &[NearPair], d: &mut [Vec3], moved: &mut [bool]) {
+        let n = d.len();
+        let mut counts = vec![0u32; n];
+        let mut sums = vec![[0i64; 3]; n];
+        for _ in 0..IMPULSE_ROUNDS {
+            let failing: Vec<&NearPair> = pairs.iter().filter(|p| !self.passes(p, d)).collect();
+            if failing.is_empty() {
+                return;
+            }
+            for pair in &failing {
+                for &v in &pair.vertices {
+                    counts[v as usize] += 1;
+                }
+            }
+            for pair in &failing {
+                let Some(push) = self.push(pair, d) else {
+                    continue;
+                };
+                let most = pair.vertices.iter().map(|&v| counts[v as usize]).max();
+                let shares = self.shares(pair, push, most.unwrap_or(1));
+                for (&v, share) in pair.vertices.iter().zip(shares) {
+                    let sum = &mut sums[v as usize];
+                    for k in 0..3 {
+                        sum[k] += share[k];
+                    }
+                }
+            }
+            for i in 0..n {
+                if sums[i] != [0; 3] {
+                    d[i] += vec3_of(sums[i]);
+                    moved[i] = true;
+                }
+                sums[i] = [0; 3];
+                counts[i] = 0;
+            }
+        }
+    }
+
+    /// Up to [`ZONE_ROUNDS`] rounds of impact zones over `pairs`. `label`
+    /// (each vertex's own index at the step's start) names each vertex's
+    /// zone and `zoned` marks the vertices in one; both carry over between
+    /// the step's detections, so a zone only grows. Each round: every pair
+    /// that fails lowers its vertices' labels to the least of theirs as
+    /// they stood (`next`), then each label becomes its label's next; then
+    /// every zoned vertex the failsafe may move takes its zone's mean step,
+    /// or, where the zone holds a vertex it may not move, that of the
+    /// lowest such (its anchor), which the zone then moves with.
+    pub fn zone_rounds(
+        &self,
+        pairs: &[NearPair],
+        d: &mut [Vec3],
+        label: &mut [u32],
+        zoned: &mut [bool],
+    ) {
+        let n = d.len();
+        let mut next = vec![0u32; n];
+        // Per zone, at its label: the fixed-point sum of its free vertices'
+        // steps and their count, and its anchor.
+        let mut sums = vec![([0i64; 3], 0u32); n];
+        let mut anchor = vec![u32::MAX; n];
+        for _ in 0..ZONE_ROUNDS {
+            let failing: Vec<&NearPair> = pairs.iter().filter(|p| !self.passes(p, d)).collect();
+            if failing.is_empty() {
+                return;
+            }
+            next.copy_from_slice(label);
+            for pair in &failing {
+                let least = pair.vertices.iter().map(|&v| label[v as usize]).min();
+                let least = least.expect("a pair has four vertices");
+                for &v in &pair.vertices {
+                    next[v as usize] = next[v as usize].min(least);
+                    zoned[v as usize] = true;
+                }
+            }
+            for i in 0..n {
+                label[i] = next[next[i] as usize];
+            }
+            for i in (0..n).filter(|&i| zoned[i]) {
+                let z = label[i] as usize;
+                match self.fixed[i] {
+                    true => anchor[z] = anchor[z].min(i as u32),
+                    false => {
+                        let (sum, count) = &mut sums[z];
+                        for (s, q) in sum.iter_mut().zip(fixed3(d[i])) {
+                            *s += q;
+                        }
+                        *count += 1;
+                    }
+                }
+            }
+            for i in (0..n).filter(|&i| zoned[i] && !self.fixed[i]) {
+                let z = label[i] as usize;
+                d[i] = match anchor[z] {
+                    u32::MAX => vec3_of(sums[z].0) / sums[z].1 as f32,
+                    a => d[a as usize],
+                };
+            }
+            sums.fill(([0; 3], 0));
+            anchor.fill(u32::MAX);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fixed_point_round_trips_and_sums_exactly() {
+        for x in [0.0f32, 1e-9, -3.5e-4, 0.0123, -0.75, 2.5, -1234.5] {
+            let back = from_fixed(to_fixed(x));
+            // Truncated to 2^-32 m, then rounded once to f32.
+            assert!((back - x).abs() <= 2.5e-10 + x.abs() * 1.2e-7, "{x} -> {back}");
+        }
+        assert_eq!(to_fixed(f32::NAN), 0);
+        assert_eq!(to_fixed(-1.0), -(1i64 << 32));
+        // Opposite values cancel to the unit, in any order.
+        let a = to_fixed(0.3);
+        let b = to_fixed(-0.1);
+        assert_eq!(a + b + to_fixed(-0.3) + to_fixed(0.1), 0);
+    }
+}
