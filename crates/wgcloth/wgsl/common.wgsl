@@ -46,13 +46,17 @@ struct StepState {
     last_residual: f32,
     // NOT_FINITE | TOO_FAST of wgsl/integrate.wgsl, sticky.
     health: atomic<u32>,
-    // Self-contact (separate.wgsl): the most near pairs a step found, the
-    // steps that fell back to holding every near vertex, the vertex steps
-    // held back, and the steps whose pairs overflowed the list.
+    // Self-contact (separate.wgsl): the most near pairs a detection found,
+    // the steps that reached the last resort, the vertex steps it held,
+    // the steps whose pairs overflowed the list, the vertex steps impulses
+    // changed and impact zones moved, and the detections run.
     self_pairs_max: u32,
     self_fallbacks: u32,
     self_held_total: atomic<u32>,
     self_overflows: u32,
+    self_pushed_total: atomic<u32>,
+    self_zoned_total: atomic<u32>,
+    self_detections_total: u32,
     // Stage "self_contact": the most cloth–cloth contacts a step applied,
     // and those left out, summed.
     cloth_contacts_max: u32,

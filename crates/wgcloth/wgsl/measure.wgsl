@@ -122,5 +122,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let n = rotate(frame.rotation, body_face_normals[out.triangle].xyz);
     x[i] = vec4<f32>(rotate(frame.rotation, out.surface) + frame.translation + params.thickness * n, 1.0);
     let vi = v[i].xyz;
-    v[i] = vec4<f32>(vi + max(dot(frame.velocity, n) - dot(vi, n), 0.0) * n, 0.0);
+    // With self-contact, w marks the vertex for stage "separate", which
+    // does not move it (the body wins) and clears the mark.
+    let pushed = select(0.0, 1.0, params.self_contact != 0u);
+    v[i] = vec4<f32>(vi + max(dot(frame.velocity, n) - dot(vi, n), 0.0) * n, pushed);
 }

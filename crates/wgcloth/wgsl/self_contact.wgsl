@@ -186,7 +186,7 @@ fn edge_pair(p: vec4<u32>) {
 }
 
 // A pair the walk met (walk.wgsl), whose boxes overlap.
-fn pair(p: vec4<u32>, edge: bool, test: bool) {
+fn pair(p: vec4<u32>, edge: bool, mode: u32) {
     if edge {
         edge_pair(p);
     } else {
@@ -217,7 +217,7 @@ fn growth() -> f32 {
 @compute @workgroup_size(WORKGROUP)
 fn walks(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x < params.n_vertices {
-        walk(walk_of(id.x, false));
+        walk(walk_of(id.x, 0u));
     }
 }
 

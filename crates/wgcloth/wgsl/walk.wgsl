@@ -13,7 +13,7 @@
 // `refused_corners(w, cell)`, the cell's corners across which no pair of
 // the walk's vertex (bits 0 to 3) or of the far end of its edge k (bits
 // 4 + 4k on) counts (self_contact: those near it at rest; separate: none),
-// and `pair(p, edge, test)`, its test of a pair: vertex p.x against
+// and `pair(p, edge, mode)`, its test of a pair: vertex p.x against
 // triangle p.yzw, or (edge) edge p.xy against edge p.zw, lower ends first.
 //
 // Lavapipe runs every branch, taken or not, masked, for each 8 invocations,
@@ -26,13 +26,13 @@
 // A walk: vertex `a`'s box, the far ends of the edges it starts
 // (NO_TRIANGLE where none) and their boxes, component by component (a
 // vector, not an array, so that no walk needs function-local memory), and
-// the union of them all, which the hierarchy is walked for; `test` is
-// separate's (a round's test rather than listing).
+// the union of them all, which the hierarchy is walked for; `mode` is
+// separate's (the pass the walk's pairs are met in: listed, or tested).
 struct Walk {
     lo: vec3<f32>,
     a: u32,
     hi: vec3<f32>,
-    test: bool,
+    mode: u32,
     vertex: Bounds,
     far: vec4<u32>,
     lo_x: vec4<f32>,
@@ -86,7 +86,7 @@ fn edge_reach(own: Bounds, far: u32) -> Bounds {
     return union_of(own, reach(far));
 }
 
-fn walk_of(a: u32, test: bool) -> Walk {
+fn walk_of(a: u32, mode: u32) -> Walk {
     let own = reach(a);
     let far = started_edges(a);
     let e0 = edge_reach(own, far.x);
@@ -95,7 +95,7 @@ fn walk_of(a: u32, test: bool) -> Walk {
     let e3 = edge_reach(own, far.w);
     let all = union_of(own, union_of(union_of(e0, e1), union_of(e2, e3)));
     return Walk(
-        all.lo.xyz, a, all.hi.xyz, test, own, far,
+        all.lo.xyz, a, all.hi.xyz, mode, own, far,
         vec4<f32>(e0.lo.x, e1.lo.x, e2.lo.x, e3.lo.x),
         vec4<f32>(e0.lo.y, e1.lo.y, e2.lo.y, e3.lo.y),
         vec4<f32>(e0.lo.z, e1.lo.z, e2.lo.z, e3.lo.z),
@@ -277,7 +277,7 @@ fn walk(w: Walk) {
         while found != 0u {
             let j = firstTrailingBit(found);
             found &= found - 1u;
-            pair(pair_at(w, cell, j), j >= 2u, w.test);
+            pair(pair_at(w, cell, j), j >= 2u, w.mode);
         }
     }
 }

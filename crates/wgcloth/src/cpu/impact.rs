@@ -36,10 +36,10 @@ pub const IMPULSE_ROUNDS: u32 = 8;
 pub const ZONE_ROUNDS: u32 = 8;
 
 /// Fixed-point units a metre: steps are summed as integers of 2^-32 m.
-const UNITS: f32 = 4_294_967_296.0;
+pub const UNITS: f32 = 4_294_967_296.0;
 /// The largest |step| fixed point holds, m (a step beyond is a run that
 /// has already diverged).
-const LARGEST: f32 = 1_073_741_824.0;
+pub const LARGEST: f32 = 1_073_741_824.0;
 
 /// `x` m in fixed point: |x| (at most [`LARGEST`]) times 2^32, truncated,
 /// with x's sign; 0 where x is not finite. The GPU builds the same integer
@@ -55,12 +55,16 @@ pub fn to_fixed(x: f32) -> i64 {
     if x < 0.0 { -q } else { q }
 }
 
-/// A fixed-point sum back in metres: its high word times 2^32 plus its low
-/// word, in f32 (the GPU's operations, rounding alike), times 2^-32.
+/// A fixed-point sum back in metres: its magnitude's high word times 2^32
+/// plus its low word, in f32 (the GPU's operations, rounding alike), times
+/// 2^-32, with its sign (so that a small negative sum is as exact as a
+/// positive one).
 pub fn from_fixed(q: i64) -> f32 {
-    let high = (q >> 32) as i32 as f32;
-    let low = q as u32 as f32;
-    (high * UNITS + low) / UNITS
+    let m = q.unsigned_abs();
+    let high = (m >> 32) as u32 as f32;
+    let low = m as u32 as f32;
+    let x = (high * UNITS + low) / UNITS;
+    if q < 0 { -x } else { x }
 }
 
 /// Each component of `v` in fixed point.
@@ -133,16 +137,16 @@ impl Impact<'_> {
         for slab in pair.usable(self.keep) {
             let n = slab.normal;
             let allowance = slab.allowance(self.keep);
-            let target = allowance - allowance / 64.0;
+            let aim = allowance - allowance / 64.0;
             let (mut most, mut t, mut pushable) = (0.0f32, 0.0f32, true);
             for &a in p {
                 for &b in q {
                     let approach = n.dot(step(b) - step(a));
                     most = most.max(approach);
-                    if approach > target {
+                    if approach > aim {
                         let rate = (free(a) as u32 * first + free(b) as u32 * second) as f32;
                         pushable &= rate > 0.0;
-                        t = t.max((approach - target) / rate);
+                        t = t.max((approach - aim) / rate);
                     }
                 }
             }

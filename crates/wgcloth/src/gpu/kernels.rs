@@ -90,22 +90,56 @@ pub enum Entry {
     Integrate,
     /// Penetration depth, the push-out and the contact total (`measure::main`).
     Measure,
-    /// Every vertex's least separation and flags cleared (`separate::prepare`).
+    /// Each vertex's step from the solve, its zone its own (`separate::start`).
+    SeparateStart,
+    /// A detection's steps, kept for its passes (`separate::sweep`).
+    SeparateSweep,
+    /// A detection: least separations and holds cleared, each cell's swept box (`separate::prepare`).
     SeparatePrepare,
     /// Refits the cloth tiles to the boxes the step sweeps (`separate::tiles`).
     SeparateTiles,
     /// Each vertex and the edges it starts against the cloth near their
     /// paths, listing the near pairs (`separate::walks`).
     SeparateWalks,
-    /// A round of the relative test over the listed near pairs (`separate::round`).
+    /// After a detection: the passes over its pairs (`separate::plan_walked`).
+    SeparatePlanWalked,
+    /// A test of the listed pairs, counting the failing ones at their vertices (`separate::test_pairs`).
+    SeparateTestPairs,
+    /// The same over the walks, when the list overflowed (`separate::test_walks`).
+    SeparateTestWalks,
+    /// After a test: the round goes on, or the rounds end (`separate::plan_tested`).
+    SeparatePlanTested,
+    /// An impulse round's pushes of the listed failing pairs (`separate::push_pairs`).
+    SeparatePushPairs,
+    /// The same over the walks (`separate::push_walks`).
+    SeparatePushWalks,
+    /// Each vertex's step changed by its summed pushes (`separate::apply`).
+    SeparateApply,
+    /// Between a detection's impulse and zone rounds (`separate::plan_phase`).
+    SeparatePlanPhase,
+    /// A zone round's hooks of the listed failing pairs (`separate::hook_pairs`).
+    SeparateHookPairs,
+    /// The same over the walks (`separate::hook_walks`).
+    SeparateHookWalks,
+    /// Labels to their labels' next, and each zone's sums (`separate::jump`).
+    SeparateJump,
+    /// Each free zoned vertex takes its zone's step (`separate::spread`).
+    SeparateSpread,
+    /// The zone sums cleared (`separate::clear`).
+    SeparateClear,
+    /// Before a detection: its passes, unless the step has settled (`separate::plan_detect`).
+    SeparatePlanDetect,
+    /// After the last detection's test: the last resort, where pairs fail (`separate::plan_last`).
+    SeparatePlanLast,
+    /// A round of the last resort over the listed near pairs (`separate::round`).
     SeparateRound,
-    /// A round's walks when the list overflowed (`separate::recheck`).
+    /// Its round's walks when the list overflowed (`separate::recheck`).
     SeparateRecheck,
-    /// The round's newly held vertices counted and folded in (`separate::settle`).
+    /// Its round's newly held vertices counted and folded in (`separate::settle`).
     SeparateSettle,
-    /// The next round's dispatches (`separate::plan`).
+    /// Its next round's dispatches (`separate::plan`).
     SeparatePlan,
-    /// Each held vertex's step held back (`separate::finish`).
+    /// Each vertex's changed step applied, and the statistics (`separate::finish`).
     SeparateFinish,
     /// Each grid cell's box at the step's start (`self_contact::cells`).
     SelfContactCells,
@@ -131,7 +165,7 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 51] = [
+    pub const ALL: [Entry; 68] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
@@ -166,9 +200,26 @@ impl Entry {
         Entry::MgPatchUp,
         Entry::Integrate,
         Entry::Measure,
+        Entry::SeparateStart,
+        Entry::SeparateSweep,
         Entry::SeparatePrepare,
         Entry::SeparateTiles,
         Entry::SeparateWalks,
+        Entry::SeparatePlanWalked,
+        Entry::SeparateTestPairs,
+        Entry::SeparateTestWalks,
+        Entry::SeparatePlanTested,
+        Entry::SeparatePushPairs,
+        Entry::SeparatePushWalks,
+        Entry::SeparateApply,
+        Entry::SeparatePlanPhase,
+        Entry::SeparateHookPairs,
+        Entry::SeparateHookWalks,
+        Entry::SeparateJump,
+        Entry::SeparateSpread,
+        Entry::SeparateClear,
+        Entry::SeparatePlanDetect,
+        Entry::SeparatePlanLast,
         Entry::SeparateRound,
         Entry::SeparateRecheck,
         Entry::SeparateSettle,
@@ -240,9 +291,26 @@ impl Entry {
             Entry::MgPatchUp => ("multigrid", "patch_up"),
             Entry::Integrate => ("integrate", "main"),
             Entry::Measure => ("measure", "main"),
+            Entry::SeparateStart => ("separate", "start"),
+            Entry::SeparateSweep => ("separate", "sweep"),
             Entry::SeparatePrepare => ("separate", "prepare"),
             Entry::SeparateTiles => ("separate", "tiles"),
             Entry::SeparateWalks => ("separate", "walks"),
+            Entry::SeparatePlanWalked => ("separate", "plan_walked"),
+            Entry::SeparateTestPairs => ("separate", "test_pairs"),
+            Entry::SeparateTestWalks => ("separate", "test_walks"),
+            Entry::SeparatePlanTested => ("separate", "plan_tested"),
+            Entry::SeparatePushPairs => ("separate", "push_pairs"),
+            Entry::SeparatePushWalks => ("separate", "push_walks"),
+            Entry::SeparateApply => ("separate", "apply"),
+            Entry::SeparatePlanPhase => ("separate", "plan_phase"),
+            Entry::SeparateHookPairs => ("separate", "hook_pairs"),
+            Entry::SeparateHookWalks => ("separate", "hook_walks"),
+            Entry::SeparateJump => ("separate", "jump"),
+            Entry::SeparateSpread => ("separate", "spread"),
+            Entry::SeparateClear => ("separate", "clear"),
+            Entry::SeparatePlanDetect => ("separate", "plan_detect"),
+            Entry::SeparatePlanLast => ("separate", "plan_last"),
             Entry::SeparateRound => ("separate", "round"),
             Entry::SeparateRecheck => ("separate", "recheck"),
             Entry::SeparateSettle => ("separate", "settle"),

@@ -236,18 +236,25 @@ pub struct StepState {
     /// `health::NOT_FINITE | health::TOO_FAST`, raised by the integrate
     /// pass and kept until the state is replaced.
     pub health: u32,
-    /// Self-contact: the most near pairs one step found (stage "separate").
+    /// Self-contact: the most near pairs one detection found (stage
+    /// "separate").
     pub self_pairs_max: u32,
-    /// Self-contact: steps in which a substep's rounds did not settle or
-    /// its pairs overflowed the list, so that every vertex near the cloth
-    /// was held.
+    /// Self-contact: steps in which a substep's last detection still found
+    /// pairs failing, so that the last resort held vertices.
     pub self_fallbacks: u32,
-    /// Self-contact: vertex steps held back, summed over every step.
+    /// Self-contact: vertex steps the last resort held, summed over every
+    /// step.
     pub self_held_total: u32,
-    /// Self-contact: steps in which a substep's near pairs overflowed the
-    /// list (its rounds walked the cloth again instead: slower, the same
-    /// result).
+    /// Self-contact: steps in which a detection's near pairs overflowed
+    /// the list (its passes walked the cloth again instead: slower, the
+    /// same result).
     pub self_overflows: u32,
+    /// Self-contact: vertex steps impulses changed, summed over every step.
+    pub self_pushed_total: u32,
+    /// Self-contact: vertex steps moved in impact zones, summed.
+    pub self_zoned_total: u32,
+    /// Self-contact: detections of near pairs, summed over every substep.
+    pub self_detections_total: u32,
     /// Self-contact: the most cloth–cloth contacts one step applied (stage
     /// "self_contact").
     pub cloth_contacts_max: u32,

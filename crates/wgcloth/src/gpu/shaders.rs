@@ -31,7 +31,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 8] = [
+pub const INCLUDES: [(&str, &str, &[&str]); 9] = [
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -71,6 +71,11 @@ pub const INCLUDES: [(&str, &str, &[&str]); 8] = [
         "springs",
         include_str!("../../wgsl/springs.wgsl"),
         &["assemble"],
+    ),
+    (
+        "impact",
+        include_str!("../../wgsl/impact.wgsl"),
+        &["separate"],
     ),
     (
         "sums",

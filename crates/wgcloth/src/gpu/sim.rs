@@ -470,13 +470,15 @@ impl GpuSim {
     /// twin of `cpu::separate::near_pairs`): each vertex's least
     /// separation (+∞ in no near pair) and the number of near pairs.
     pub fn read_separations(&self) -> Result<(Vec<f32>, u32)> {
-        use crate::gpu::constants::self_header;
+        use crate::gpu::constants::{self_header, separations};
         let words: Vec<u32> = self.read(&self.buffers.separations)?;
         let n = self.params.n_vertices as usize;
-        let least = words[..n].iter().map(|&b| f32::from_bits(b));
+        let at = separations::LEAST as usize * n;
+        let least = words[at..at + n].iter().map(|&b| f32::from_bits(b));
+        let header = separations::WORDS as usize * n;
         Ok((
             least.collect(),
-            words[2 * n + self_header::PAIR_COUNT as usize],
+            words[header + self_header::PAIR_COUNT as usize],
         ))
     }
 
