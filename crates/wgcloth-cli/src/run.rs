@@ -177,13 +177,21 @@ pub struct Report {
 /// What stage "separate" did over a run (cpu/separate.rs).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SelfContactReport {
-    /// The most near pairs one step found.
+    /// The most near pairs one detection found.
     pub pairs_max: u64,
-    /// Vertex steps held back, summed over the run.
+    /// Vertex steps the failsafe changed, summed over the run.
+    pub changed_total: u64,
+    /// `changed_total` over the run's vertex steps: the failsafe's share.
+    pub failsafe_share: f64,
+    /// Vertex steps impulses changed.
+    pub pushed_total: u64,
+    /// Vertex steps moved in impact zones.
+    pub zoned_total: u64,
+    /// Vertex steps the last resort held.
     pub held_total: u64,
-    /// Steps whose rounds did not settle, so that every vertex in a near
-    /// pair was held.
-    pub unsettled_steps: u64,
+    /// Steps that reached the last resort: pairs still failing at their
+    /// last detection.
+    pub last_resort_steps: u64,
     /// GPU: steps whose near pairs overflowed the list (their rounds walked
     /// the cloth again: slower, the same result); 0 on the CPU.
     pub overflow_steps: u64,
@@ -471,8 +479,11 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         max_penetration = max_penetration.max(s.max_penetration);
         let sep = &s.separation;
         separated.pairs_max = separated.pairs_max.max(sep.pairs as u64);
+        separated.changed_total += sep.changed as u64;
+        separated.pushed_total += sep.pushed as u64;
+        separated.zoned_total += sep.zoned as u64;
         separated.held_total += sep.held as u64;
-        separated.unsettled_steps += u64::from(self_contact.separate && !sep.settled);
+        separated.last_resort_steps += u64::from(self_contact.separate && !sep.settled);
         separated.contacts_max = separated.contacts_max.max(s.self_contacts as u64);
         separated.contacts_dropped += s.self_contacts_dropped as u64;
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
@@ -541,7 +552,11 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         cg_breakdowns: breakdowns,
         contacts_mean: contacts as f64 / done,
         energy_final: sim.energy().total(),
-        self_contact: self_contact.separate.then_some(separated),
+        self_contact: self_contact.separate.then_some(SelfContactReport {
+            failsafe_share: separated.changed_total as f64
+                / (done * sim.scene.cloth.vertex_count() as f64),
+            ..separated
+        }),
     })
 }
 
@@ -771,8 +786,13 @@ fn run_gpu(
         energy_final: cpu::energy(scene, &x, &v).total(),
         self_contact: config.self_contact.enabled.then_some(SelfContactReport {
             pairs_max: last.self_pairs_max as u64,
+            changed_total: last.self_changed_total as u64,
+            failsafe_share: last.self_changed_total as f64
+                / (done * scene.cloth.vertex_count() as f64),
+            pushed_total: last.self_pushed_total as u64,
+            zoned_total: last.self_zoned_total as u64,
             held_total: last.self_held_total as u64,
-            unsettled_steps: last.self_fallbacks as u64,
+            last_resort_steps: last.self_fallbacks as u64,
             overflow_steps: last.self_overflows as u64,
             contacts_max: last.cloth_contacts_max as u64,
             contacts_dropped: last.cloth_contacts_dropped as u64,
@@ -940,8 +960,9 @@ impl Report {
             .as_ref()
             .map(|c| {
                 format!(
-                    "\nself-contact {} near pairs at most in a step, {} vertex steps held back, {} steps unsettled, {} overflowed the GPU's pair list; {} cloth–cloth contacts at most in a step, {} dropped",
-                    c.pairs_max, c.held_total, c.unsettled_steps, c.overflow_steps, c.contacts_max, c.contacts_dropped
+                    "\nself-contact {} near pairs at most in a detection, {} overflowed the GPU's pair list; {} cloth–cloth contacts at most in a step, {} dropped\nfailsafe     {} vertex steps changed ({:.3} % of all): {} by impulses, {} in impact zones, {} held by the last resort in {} steps",
+                    c.pairs_max, c.overflow_steps, c.contacts_max, c.contacts_dropped,
+                    c.changed_total, 100.0 * c.failsafe_share, c.pushed_total, c.zoned_total, c.held_total, c.last_resort_steps
                 )
             })
             .unwrap_or_default()

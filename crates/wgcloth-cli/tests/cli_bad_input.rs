@@ -549,8 +549,8 @@ fn tiny_run_writes_report_json() {
 fn gpu_runs_say_how_the_solver_sums_and_lays_out_its_vectors() {
     let adapter = match wgcloth::gpu::GpuContext::pick_adapter() {
         Ok(adapter) => adapter,
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-            panic!("CI needs a GPU adapter: {e}")
+        Err(e) if !std::env::var("WGCLOTH_NO_GPU_TESTS").is_ok_and(|v| v == "1") => {
+            panic!("the GPU tests need an adapter (WGCLOTH_NO_GPU_TESTS=1 skips them): {e}")
         }
         Err(e) => return eprintln!("skipping GPU test: {e}"),
     };

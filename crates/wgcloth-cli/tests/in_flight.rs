@@ -3,8 +3,8 @@
 //! iterations as recent steps needed: it must still count every step once,
 //! in order, and end where a plain loop that waits for every step ends,
 //! also when it solves again a step that its budget cut.
-//! Lavapipe in CI; without an adapter these tests fail under CI=true and
-//! skip elsewhere.
+//! Lavapipe in CI; without an adapter these tests fail unless
+//! WGCLOTH_NO_GPU_TESTS=1 opts out.
 
 #[path = "../../wgcloth/tests/common/mod.rs"]
 mod common;

@@ -1,7 +1,7 @@
 //! The configs in `scenes/` load, build and step: what a user runs with
 //! `wgcloth run --config scenes/NAME.toml`; the folding ones keep the cloth
 //! from passing through itself on both paths. Without an adapter the GPU
-//! tests fail under CI=true and skip elsewhere.
+//! tests fail unless WGCLOTH_NO_GPU_TESTS=1 opts out.
 
 #[path = "../../wgcloth/tests/common/mod.rs"]
 mod common;
@@ -10,9 +10,9 @@ use std::path::Path;
 
 use wgcloth::bvh::Bvh;
 use wgcloth::config::{Config, ModelKind, Preconditioner, Smoother};
+use wgcloth::cpu::impact::Impact;
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
 use wgcloth::cpu::springs::max_strain;
-use wgcloth::cpu::impact::Impact;
 use wgcloth::cpu::{CpuSim, StepStats, integrate, self_contact, separate};
 use wgcloth::gpu::layout::{StepState, VectorLayout};
 use wgcloth::gpu::{GpuSim, Kernels};

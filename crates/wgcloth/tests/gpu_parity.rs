@@ -1,5 +1,5 @@
 //! The GPU stages against their CPU twins on lavapipe (or any adapter).
-//! Without an adapter these tests fail under CI=true and skip elsewhere.
+//! Without an adapter these tests fail unless WGCLOTH_NO_GPU_TESTS=1 opts out.
 
 mod common;
 

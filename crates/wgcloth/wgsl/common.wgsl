@@ -48,12 +48,14 @@ struct StepState {
     health: atomic<u32>,
     // Self-contact (separate.wgsl): the most near pairs a detection found,
     // the steps that reached the last resort, the vertex steps it held,
-    // the steps whose pairs overflowed the list, the vertex steps impulses
-    // changed and impact zones moved, and the detections run.
+    // the steps whose pairs overflowed the list, the vertex steps the
+    // failsafe changed, those impulses changed and impact zones moved, and
+    // the detections run.
     self_pairs_max: u32,
     self_fallbacks: u32,
     self_held_total: atomic<u32>,
     self_overflows: u32,
+    self_changed_total: atomic<u32>,
     self_pushed_total: atomic<u32>,
     self_zoned_total: atomic<u32>,
     self_detections_total: u32,

@@ -728,6 +728,7 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(d != solved) {
         x[i] = vec4<f32>(x_start[i].xyz + d, 1.0);
         vi += (d - solved) / params.dt;
+        atomicAdd(&state.self_changed_total, 1u);
     }
     // The push-out's mark cleared.
     v[i] = vec4<f32>(vi, 0.0);

@@ -33,7 +33,7 @@ use crate::cpu::separate::NearPair;
 /// Impulse rounds a detection of near pairs runs before impact zones.
 pub const IMPULSE_ROUNDS: u32 = 8;
 /// Rounds of impact zones a detection runs after its impulse rounds.
-pub const ZONE_ROUNDS: u32 = 8;
+pub const ZONE_ROUNDS: u32 = 4;
 
 /// Fixed-point units a metre: steps are summed as integers of 2^-32 m.
 pub const UNITS: f32 = 4_294_967_296.0;
@@ -320,7 +320,10 @@ mod tests {
         for x in [0.0f32, 1e-9, -3.5e-4, 0.0123, -0.75, 2.5, -1234.5] {
             let back = from_fixed(to_fixed(x));
             // Truncated to 2^-32 m, then rounded once to f32.
-            assert!((back - x).abs() <= 2.5e-10 + x.abs() * 1.2e-7, "{x} -> {back}");
+            assert!(
+                (back - x).abs() <= 2.5e-10 + x.abs() * 1.2e-7,
+                "{x} -> {back}"
+            );
         }
         assert_eq!(to_fixed(f32::NAN), 0);
         assert_eq!(to_fixed(-1.0), -(1i64 << 32));

@@ -75,6 +75,7 @@ impl StepStats {
         self.max_penetration = self.max_penetration.max(sub.max_penetration);
         let (sep, next) = (&mut self.separation, &sub.separation);
         sep.pairs = sep.pairs.max(next.pairs);
+        sep.changed += next.changed;
         sep.pushed += next.pushed;
         sep.zoned += next.zoned;
         sep.held += next.held;
@@ -426,8 +427,7 @@ impl CpuSim {
                         h,
                     };
                     // Collide refits the BVH to where the next step starts.
-                    stats.separation =
-                        within.keep_apart(&self.x_start, x, v, &mut self.cloth_bvh);
+                    stats.separation = within.keep_apart(&self.x_start, x, v, &mut self.cloth_bvh);
                 }
             }
         }

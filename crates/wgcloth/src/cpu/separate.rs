@@ -421,6 +421,8 @@ pub struct Separation {
     /// Near pairs found, the most of a detection (an edge–edge pair perhaps
     /// twice).
     pub pairs: usize,
+    /// Vertices whose step the failsafe changed, in any of the ways below.
+    pub changed: usize,
     /// Vertices whose step impulses changed.
     pub pushed: usize,
     /// Vertices moved in impact zones.
@@ -480,10 +482,7 @@ impl Within<'_> {
                 break;
             }
             if detection + 1 == DETECTIONS {
-                let bounds: Vec<f32> = least
-                    .iter()
-                    .map(|&s| displacement_bound(s, keep))
-                    .collect();
+                let bounds: Vec<f32> = least.iter().map(|&s| displacement_bound(s, keep)).collect();
                 let rounds = hold(&pairs, &d, &bounds, keep);
                 let held = rounds.unwrap_or_else(|| least.iter().map(|s| s.is_finite()).collect());
                 for i in 0..n {
@@ -502,6 +501,7 @@ impl Within<'_> {
         for i in (0..n).filter(|&i| d[i] != solved[i]) {
             x[i] = start[i] + d[i];
             v[i] += (d[i] - solved[i]) / self.h;
+            done.changed += 1;
         }
         done.pushed = pushed.iter().filter(|&&p| p).count();
         done.zoned = zoned.iter().filter(|&&z| z).count();

@@ -9,7 +9,9 @@ use wgpu::util::DeviceExt;
 use crate::config::{ModelKind, Preconditioner, Smoother};
 use crate::cpu::{self_contact, separate};
 use crate::error::{Error, Result};
-use crate::gpu::constants::{TILE, WORKGROUP, cloth_header, model, motion, self_header, separations};
+use crate::gpu::constants::{
+    TILE, WORKGROUP, cloth_header, model, motion, self_header, separations,
+};
 use crate::gpu::layout::{
     BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, ScalarsAndSizes,
     Sections, StepState, Sym3, VectorLayout,
@@ -437,7 +439,10 @@ impl Sizes {
             rigid: size(2 * p.n_rigid_vertices as u64, 16),
             // With self-contact, each cell's swept box after them.
             bounds: size(tiles + self_cells, 32),
-            separations: size(self_n * separations::WORDS as u64 + self_header::WORDS as u64, 4),
+            separations: size(
+                self_n * separations::WORDS as u64 + self_header::WORDS as u64,
+                4,
+            ),
             self_pairs: size(p.self_capacity as u64, PAIR_BYTES),
             cloth_lists: match p.cloth_thickness > 0.0 {
                 true => {

@@ -249,6 +249,9 @@ pub struct StepState {
     /// the list (its passes walked the cloth again instead: slower, the
     /// same result).
     pub self_overflows: u32,
+    /// Self-contact: vertex steps the failsafe changed (impulses, zones or
+    /// the last resort), summed over every step.
+    pub self_changed_total: u32,
     /// Self-contact: vertex steps impulses changed, summed over every step.
     pub self_pushed_total: u32,
     /// Self-contact: vertex steps moved in impact zones, summed.
