@@ -1,7 +1,8 @@
 //! Samples of a run taken every K steps (`run --monitor FILE.csv`): the
 //! state's energy, fastest vertex and most-strained spring, the cloth
-//! triangle pairs that pass through each other, the process's resident
-//! memory and the GPU allocator's bytes. A soak reads them to show the run stays finite, its
+//! triangle pairs that pass through each other, the deepest cloth vertex
+//! inside the body, the process's resident memory and the GPU allocator's
+//! bytes. A soak reads them to show the run stays finite, its
 //! energy bounded and its memory flat.
 
 use std::fs::File;
@@ -35,6 +36,9 @@ pub struct Sample {
     /// Cloth triangle pairs that share no vertex and intersect
     /// (`wgcloth::intersections`).
     pub self_intersections: usize,
+    /// How deep the deepest cloth vertex is inside the body's surface as
+    /// the step ends, m (0 outside, or with no body).
+    pub body_depth: f32,
     /// Resident set size of this process (Linux `VmRSS`), bytes.
     pub rss_bytes: Option<u64>,
     /// Device memory the GPU allocator has handed out and has reserved
@@ -43,13 +47,13 @@ pub struct Sample {
     pub gpu_reserved_bytes: Option<u64>,
 }
 
-const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,max_strain,finite,self_intersections,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
+const HEADER: &str = "step,seconds,backend,energy_j,kinetic_j,max_speed,max_strain,finite,self_intersections,body_depth,rss_bytes,gpu_allocated_bytes,gpu_reserved_bytes";
 
 impl Sample {
     fn csv(&self) -> String {
         let opt = |v: Option<u64>| v.map(|b| b.to_string()).unwrap_or_default();
         format!(
-            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{:.6e},{},{},{},{},{}",
+            "{},{:.3},{},{:.9e},{:.9e},{:.6e},{:.6e},{},{},{:.6e},{},{},{}",
             self.step,
             self.seconds,
             self.backend,
@@ -59,6 +63,7 @@ impl Sample {
             self.max_strain,
             self.finite,
             self.self_intersections,
+            self.body_depth,
             opt(self.rss_bytes),
             opt(self.gpu_allocated_bytes),
             opt(self.gpu_reserved_bytes)
@@ -131,6 +136,7 @@ impl Monitor {
             max_strain: cpu::springs::max_strain(&scene.cloth, x),
             finite: x.iter().chain(v).all(|p| p.is_finite()),
             self_intersections: intersections::intersecting_pairs(x, &scene.cloth.triangles).len(),
+            body_depth: body_depth(scene, step, x),
             rss_bytes: resident_bytes(),
             gpu_allocated_bytes: allocator.as_ref().map(|r| r.total_allocated_bytes),
             gpu_reserved_bytes: allocator.as_ref().map(|r| r.total_reserved_bytes),
@@ -169,9 +175,15 @@ impl Monitor {
             .iter()
             .filter(|s| s.self_intersections > 0)
             .count();
+        let deepest = self
+            .samples
+            .iter()
+            .max_by(|a, b| a.body_depth.total_cmp(&b.body_depth))
+            .unwrap_or(first);
         format!(
             "monitor      {} samples in {}: energy {lo:.4} to {hi:.4} J, springs strained up to {:.2} % (step {}), {}\n\
              self         {crossed} samples with intersecting cloth triangle pairs, at most {worst}\n\
+             body         deepest inside the body as a step ends {:.2} mm (step {})\n\
              memory       resident {} at step {} → {} at step {} (max {}); GPU allocated {} → {}",
             self.samples.len(),
             self.path.display(),
@@ -182,6 +194,8 @@ impl Monitor {
             } else {
                 "NOT all finite"
             },
+            1e3 * deepest.body_depth,
+            deepest.step,
             mib(first.rss_bytes),
             first.step,
             mib(last.rss_bytes),
@@ -191,6 +205,20 @@ impl Monitor {
             mib(last.gpu_allocated_bytes),
         )
     }
+}
+
+/// How deep the deepest cloth vertex `x` is inside the scene's body, placed
+/// where it is after `step` steps, m.
+fn body_depth(scene: &Scene, step: u64, x: &[Vec3]) -> f32 {
+    let Some(body) = &scene.rigid else {
+        return 0.0;
+    };
+    let mut frame = cpu::rigid::RigidFrame::default();
+    let t = (step as f64 * scene.config.solver.dt as f64) as f32;
+    cpu::rigid::transform(body, t, &mut frame);
+    x.iter()
+        .map(|&p| cpu::measure::penetration_depth(body, &frame, p))
+        .fold(0.0, f32::max)
 }
 
 /// This process's resident set size (`VmRSS` of /proc/self/status);

@@ -63,8 +63,8 @@ fn scene_config(name: &str) -> Config {
 /// the CPU does and changes the same steps, to the bit, on a cloth pushed
 /// into pleats (the pleat scene after 1.2 s, the state uploaded to both,
 /// a step of 3 and of 15 times its velocities taken, so that many pairs
-/// fail: impulses alone, then zones too, whose pairs overflow the GPU's
-/// list, so that its passes walk the cloth again).
+/// fail: impulses alone, then zones and the last resort too, whose pairs
+/// overflow the GPU's list, so that its passes walk the cloth again).
 #[test]
 fn the_gpu_finds_and_changes_what_the_cpu_does_on_a_pleated_cloth() {
     let Some(ctx) = common::gpu_context() else {
@@ -77,7 +77,7 @@ fn the_gpu_finds_and_changes_what_the_cpu_does_on_a_pleated_cloth() {
     }
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, &scene).unwrap();
     let capacity = separate::PAIRS_PER_VERTEX as usize * scene.cloth.vertex_count();
-    let (mut overflowed, mut zones) = (false, false);
+    let (mut overflowed, mut zones, mut last_resort) = (false, false, false);
     for factor in [3.0, 15.0] {
         let start = &cpu.state.x;
         let v: Vec<_> = cpu.state.v.iter().map(|v| factor * *v).collect();
@@ -153,9 +153,11 @@ fn the_gpu_finds_and_changes_what_the_cpu_does_on_a_pleated_cloth() {
         assert_eq!(apart(&gpu_x, &x), 0.0, "x{factor}: positions");
         assert_eq!(apart(&gpu_v, &solved), 0.0, "x{factor}: velocities");
         overflowed |= pairs.len() > capacity;
+        last_resort |= done.held > 0;
     }
     assert!(overflowed, "one case overflows the list");
     assert!(zones, "one case forms impact zones");
+    assert!(last_resort, "one case reaches the last resort");
 }
 
 /// Stage "self_contact" on the GPU finds the cloth–cloth contacts the CPU

@@ -548,15 +548,21 @@ fn rays_through_mesh_vertices_and_edges_find_the_same_vertices_inside_on_the_gpu
     transform(body, c.solver.dt, &mut frame);
     let (mut cpu_x, mut cpu_v) = (x.clone(), v.clone());
     let thickness = c.contact.thickness;
+    let mut moved = vec![false; n];
     measure::push_out(
         body,
         &frame,
         thickness,
         &scene.cloth.pinned,
-        &mut cpu_x,
-        &mut cpu_v,
+        (&mut cpu_x, &mut cpu_v),
+        &mut moved,
     );
     let pushed = (0..n).filter(|&i| cpu_x[i] != x[i]).count();
+    assert_eq!(
+        pushed,
+        moved.iter().filter(|&&m| m).count(),
+        "marked as moved"
+    );
     let otherwise: Vec<Vec3> = (0..n)
         .filter(|&i| (gpu_x[i] != x[i]) != (cpu_x[i] != x[i]))
         .map(|i| x[i])

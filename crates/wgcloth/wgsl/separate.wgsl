@@ -705,11 +705,10 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let f = flags(i);
-    atomicStore(&separations[vertex_word(SEP_FLAGS, i)], 0u);
     var d = step_of(i);
     if last_resort {
         let near = atomicLoad(&separations[vertex_word(SEP_LEAST, i)]) != 0x7f800000u;
-        let hold = select(held(i), near, read_header(SELF_UNSETTLED) != 0u);
+        let hold = select((f & FLAG_HELD) != 0u, near, read_header(SELF_UNSETTLED) != 0u);
         let b = bound(i);
         let length = length(d);
         if hold && length > b {
@@ -717,6 +716,7 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
             atomicAdd(&state.self_held_total, 1u);
         }
     }
+    atomicStore(&separations[vertex_word(SEP_FLAGS, i)], 0u);
     if (f & FLAG_PUSHED) != 0u {
         atomicAdd(&state.self_pushed_total, 1u);
     }

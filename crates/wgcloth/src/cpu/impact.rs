@@ -315,6 +315,149 @@ impl Impact<'_> {
 mod tests {
     use super::*;
 
+    const KEEP: SelfContactConfig = SelfContactConfig {
+        enabled: true,
+        gamma: 0.45,
+        floor: 1e-3,
+        thickness: 5e-3,
+        mass_ratio: 100.0,
+    };
+
+    /// A vertex 4 mm above the middle of a triangle in z = 0, stepping
+    /// down by `down` and sideways by `slide`, the triangle still.
+    fn falling_vertex(down: f32, slide: f32) -> (NearPair, Vec<Vec3>) {
+        let start = [
+            Vec3::new(0.3, 0.3, 0.004),
+            Vec3::ZERO,
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let pair = NearPair::at([0, 1, 2, 3], false, &start);
+        let d = vec![
+            Vec3::new(slide, 0.0, -down),
+            Vec3::ZERO,
+            Vec3::ZERO,
+            Vec3::ZERO,
+        ];
+        (pair, d)
+    }
+
+    /// The steps after one round of `pair` alone.
+    fn pushed(impact: &Impact, pair: &NearPair, d: &[Vec3]) -> Vec<Vec3> {
+        let push = impact.push(pair, d).expect("the pair fails");
+        let shares = impact.shares(pair, push, 1);
+        (0..4).map(|k| d[k] + vec3_of(shares[k])).collect()
+    }
+
+    /// One push makes a lone pair pass, its sides' momenta cancel to the
+    /// fixed point's unit, the vertex moves three times as far as the
+    /// triangle, and friction takes at most μ times the push off the slide
+    /// (Coulomb), stopping a slow one.
+    #[test]
+    fn a_push_passes_keeps_momentum_and_obeys_coulomb() {
+        let fixed = [false; 4];
+        let impact = Impact {
+            keep: &KEEP,
+            mu: 0.5,
+            fixed: &fixed,
+        };
+        for slide in [0.0, 1e-3, 0.05] {
+            let (pair, d) = falling_vertex(0.01, slide);
+            assert!(!pair.passes(|v| d[v as usize], &KEEP));
+            let push = impact.push(&pair, &d).unwrap();
+            let shares = impact.shares(&pair, push, 1);
+            let total = shares
+                .iter()
+                .fold([0i64; 3], |t, s| std::array::from_fn(|k| t[k] + s[k]));
+            assert_eq!(total, [0; 3], "slide {slide}: momentum");
+            let after = pushed(&impact, &pair, &d);
+            assert!(
+                pair.passes(|v| after[v as usize], &KEEP),
+                "slide {slide}: passes"
+            );
+            let (vertex, triangle) = (after[0] - d[0], after[1] - d[1]);
+            assert!(
+                (vertex + 3.0 * triangle).length() < 1e-8,
+                "slide {slide}: shares"
+            );
+            // The change of the sides' relative mean step: along z the
+            // push, along x friction against the slide.
+            let relative = |d: &[Vec3]| d[0] - (d[1] + d[2] + d[3]) / 3.0;
+            let change = relative(&after) - relative(&d);
+            let (normal, friction) = (change.z, -change.x);
+            assert!(normal > 0.0 && friction >= 0.0, "{change}");
+            assert!(
+                friction <= 0.5 * normal * (1.0 + 1e-5),
+                "slide {slide}: Coulomb"
+            );
+            let left = relative(&after).x;
+            match slide {
+                0.0 => assert_eq!(friction, 0.0),
+                // Stopped: the slide is under μ times the push.
+                s if s < 0.5 * normal => assert!(left.abs() < 1e-8, "{left}"),
+                // Slowed by μ times the push.
+                _ => assert!((friction - 0.5 * normal).abs() < 1e-6 * normal, "{change}"),
+            }
+        }
+    }
+
+    /// A triangle vertex the failsafe may not move stays, and the vertex
+    /// takes the whole push; with both sides fixed, nothing can push.
+    #[test]
+    fn a_vertex_that_may_not_move_stays() {
+        let fixed = [false, true, false, false];
+        let impact = Impact {
+            keep: &KEEP,
+            mu: 0.5,
+            fixed: &fixed,
+        };
+        let (pair, d) = falling_vertex(0.01, 0.0);
+        let after = pushed(&impact, &pair, &d);
+        assert_eq!(after[1], Vec3::ZERO);
+        assert!(pair.passes(|v| after[v as usize], &KEEP));
+        let all = [true; 4];
+        let stuck = Impact {
+            keep: &KEEP,
+            mu: 0.5,
+            fixed: &all,
+        };
+        assert_eq!(stuck.push(&pair, &d), None);
+    }
+
+    /// Impact zones: two pairs that no push may fix, each with a vertex
+    /// the failsafe may not move on both sides, are merged, and the free
+    /// vertices take their zone's anchor's step; a free zone takes its
+    /// mean, which keeps its momentum.
+    #[test]
+    fn zones_move_as_one() {
+        let (pair, d) = falling_vertex(0.01, 0.02);
+        let fixed = [false; 4];
+        let impact = Impact {
+            keep: &KEEP,
+            mu: 0.5,
+            fixed: &fixed,
+        };
+        let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
+        impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
+        assert_eq!(zoned, [true; 4]);
+        assert_eq!(label, [0; 4]);
+        let mean = d.iter().sum::<Vec3>() / 4.0;
+        assert!(
+            steps.iter().all(|s| (*s - mean).length() < 1e-9),
+            "{steps:?}"
+        );
+        assert!(pair.passes(|v| steps[v as usize], &KEEP));
+        let anchored = [false, false, true, false];
+        let impact = Impact {
+            keep: &KEEP,
+            mu: 0.5,
+            fixed: &anchored,
+        };
+        let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
+        impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
+        assert!(steps.iter().all(|s| *s == d[2]), "{steps:?}");
+    }
+
     #[test]
     fn fixed_point_round_trips_and_sums_exactly() {
         for x in [0.0f32, 1e-9, -3.5e-4, 0.0123, -0.75, 2.5, -1234.5] {
