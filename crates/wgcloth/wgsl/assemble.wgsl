@@ -23,21 +23,16 @@ fn stiffness_scale() -> f32 {
     return params.dt * params.dt + params.dt * params.damping_stiffness;
 }
 
-// The face–vertex contact on triangle t with the lowest rigid vertex above
-// `after`, as an entry (rigid vertex + 1; 0: none; start with 0). Taking a
-// list in rigid-vertex order keeps the sums independent of the order the
-// detection's threads linked it in; lists are short, and a list never
-// holds more than the body's vertices (the bound only guards the walk).
-fn next_triangle_contact(t: u32, after: u32) -> u32 {
-    var best = 0u;
-    var e = triangle_contacts[t];
-    for (var hops = 0u; e != 0u && hops < params.n_rigid_vertices; hops++) {
-        if e > after && (best == 0u || e < best) {
-            best = e;
-        }
-        e = triangle_contacts[params.n_triangles + e - 1u];
-    }
-    return best;
+// The face–vertex contacts on triangle t in rigid-vertex order, as entries
+// (rigid vertex + 1; 0 ends the list), as collide.wgsl's `order` linked
+// them: the sums so taken do not depend on the order the detection's
+// threads found them in.
+fn first_triangle_contact(t: u32) -> u32 {
+    return triangle_contacts[params.n_triangles + t];
+}
+
+fn next_triangle_contact(e: u32) -> u32 {
+    return triangle_contacts[2u * params.n_triangles + params.n_rigid_vertices + e - 1u];
 }
 
 // Σ β_k v_k (a vertex–face contact has β = (1, 0, 0)).
@@ -78,7 +73,7 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var q = vertex_triangles_begin(i); q < vertex_triangles_begin(i + 1u); q++) {
         let t = vertex_triangle(q) / 3u;
         let corner = vertex_triangle(q) % 3u;
-        for (var e = next_triangle_contact(t, 0u); e != 0u; e = next_triangle_contact(t, e)) {
+        for (var e = first_triangle_contact(t); e != 0u; e = next_triangle_contact(e)) {
             let c = contacts[params.n_vertices + e - 1u];
             let r = responses[params.n_vertices + e - 1u];
             let beta = c.beta[corner];
@@ -107,7 +102,7 @@ fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         let t = along[side] / 3u;
         let edge = along[side] % 3u;
-        for (var e = next_triangle_contact(t, 0u); e != 0u; e = next_triangle_contact(t, e)) {
+        for (var e = first_triangle_contact(t); e != 0u; e = next_triangle_contact(e)) {
             let c = contacts[params.n_vertices + e - 1u];
             let weight = c.beta[edge] * c.beta[(edge + 1u) % 3u];
             off = sym_add(off, sym_scale(contact_block(responses[params.n_vertices + e - 1u], c.normal), weight));

@@ -431,7 +431,7 @@ impl Sizes {
             topology: size(topology_words as u64, 4),
             contacts: size(slots, size_of::<Contact>()),
             responses: size(slots, size_of::<Response>()),
-            triangle_contacts: size(t + p.n_rigid_vertices as u64, 4),
+            triangle_contacts: size(2 * (t + p.n_rigid_vertices as u64), 4),
             matrix: size(n + s, size_of::<Sym3>()),
             partials: size(5 * groups(n as u32) as u64, 4),
             operators: size(operators, size_of::<Sym3>()),

@@ -30,6 +30,8 @@ pub enum Entry {
     /// The same, one invocation per rigid vertex
     /// (`collide::face_vertex_serial`).
     CollideFaceVertexSerial,
+    /// Each triangle's face–vertex contacts linked in rigid-vertex order (`collide::order`).
+    CollideOrder,
     /// The analytic models' response of every contact slot (`contact::respond_slots`).
     ContactRespondSlots,
     /// Empties the network batch (`contact::reset_batch`).
@@ -165,13 +167,14 @@ pub enum Entry {
 
 impl Entry {
     /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 68] = [
+    pub const ALL: [Entry; 69] = [
         Entry::Rigid,
         Entry::CollideTiles,
         Entry::CollideSupertiles,
         Entry::CollideVertexFace,
         Entry::CollideFaceVertex,
         Entry::CollideFaceVertexSerial,
+        Entry::CollideOrder,
         Entry::ContactRespondSlots,
         Entry::ContactResetBatch,
         Entry::ContactGather,
@@ -263,6 +266,7 @@ impl Entry {
             Entry::CollideVertexFace => ("collide", "vertex_face"),
             Entry::CollideFaceVertex => ("collide", "face_vertex"),
             Entry::CollideFaceVertexSerial => ("collide", "face_vertex_serial"),
+            Entry::CollideOrder => ("collide", "order"),
             Entry::ContactRespondSlots => ("contact", "respond_slots"),
             Entry::ContactResetBatch => ("contact", "reset_batch"),
             Entry::ContactGather => ("contact", "gather"),

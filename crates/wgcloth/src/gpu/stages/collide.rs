@@ -21,6 +21,7 @@ pub(crate) struct Collide {
     vertex_face: Bound,
     face_vertex: Bound,
     face_vertex_serial: Bound,
+    order: Bound,
     /// The most workgroups one dispatch may have: `face_vertex` runs one
     /// per rigid vertex, each taking every this-many-th beyond.
     max_groups: u32,
@@ -52,16 +53,17 @@ impl Collide {
             vertex_face: bind(Entry::CollideVertexFace),
             face_vertex: bind(Entry::CollideFaceVertex),
             face_vertex_serial: bind(Entry::CollideFaceVertexSerial),
+            order: bind(Entry::CollideOrder),
             max_groups: device.limits().max_compute_workgroups_per_dimension,
             triangle_contacts: b.triangle_contacts.clone(),
         }
     }
 
     /// Before the pass: face–vertex contacts link into their triangle's
-    /// list, so every list starts empty (a zero head).
+    /// list, as found and in order, so every list starts empty (zero heads).
     pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
-        let counts = 4 * p.n_triangles as u64;
-        encoder.clear_buffer(&self.triangle_contacts, 0, Some(counts));
+        let heads = 2 * 4 * p.n_triangles as u64;
+        encoder.clear_buffer(&self.triangle_contacts, 0, Some(heads));
     }
 
     pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
@@ -76,6 +78,7 @@ impl Collide {
             self.face_vertex_serial
                 .dispatch(pass, p.n_rigid_vertices, WORKGROUP);
         }
-        4
+        self.order.dispatch(pass, p.n_rigid_vertices, WORKGROUP);
+        5
     }
 }
