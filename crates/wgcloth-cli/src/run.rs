@@ -187,6 +187,8 @@ pub struct SelfContactReport {
     pub pushed_total: u64,
     /// Vertex steps moved in impact zones.
     pub zoned_total: u64,
+    /// Vertex steps whose change the body stopped.
+    pub stopped_total: u64,
     /// Vertex steps the last resort held.
     pub held_total: u64,
     /// Steps that reached the last resort: pairs still failing at their
@@ -482,6 +484,7 @@ fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Result<Report>
         separated.changed_total += sep.changed as u64;
         separated.pushed_total += sep.pushed as u64;
         separated.zoned_total += sep.zoned as u64;
+        separated.stopped_total += sep.stopped as u64;
         separated.held_total += sep.held as u64;
         separated.last_resort_steps += u64::from(self_contact.separate && !sep.settled);
         separated.contacts_max = separated.contacts_max.max(s.self_contacts as u64);
@@ -791,6 +794,7 @@ fn run_gpu(
                 / (done * scene.cloth.vertex_count() as f64),
             pushed_total: last.self_pushed_total as u64,
             zoned_total: last.self_zoned_total as u64,
+            stopped_total: last.self_stopped_total as u64,
             held_total: last.self_held_total as u64,
             last_resort_steps: last.self_fallbacks as u64,
             overflow_steps: last.self_overflows as u64,
@@ -960,9 +964,9 @@ impl Report {
             .as_ref()
             .map(|c| {
                 format!(
-                    "\nself-contact {} near pairs at most in a detection, {} overflowed the GPU's pair list; {} cloth–cloth contacts at most in a step, {} dropped\nfailsafe     {} vertex steps changed ({:.3} % of all): {} by impulses, {} in impact zones, {} held by the last resort in {} steps",
+                    "\nself-contact {} near pairs at most in a detection, {} overflowed the GPU's pair list; {} cloth–cloth contacts at most in a step, {} dropped\nfailsafe     {} vertex steps changed ({:.3} % of all): {} by impulses, {} in impact zones, {} stopped by the body, {} held by the last resort in {} steps",
                     c.pairs_max, c.overflow_steps, c.contacts_max, c.contacts_dropped,
-                    c.changed_total, 100.0 * c.failsafe_share, c.pushed_total, c.zoned_total, c.held_total, c.last_resort_steps
+                    c.changed_total, 100.0 * c.failsafe_share, c.pushed_total, c.zoned_total, c.stopped_total, c.held_total, c.last_resort_steps
                 )
             })
             .unwrap_or_default()

@@ -49,8 +49,8 @@ struct StepState {
     // Self-contact (separate.wgsl): the most near pairs a detection found,
     // the steps that reached the last resort, the vertex steps it held,
     // the steps whose pairs overflowed the list, the vertex steps the
-    // failsafe changed, those impulses changed and impact zones moved, and
-    // the detections run.
+    // failsafe changed, those impulses changed, impact zones moved and the
+    // body stopped, and the detections run.
     self_pairs_max: u32,
     self_fallbacks: u32,
     self_held_total: atomic<u32>,
@@ -58,6 +58,7 @@ struct StepState {
     self_changed_total: atomic<u32>,
     self_pushed_total: atomic<u32>,
     self_zoned_total: atomic<u32>,
+    self_stopped_total: atomic<u32>,
     self_detections_total: u32,
     // Stage "self_contact": the most cloth–cloth contacts a step applied,
     // and those left out, summed.

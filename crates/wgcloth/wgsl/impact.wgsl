@@ -47,10 +47,30 @@ fn flags(i: u32) -> u32 {
     return atomicLoad(&separations[vertex_word(SEP_FLAGS, i)]);
 }
 
-// Whether the failsafe may not move vertex i: pinned, or pushed out of the
-// body this step (measure.wgsl marks it in its velocity's w).
+// Whether the failsafe may not move vertex i: pinned, pushed out of the
+// body this step (measure.wgsl marks it in its velocity's w), or stopped by
+// the body in the failsafe (`clip`).
 fn is_fixed(i: u32) -> bool {
-    return is_pinned(i) || v[i].w != 0.0;
+    return is_pinned(i) || v[i].w != 0.0 || (flags(i) & FLAG_BODY) != 0u;
+}
+
+// The body wins (Impact::clip): step d of vertex i, in contact with the
+// body at the step's start (its vertex–face slot), moved out along the
+// surface's normal where it would end nearer the moving surface than the
+// floor; the vertex is then fixed.
+fn clip(i: u32, d: vec3<f32>) -> vec3<f32> {
+    let c = contacts[i];
+    if c.valid == 0u || is_pinned(i) {
+        return d;
+    }
+    let surface_step = -c.offset * params.dt;
+    let along = dot(c.normal, d - surface_step);
+    let least = params.self_floor - c.distance;
+    if along < least {
+        atomicOr(&separations[vertex_word(SEP_FLAGS, i)], FLAG_BODY);
+        return d + c.normal * (least - along);
+    }
+    return d;
 }
 
 // x m in fixed point (cpu::impact::to_fixed), as (low word, high word) of

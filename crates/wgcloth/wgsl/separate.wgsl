@@ -50,6 +50,9 @@
 // Per vertex its words (gpu::constants::separations), then the header
 // (gpu::constants::self_header's words; zeroed before the pass).
 @group(1) @binding(10) var<storage, read_write> separations: array<atomic<u32>>;
+// Per cloth vertex its vertex–face contact slot (collide.wgsl): where the
+// body bounds its step.
+@group(1) @binding(4) var<storage, read> contacts: array<Contact>;
 // Per pair its four vertices (EDGE_PAIR on the first of an edge–edge
 // pair); its normal and separation are computed again from x_start.
 @group(1) @binding(11) var<storage, read_write> pairs: array<vec4<u32>>;
@@ -450,7 +453,7 @@ fn apply(@builtin(global_invocation_id) id: vec3<u32>) {
         summed = summed || atomicLoad(&separations[SEP_SUM * params.n_vertices + 6u * i + k]) != 0u;
     }
     if summed {
-        set_step(i, step_of(i) + sum_of(i));
+        set_step(i, clip(i, step_of(i) + sum_of(i)));
         atomicOr(&separations[vertex_word(SEP_FLAGS, i)], FLAG_PUSHED);
         clear_sum(i);
     }
@@ -500,12 +503,14 @@ fn spread(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let zone = atomicLoad(&separations[vertex_word(SEP_LABEL, i)]);
     let anchor = atomicLoad(&separations[vertex_word(SEP_ANCHOR, zone)]);
+    var d: vec3<f32>;
     if anchor != 0xffffffffu {
-        set_step(i, step_of(anchor));
+        d = step_of(anchor);
     } else {
         let count = atomicLoad(&separations[vertex_word(SEP_COUNT, zone)]);
-        set_step(i, sum_of(zone) / f32(count));
+        d = sum_of(zone) / f32(count);
     }
+    set_step(i, clip(i, d));
 }
 
 // The zone sums cleared, and each next label its label.
@@ -711,7 +716,7 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
         let hold = select((f & FLAG_HELD) != 0u, near, read_header(SELF_UNSETTLED) != 0u);
         let b = bound(i);
         let length = length(d);
-        if hold && length > b {
+        if hold && !is_fixed(i) && length > b {
             d = d * (b / length);
             atomicAdd(&state.self_held_total, 1u);
         }
@@ -722,6 +727,9 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     if (f & FLAG_ZONED) != 0u {
         atomicAdd(&state.self_zoned_total, 1u);
+    }
+    if (f & FLAG_BODY) != 0u {
+        atomicAdd(&state.self_stopped_total, 1u);
     }
     let solved = x[i].xyz - x_start[i].xyz;
     var vi = v[i].xyz;

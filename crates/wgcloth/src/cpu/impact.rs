@@ -28,6 +28,7 @@
 use glam::Vec3;
 
 use crate::config::SelfContactConfig;
+use crate::cpu::collide::Contact;
 use crate::cpu::separate::NearPair;
 
 /// Impulse rounds a detection of near pairs runs before impact zones.
@@ -77,15 +78,48 @@ fn vec3_of(q: [i64; 3]) -> Vec3 {
     Vec3::from_array(q.map(from_fixed))
 }
 
+/// Where a vertex in contact with the body at the step's start may go:
+/// not nearer its surface, which moves by `surface_step`, than the floor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyGap {
+    /// The surface's outward unit normal.
+    pub normal: Vec3,
+    /// The vertex's signed distance above the surface at the start, m.
+    pub gap: f32,
+    /// How far the surface moves in the step, m.
+    pub surface_step: Vec3,
+}
+
+/// Each cloth vertex's gap to the body from the step's vertex–face
+/// `contacts` found where it started (none for a pinned vertex), h the
+/// step.
+pub fn body_gaps(contacts: &[Contact], pinned: &[bool], h: f32) -> Vec<Option<BodyGap>> {
+    let mut body = vec![None; pinned.len()];
+    for c in contacts.iter().filter(|c| c.cloth_triangle.is_none()) {
+        let i = c.vertices[0] as usize;
+        body[i] = (!pinned[i]).then_some(BodyGap {
+            normal: c.normal,
+            gap: c.distance,
+            surface_step: -c.velocity_offset * h,
+        });
+    }
+    body
+}
+
 /// How the failsafe treats the cloth: the pair test's gamma and floor, the
-/// friction coefficient, and the vertices it may not move.
+/// friction coefficient, the vertices it may not move and where the body
+/// bounds them.
 pub struct Impact<'a> {
     /// Gamma and floor.
     pub keep: &'a SelfContactConfig,
     /// μ, the `[contact]` one.
     pub mu: f32,
-    /// Per vertex: pinned, or held by the body this step.
-    pub fixed: &'a [bool],
+    /// Per vertex: pinned, pushed out by the body this step, or stopped by
+    /// it in the failsafe ([`Impact::clip`]), which adds to these.
+    pub fixed: Vec<bool>,
+    /// Per vertex, its gap to the body where it was in contact with it at
+    /// the step's start (never for a pinned one).
+    pub body: &'a [Option<BodyGap>],
 }
 
 /// A failing pair's push ([`Impact::push`]): its free first-side vertices
@@ -179,6 +213,22 @@ impl Impact<'_> {
         })
     }
 
+    /// The body wins: each vertex whose step `d` brings it nearer the
+    /// body's surface than the floor, across the plane it had contact with
+    /// at the start, moves out along its normal to the floor, and is fixed
+    /// from then on (zones move with it). The body takes the momentum.
+    pub fn clip(&mut self, i: usize, d: &mut Vec3) {
+        let Some(g) = self.body[i] else {
+            return;
+        };
+        let along = g.normal.dot(*d - g.surface_step);
+        let least = self.keep.floor - g.gap;
+        if along < least {
+            *d += g.normal * (least - along);
+            self.fixed[i] = true;
+        }
+    }
+
     /// Whether the pair passes with steps `d` ([`NearPair::passes`]).
     fn passes(&self, pair: &NearPair, d: &[Vec3]) -> bool {
         pair.passes(|v| d[v as usize], self.keep)
@@ -208,7 +258,7 @@ impl Impact<'_> {
     /// [`push`](Impact::push) divided among the most failing pairs at any
     /// of its vertices, summed in fixed point; `moved` marks each vertex a
     /// round changed. Stops at the first round in which no pair fails.
-    pub fn impulse_rounds(&self, pairs: &[NearPair], d: &mut [Vec3], moved: &mut [bool]) {
+    pub fn impulse_rounds(&mut self, pairs: &[NearPair], d: &mut [Vec3], moved: &mut [bool]) {
         let n = d.len();
         let mut counts = vec![0u32; n];
         let mut sums = vec![[0i64; 3]; n];
@@ -239,6 +289,7 @@ impl Impact<'_> {
                 if sums[i] != [0; 3] {
                     d[i] += vec3_of(sums[i]);
                     moved[i] = true;
+                    self.clip(i, &mut d[i]);
                 }
                 sums[i] = [0; 3];
                 counts[i] = 0;
@@ -256,7 +307,7 @@ impl Impact<'_> {
     /// or, where the zone holds a vertex it may not move, that of the
     /// lowest such (its anchor), which the zone then moves with.
     pub fn zone_rounds(
-        &self,
+        &mut self,
         pairs: &[NearPair],
         d: &mut [Vec3],
         label: &mut [u32],
@@ -298,12 +349,17 @@ impl Impact<'_> {
                     }
                 }
             }
-            for i in (0..n).filter(|&i| zoned[i] && !self.fixed[i]) {
+            for i in 0..n {
+                if !zoned[i] || self.fixed[i] {
+                    continue;
+                }
                 let z = label[i] as usize;
-                d[i] = match anchor[z] {
+                let mut step = match anchor[z] {
                     u32::MAX => vec3_of(sums[z].0) / sums[z].1 as f32,
                     a => d[a as usize],
                 };
+                self.clip(i, &mut step);
+                d[i] = step;
             }
             sums.fill(([0; 3], 0));
             anchor.fill(u32::MAX);
@@ -356,10 +412,11 @@ mod tests {
     #[test]
     fn a_push_passes_keeps_momentum_and_obeys_coulomb() {
         let fixed = [false; 4];
-        let impact = Impact {
+        let mut impact = Impact {
             keep: &KEEP,
             mu: 0.5,
-            fixed: &fixed,
+            fixed: fixed.to_vec(),
+            body: &[None; 4],
         };
         for slide in [0.0, 1e-3, 0.05] {
             let (pair, d) = falling_vertex(0.01, slide);
@@ -406,20 +463,22 @@ mod tests {
     #[test]
     fn a_vertex_that_may_not_move_stays() {
         let fixed = [false, true, false, false];
-        let impact = Impact {
+        let mut impact = Impact {
             keep: &KEEP,
             mu: 0.5,
-            fixed: &fixed,
+            fixed: fixed.to_vec(),
+            body: &[None; 4],
         };
         let (pair, d) = falling_vertex(0.01, 0.0);
         let after = pushed(&impact, &pair, &d);
         assert_eq!(after[1], Vec3::ZERO);
         assert!(pair.passes(|v| after[v as usize], &KEEP));
         let all = [true; 4];
-        let stuck = Impact {
+        let mut stuck = Impact {
             keep: &KEEP,
             mu: 0.5,
-            fixed: &all,
+            fixed: all.to_vec(),
+            body: &[None; 4],
         };
         assert_eq!(stuck.push(&pair, &d), None);
     }
@@ -432,10 +491,11 @@ mod tests {
     fn zones_move_as_one() {
         let (pair, d) = falling_vertex(0.01, 0.02);
         let fixed = [false; 4];
-        let impact = Impact {
+        let mut impact = Impact {
             keep: &KEEP,
             mu: 0.5,
-            fixed: &fixed,
+            fixed: fixed.to_vec(),
+            body: &[None; 4],
         };
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
@@ -448,10 +508,11 @@ mod tests {
         );
         assert!(pair.passes(|v| steps[v as usize], &KEEP));
         let anchored = [false, false, true, false];
-        let impact = Impact {
+        let mut impact = Impact {
             keep: &KEEP,
             mu: 0.5,
-            fixed: &anchored,
+            fixed: anchored.to_vec(),
+            body: &[None; 4],
         };
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);

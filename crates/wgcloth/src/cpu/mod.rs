@@ -31,7 +31,6 @@ use assemble::StepParams;
 use body_grid::BodyGrid;
 use collide::{Contact, Tolerances};
 use contact::{Model, Response};
-use impact::Impact;
 use pcg::{BlockMatrix, PcgOutcome, PcgScratch};
 use rigid::RigidFrame;
 
@@ -78,6 +77,7 @@ impl StepStats {
         sep.changed += next.changed;
         sep.pushed += next.pushed;
         sep.zoned += next.zoned;
+        sep.stopped += next.stopped;
         sep.held += next.held;
         sep.detections += next.detections;
         sep.settled &= next.settled;
@@ -416,14 +416,14 @@ impl CpuSim {
                     let fixed: Vec<bool> = (cloth.pinned.iter().zip(&self.backed))
                         .map(|(&pinned, &backed)| pinned || backed)
                         .collect();
+                    let body = impact::body_gaps(&self.contacts, &cloth.pinned, h);
                     let within = separate::Within {
                         triangles: &cloth.triangles,
                         edges: &self.edges,
-                        impact: Impact {
-                            keep,
-                            mu: self.scene.config.contact.mu,
-                            fixed: &fixed,
-                        },
+                        keep,
+                        mu: self.scene.config.contact.mu,
+                        fixed: &fixed,
+                        body: &body,
                         h,
                     };
                     // Collide refits the BVH to where the next step starts.

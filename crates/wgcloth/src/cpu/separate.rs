@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use crate::bvh::{Aabb, Bvh};
 use crate::config::SelfContactConfig;
 use crate::cpu::GRAIN;
-use crate::cpu::impact::Impact;
+use crate::cpu::impact::{BodyGap, Impact};
 use crate::math::{closest_between_segments, closest_on_triangle};
 
 /// Every edge of `triangles` once, by vertex (lower index first), sorted.
@@ -427,6 +427,8 @@ pub struct Separation {
     pub pushed: usize,
     /// Vertices moved in impact zones.
     pub zoned: usize,
+    /// Vertices whose changed step the body stopped ([`Impact::clip`]).
+    pub stopped: usize,
     /// Vertices the last resort held to their bounds.
     pub held: usize,
     /// Detections of near pairs run.
@@ -441,8 +443,15 @@ pub struct Within<'a> {
     pub triangles: &'a [[u32; 3]],
     /// Their edges ([`triangle_edges`]).
     pub edges: &'a [[u32; 2]],
-    /// The failsafe's test, friction, and the vertices it may not move.
-    pub impact: Impact<'a>,
+    /// Gamma and floor.
+    pub keep: &'a SelfContactConfig,
+    /// μ, the `[contact]` one.
+    pub mu: f32,
+    /// Per vertex: pinned, or pushed out of the body this step.
+    pub fixed: &'a [bool],
+    /// Per vertex, its gap to the body where it had contact with it at the
+    /// step's start ([`BodyGap`]).
+    pub body: &'a [Option<BodyGap>],
     /// The time step, s.
     pub h: f32,
 }
@@ -453,8 +462,10 @@ impl Within<'_> {
     /// the near pairs (`bvh` refitted to their swept boxes), each where a
     /// pair fails but the last followed by `impact`'s impulse and zone
     /// rounds; where the last finds a pair failing, the last resort
-    /// ([`hold`]). A changed vertex ends at its start plus its step, and
-    /// its velocity changes by its step's change over h.
+    /// ([`hold`]), which holds no vertex the failsafe may not move. Every
+    /// changed step is kept out of the body ([`Impact::clip`]). A changed
+    /// vertex ends at its start plus its step, and its velocity changes by
+    /// its step's change over h.
     pub fn keep_apart(
         &self,
         start: &[Vec3],
@@ -462,10 +473,16 @@ impl Within<'_> {
         v: &mut [Vec3],
         bvh: &mut Bvh,
     ) -> Separation {
-        let keep = self.impact.keep;
+        let keep = self.keep;
         let n = x.len();
         let solved: Vec<Vec3> = x.iter().zip(start).map(|(x, s)| *x - *s).collect();
         let mut d = solved.clone();
+        let mut impact = Impact {
+            keep,
+            mu: self.mu,
+            fixed: self.fixed.to_vec(),
+            body: self.body,
+        };
         let mut label: Vec<u32> = (0..n as u32).collect();
         let (mut zoned, mut pushed) = (vec![false; n], vec![false; n]);
         let mut done = Separation {
@@ -486,7 +503,7 @@ impl Within<'_> {
                 let rounds = hold(&pairs, &d, &bounds, keep);
                 let held = rounds.unwrap_or_else(|| least.iter().map(|s| s.is_finite()).collect());
                 for i in 0..n {
-                    if held[i] && d[i].length() > bounds[i] {
+                    if held[i] && !impact.fixed[i] && d[i].length() > bounds[i] {
                         d[i] = within(d[i], bounds[i]);
                         done.held += 1;
                     }
@@ -494,15 +511,17 @@ impl Within<'_> {
                 done.settled = false;
                 break;
             }
-            self.impact.impulse_rounds(&pairs, &mut d, &mut pushed);
-            self.impact
-                .zone_rounds(&pairs, &mut d, &mut label, &mut zoned);
+            impact.impulse_rounds(&pairs, &mut d, &mut pushed);
+            impact.zone_rounds(&pairs, &mut d, &mut label, &mut zoned);
         }
         for i in (0..n).filter(|&i| d[i] != solved[i]) {
             x[i] = start[i] + d[i];
             v[i] += (d[i] - solved[i]) / self.h;
             done.changed += 1;
         }
+        done.stopped = (impact.fixed.iter().zip(self.fixed))
+            .filter(|&(&now, &before)| now && !before)
+            .count();
         done.pushed = pushed.iter().filter(|&&p| p).count();
         done.zoned = zoned.iter().filter(|&&z| z).count();
         done

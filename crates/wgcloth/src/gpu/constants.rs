@@ -61,6 +61,8 @@ pub mod separations {
     pub const PUSHED: u32 = 4;
     /// Flag: in an impact zone.
     pub const ZONED: u32 = 8;
+    /// Flag: stopped by the body in the failsafe.
+    pub const BODY: u32 = 16;
 }
 
 /// Words of stage "separate"'s header (wgsl/separate.wgsl), after its
@@ -170,7 +172,7 @@ const _: () = assert!(multigrid::MAX_LEVELS <= WORKGROUP);
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them, nor `level::COARSE`).
-pub const SHARED: [(&str, u32); 64] = [
+pub const SHARED: [(&str, u32); 65] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -193,6 +195,7 @@ pub const SHARED: [(&str, u32); 64] = [
     ("FLAG_HELD_NEW", separations::HELD_NEW),
     ("FLAG_PUSHED", separations::PUSHED),
     ("FLAG_ZONED", separations::ZONED),
+    ("FLAG_BODY", separations::BODY),
     ("SELF_PAIR_COUNT", self_header::PAIR_COUNT),
     ("SELF_FAILING", self_header::FAILING),
     ("SELF_CHANGED", self_header::CHANGED),

@@ -256,6 +256,8 @@ pub struct StepState {
     pub self_pushed_total: u32,
     /// Self-contact: vertex steps moved in impact zones, summed.
     pub self_zoned_total: u32,
+    /// Self-contact: vertex steps the body stopped in the failsafe, summed.
+    pub self_stopped_total: u32,
     /// Self-contact: detections of near pairs, summed over every substep.
     pub self_detections_total: u32,
     /// Self-contact: the most cloth–cloth contacts one step applied (stage

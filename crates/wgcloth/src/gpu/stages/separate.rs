@@ -49,6 +49,7 @@ impl Separate {
             ("x_start", &b.x_start),
             ("x", &b.x),
             ("v", &b.v),
+            ("contacts", &b.contacts),
             ("bounds", &b.bounds),
             ("separations", &b.separations),
             ("pairs", &b.self_pairs),
