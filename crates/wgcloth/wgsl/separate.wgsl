@@ -716,7 +716,7 @@ fn finish(@builtin(global_invocation_id) id: vec3<u32>) {
         let hold = select((f & FLAG_HELD) != 0u, near, read_header(SELF_UNSETTLED) != 0u);
         let b = bound(i);
         let length = length(d);
-        if hold && !is_fixed(i) && length > b {
+        if hold && length > b {
             d = d * (b / length);
             atomicAdd(&state.self_held_total, 1u);
         }

@@ -462,8 +462,9 @@ impl Within<'_> {
     /// the near pairs (`bvh` refitted to their swept boxes), each where a
     /// pair fails but the last followed by `impact`'s impulse and zone
     /// rounds; where the last finds a pair failing, the last resort
-    /// ([`hold`]), which holds no vertex the failsafe may not move. Every
-    /// changed step is kept out of the body ([`Impact::clip`]). A changed
+    /// ([`hold`]), which holds the vertices the failsafe may not move too:
+    /// without them its pairs could cross. The impulses' and zones' steps
+    /// are kept out of the body ([`Impact::clip`]). A changed
     /// vertex ends at its start plus its step, and its velocity changes by
     /// its step's change over h.
     pub fn keep_apart(
@@ -503,7 +504,7 @@ impl Within<'_> {
                 let rounds = hold(&pairs, &d, &bounds, keep);
                 let held = rounds.unwrap_or_else(|| least.iter().map(|s| s.is_finite()).collect());
                 for i in 0..n {
-                    if held[i] && !impact.fixed[i] && d[i].length() > bounds[i] {
+                    if held[i] && d[i].length() > bounds[i] {
                         d[i] = within(d[i], bounds[i]);
                         done.held += 1;
                     }
