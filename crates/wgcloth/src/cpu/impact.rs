@@ -371,13 +371,25 @@ impl Impact<'_> {
 mod tests {
     use super::*;
 
-    const KEEP: SelfContactConfig = SelfContactConfig {
+    /// The default gamma (0.45) and floor (1 mm).
+    const KEEP: &SelfContactConfig = &SelfContactConfig {
         enabled: true,
         gamma: 0.45,
         floor: 1e-3,
         thickness: 5e-3,
         mass_ratio: 100.0,
     };
+
+    /// The failsafe over a lone pair's four vertices, `fixed` of them it
+    /// may not move, μ = 0.5, no body.
+    fn lone(fixed: [bool; 4]) -> Impact<'static> {
+        Impact {
+            keep: KEEP,
+            mu: 0.5,
+            fixed: fixed.to_vec(),
+            body: &[None; 4],
+        }
+    }
 
     /// A vertex 4 mm above the middle of a triangle in z = 0, stepping
     /// down by `down` and sideways by `slide`, the triangle still.
@@ -411,16 +423,10 @@ mod tests {
     /// (Coulomb), stopping a slow one.
     #[test]
     fn a_push_passes_keeps_momentum_and_obeys_coulomb() {
-        let fixed = [false; 4];
-        let mut impact = Impact {
-            keep: &KEEP,
-            mu: 0.5,
-            fixed: fixed.to_vec(),
-            body: &[None; 4],
-        };
+        let impact = lone([false; 4]);
         for slide in [0.0, 1e-3, 0.05] {
             let (pair, d) = falling_vertex(0.01, slide);
-            assert!(!pair.passes(|v| d[v as usize], &KEEP));
+            assert!(!pair.passes(|v| d[v as usize], KEEP));
             let push = impact.push(&pair, &d).unwrap();
             let shares = impact.shares(&pair, push, 1);
             let total = shares
@@ -429,7 +435,7 @@ mod tests {
             assert_eq!(total, [0; 3], "slide {slide}: momentum");
             let after = pushed(&impact, &pair, &d);
             assert!(
-                pair.passes(|v| after[v as usize], &KEEP),
+                pair.passes(|v| after[v as usize], KEEP),
                 "slide {slide}: passes"
             );
             let (vertex, triangle) = (after[0] - d[0], after[1] - d[1]);
@@ -462,24 +468,12 @@ mod tests {
     /// takes the whole push; with both sides fixed, nothing can push.
     #[test]
     fn a_vertex_that_may_not_move_stays() {
-        let fixed = [false, true, false, false];
-        let mut impact = Impact {
-            keep: &KEEP,
-            mu: 0.5,
-            fixed: fixed.to_vec(),
-            body: &[None; 4],
-        };
+        let impact = lone([false, true, false, false]);
         let (pair, d) = falling_vertex(0.01, 0.0);
         let after = pushed(&impact, &pair, &d);
         assert_eq!(after[1], Vec3::ZERO);
-        assert!(pair.passes(|v| after[v as usize], &KEEP));
-        let all = [true; 4];
-        let mut stuck = Impact {
-            keep: &KEEP,
-            mu: 0.5,
-            fixed: all.to_vec(),
-            body: &[None; 4],
-        };
+        assert!(pair.passes(|v| after[v as usize], KEEP));
+        let stuck = lone([true; 4]);
         assert_eq!(stuck.push(&pair, &d), None);
     }
 
@@ -490,13 +484,7 @@ mod tests {
     #[test]
     fn zones_move_as_one() {
         let (pair, d) = falling_vertex(0.01, 0.02);
-        let fixed = [false; 4];
-        let mut impact = Impact {
-            keep: &KEEP,
-            mu: 0.5,
-            fixed: fixed.to_vec(),
-            body: &[None; 4],
-        };
+        let mut impact = lone([false; 4]);
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
         assert_eq!(zoned, [true; 4]);
@@ -506,14 +494,8 @@ mod tests {
             steps.iter().all(|s| (*s - mean).length() < 1e-9),
             "{steps:?}"
         );
-        assert!(pair.passes(|v| steps[v as usize], &KEEP));
-        let anchored = [false, false, true, false];
-        let mut impact = Impact {
-            keep: &KEEP,
-            mu: 0.5,
-            fixed: anchored.to_vec(),
-            body: &[None; 4],
-        };
+        assert!(pair.passes(|v| steps[v as usize], KEEP));
+        let mut impact = lone([false, false, true, false]);
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
         assert!(steps.iter().all(|s| *s == d[2]), "{steps:?}");
