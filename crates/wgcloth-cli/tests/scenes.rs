@@ -620,3 +620,36 @@ fn folding_scenes_run_2_s_whole_and_out_of_the_body() {
         );
     }
 }
+
+/// The box of `scenes/pleat.toml` at 64² (CPU): it piles the cloth into
+/// layers it presses, and no step ends with a cloth vertex inside it, or
+/// the cloth through itself. While a vertex the push-out moved was fixed
+/// outright, two layers pushed onto the box's face could not be parted, 33
+/// steps reached the last resort, which holds steps back, and the box
+/// closed on the held cloth: 49.8 mm inside it at the end.
+#[test]
+fn the_pleats_box_presses_layers_at_64_and_never_ends_a_step_inside_them() {
+    let mut config = scene_config("pleat");
+    config.cloth.grid = [64, 64];
+    let scene = Scene::new(&config).unwrap();
+    let triangles = scene.cloth.triangles.clone();
+    let mut sim = CpuSim::new(scene.clone());
+    let (mut deepest, mut crossed, mut stopped) = (0.0f32, 0, 0);
+    for k in 1..=config.solver.steps {
+        stopped += sim.step().separation.stopped;
+        let x = &sim.state.x;
+        let depth = x
+            .iter()
+            .map(|&p| convex_depth(&scene, k, p))
+            .fold(0.0, f32::max);
+        deepest = deepest.max(depth);
+        crossed = crossed.max(intersecting_pairs(x, &triangles).len());
+    }
+    eprintln!("pleat 64²: deepest in the box {deepest} m, crossing {crossed}, stopped {stopped}");
+    assert!(
+        stopped > 0,
+        "the box never stopped a layer the failsafe moved"
+    );
+    assert_eq!(crossed, 0, "the cloth crossed itself");
+    assert_eq!(deepest, 0.0, "a vertex ended a step inside the box");
+}

@@ -47,17 +47,19 @@ fn flags(i: u32) -> u32 {
     return atomicLoad(&separations[vertex_word(SEP_FLAGS, i)]);
 }
 
-// Whether the failsafe may not move vertex i: pinned, pushed out of the
-// body this step (measure.wgsl marks it in its velocity's w), or stopped by
-// the body in the failsafe (`clip`).
+// Whether the failsafe may not move vertex i: pinned, or pushed out of the
+// body this step (measure.wgsl marks it in its velocity's w) with no
+// contact at the step's start to bound it (a vertex with one is kept out
+// by `clip`).
 fn is_fixed(i: u32) -> bool {
-    return is_pinned(i) || v[i].w != 0.0 || (flags(i) & FLAG_BODY) != 0u;
+    return is_pinned(i) || (v[i].w != 0.0 && contacts[i].valid == 0u);
 }
 
 // The body wins (Impact::clip): step d of vertex i, in contact with the
 // body at the step's start (its vertex–face slot), moved out along the
 // surface's normal where it would end nearer the moving surface than the
-// floor; the vertex is then fixed.
+// floor; the vertex is then stopped (FLAG_BODY): no push moves it nearer,
+// and its zone moves with the body.
 fn clip(i: u32, d: vec3<f32>) -> vec3<f32> {
     let c = contacts[i];
     if c.valid == 0u || is_pinned(i) {
@@ -142,52 +144,36 @@ fn clear_sum(i: u32) {
 
 // A failing pair's push (cpu::impact::Push): its free first-side vertices
 // each move by `first` times `change`, its free second-side ones by
-// −`second` times it.
+// −`second` times it, the others (not in `free`) not at all.
 struct Push {
     change: vec3<f32>,
     first: u32,
     second: u32,
+    free: array<u32, 4>,
     valid: bool,
+}
+
+// Whether vertex i may move along `direction` (Impact::free): not fixed,
+// and not stopped against the body where that brings it nearer.
+fn free_along(i: u32, direction: vec3<f32>) -> bool {
+    let stopped = (flags(i) & FLAG_BODY) != 0u;
+    let c = contacts[i];
+    let into = c.valid != 0u && dot(c.normal, direction) < 0.0;
+    return !is_fixed(i) && !(stopped && into);
 }
 
 // The push that makes a failing pair pass (Impact::push); not valid where
 // it passes or no push can.
 fn push_of(p: vec4<u32>, edge: bool, g: Gap) -> Push {
-    let none = Push(vec3<f32>(0.0), 0u, 0u, false);
+    let none = Push(vec3<f32>(0.0), 0u, 0u, array<u32, 4>(0u, 0u, 0u, 0u), false);
     if touching(g) {
         return none;
     }
     let d = array<vec3<f32>, 4>(step_of(p.x), step_of(p.y), step_of(p.z), step_of(p.w));
-    let free = array<u32, 4>(
-        select(1u, 0u, is_fixed(p.x)),
-        select(1u, 0u, is_fixed(p.y)),
-        select(1u, 0u, is_fixed(p.z)),
-        select(1u, 0u, is_fixed(p.w)),
-    );
+    let ids = array<u32, 4>(p.x, p.y, p.z, p.w);
     let split = select(1u, 2u, edge);
-    var free_p = 0u;
-    var free_q = 0u;
-    for (var k = 0u; k < 4u; k++) {
-        if k < split {
-            free_p += free[k];
-        } else {
-            free_q += free[k];
-        }
-    }
-    if free_p == 0u && free_q == 0u {
-        return none;
-    }
-    var first = free_q;
-    var second = free_p;
-    if free_p == 0u {
-        first = 0u;
-        second = 1u;
-    } else if free_q == 0u {
-        first = 1u;
-        second = 0u;
-    }
     let slabs = array<Slab, 2>(g.nearest, g.plane);
-    var found = false;
+    var best = none;
     var best_t = 0.0;
     var best_n = vec3<f32>(0.0);
     for (var s = 0u; s < 2u; s++) {
@@ -195,6 +181,30 @@ fn push_of(p: vec4<u32>, edge: bool, g: Gap) -> Push {
             continue;
         }
         let n = slabs[s].normal;
+        var free: array<u32, 4>;
+        var free_p = 0u;
+        var free_q = 0u;
+        for (var k = 0u; k < 4u; k++) {
+            let direction = select(-n, n, k < split);
+            free[k] = select(0u, 1u, free_along(ids[k], direction));
+            if k < split {
+                free_p += free[k];
+            } else {
+                free_q += free[k];
+            }
+        }
+        var first = free_q;
+        var second = free_p;
+        if free_p == 0u && free_q == 0u {
+            first = 0u;
+            second = 0u;
+        } else if free_p == 0u {
+            first = 0u;
+            second = 1u;
+        } else if free_q == 0u {
+            first = 1u;
+            second = 0u;
+        }
         let allowed = allowance(slabs[s].width);
         let aim = allowed - allowed / 64.0;
         var most = 0.0;
@@ -214,13 +224,13 @@ fn push_of(p: vec4<u32>, edge: bool, g: Gap) -> Push {
         if most <= allowed {
             return none;
         }
-        if pushable && (!found || t < best_t) {
-            found = true;
+        if pushable && (!best.valid || t < best_t) {
+            best = Push(vec3<f32>(0.0), first, second, free, true);
             best_t = t;
             best_n = n;
         }
     }
-    if !found {
+    if !best.valid {
         return none;
     }
     var mean_p = vec3<f32>(0.0);
@@ -235,12 +245,23 @@ fn push_of(p: vec4<u32>, edge: bool, g: Gap) -> Push {
     let relative = mean_p / f32(split) - mean_q / f32(4u - split);
     let tangential = relative - best_n * dot(best_n, relative);
     let slide = length(tangential);
-    let rate = f32(free_p * first) / f32(split) + f32(free_q * second) / f32(4u - split);
+    var moving_p = 0u;
+    var moving_q = 0u;
+    for (var k = 0u; k < 4u; k++) {
+        if k < split {
+            moving_p += best.free[k];
+        } else {
+            moving_q += best.free[k];
+        }
+    }
+    let rate = f32(moving_p * best.first) / f32(split)
+        + f32(moving_q * best.second) / f32(4u - split);
     var friction = vec3<f32>(0.0);
     if slide > 0.0 {
         friction = tangential * (min(slide / rate, params.mu * best_t) / slide);
     }
-    return Push(best_n * best_t - friction, first, second, true);
+    best.change = best_n * best_t - friction;
+    return best;
 }
 
 // A failing pair's push, divided among the most failing pairs at any of
@@ -255,7 +276,7 @@ fn add_shares(p: vec4<u32>, edge: bool, push: Push) {
     let base = array<vec2<u32>, 3>(to_fixed(c.x), to_fixed(c.y), to_fixed(c.z));
     let split = select(1u, 2u, edge);
     for (var k = 0u; k < 4u; k++) {
-        if is_fixed(ids[k]) {
+        if push.free[k] == 0u {
             continue;
         }
         // factor · b as 64-bit integers: the low word's product, and its

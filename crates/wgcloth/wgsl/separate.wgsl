@@ -471,8 +471,10 @@ fn hook_walks(@builtin(global_invocation_id) id: vec3<u32>) {
     walk_at(id.x, HOOKING);
 }
 
-// Each label becomes its label's next; a zoned vertex adds its step to its
-// zone's sum, or, where it may not be moved, offers itself as its anchor.
+// Each label becomes its label's next; a zoned vertex the failsafe may not
+// move offers itself as its zone's anchor; any other adds its step to its
+// zone's sum, and offers itself as its body anchor (ANCHOR_BODY, which a
+// fixed one's index is below) where it is stopped against the body.
 @compute @workgroup_size(WORKGROUP)
 fn jump(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -489,12 +491,16 @@ fn jump(@builtin(global_invocation_id) id: vec3<u32>) {
         atomicMin(&separations[vertex_word(SEP_ANCHOR, zone)], i);
         return;
     }
+    if (flags(i) & FLAG_BODY) != 0u {
+        atomicMin(&separations[vertex_word(SEP_ANCHOR, zone)], i | ANCHOR_BODY);
+    }
     let d = step_of(i);
     add_fixed3(zone, array<vec2<u32>, 3>(to_fixed(d.x), to_fixed(d.y), to_fixed(d.z)));
     atomicAdd(&separations[vertex_word(SEP_COUNT, zone)], 1u);
 }
 
-// Each free zoned vertex takes its zone's anchor's step, or its mean.
+// Each zoned vertex that is not fixed takes its zone's anchor's step; else,
+// with a body anchor, the body's step there; else its zone's mean.
 @compute @workgroup_size(WORKGROUP)
 fn spread(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -504,8 +510,10 @@ fn spread(@builtin(global_invocation_id) id: vec3<u32>) {
     let zone = atomicLoad(&separations[vertex_word(SEP_LABEL, i)]);
     let anchor = atomicLoad(&separations[vertex_word(SEP_ANCHOR, zone)]);
     var d: vec3<f32>;
-    if anchor != 0xffffffffu {
+    if anchor < ANCHOR_BODY {
         d = step_of(anchor);
+    } else if anchor != 0xffffffffu {
+        d = -contacts[anchor & ~ANCHOR_BODY].offset * params.dt;
     } else {
         let count = atomicLoad(&separations[vertex_word(SEP_COUNT, zone)]);
         d = sum_of(zone) / f32(count);

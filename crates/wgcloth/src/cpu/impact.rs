@@ -12,8 +12,11 @@
 //!    most μ times that push off their relative tangential step. The two
 //!    sides' shares keep momentum: equal masses, so a vertex moves three
 //!    times as far as the triangle it meets. A vertex the failsafe may not
-//!    move (pinned, or pushed out by the body, which wins) stays, and the
-//!    other side's free vertices take its share. Each pair's change is divided by the most
+//!    move (pinned, or pushed out of the body with no plane to keep it
+//!    out by) stays, and so does one the body has stopped where the push
+//!    would bring it nearer the body (the body wins: the layer behind is
+//!    pushed instead); the other side's free vertices take their share.
+//!    Each pair's change is divided by the most
 //!    failing pairs at any of its vertices (a Jacobi sweep that does not
 //!    overshoot a vertex between pairs), and the changes are summed in
 //!    fixed point, whose sums do not depend on the order pairs are met
@@ -21,9 +24,10 @@
 //! 2. **Impact zones** (Bridson, Fedkiw & Anderson 2002), for what the
 //!    rounds leave: the vertices of each pair still failing join one zone
 //!    (labels lowered to the least of the pair's, then each label to its
-//!    label's label), and each zone moves as one by the mean step of its
-//!    vertices, or of those it may not move when it has any: momentum is
-//!    kept, and no pair within a zone closes at all.
+//!    label's label), and each zone moves as one: with a vertex it may not
+//!    move, by that one's step; with one the body stopped, with the body
+//!    (as far from it as it started); else by its mean step, which keeps
+//!    its momentum. No pair within a zone closes at all.
 
 use glam::Vec3;
 
@@ -114,9 +118,12 @@ pub struct Impact<'a> {
     pub keep: &'a SelfContactConfig,
     /// μ, the `[contact]` one.
     pub mu: f32,
-    /// Per vertex: pinned, pushed out by the body this step, or stopped by
-    /// it in the failsafe ([`Impact::clip`]), which adds to these.
-    pub fixed: Vec<bool>,
+    /// Per vertex: pinned, or pushed out of the body with no contact at the
+    /// step's start to keep it out by: the failsafe does not move it.
+    pub fixed: &'a [bool],
+    /// Per vertex: stopped against the body ([`Impact::clip`]), which it
+    /// may leave but not come nearer.
+    pub stopped: Vec<bool>,
     /// Per vertex, its gap to the body where it was in contact with it at
     /// the step's start (never for a pinned one).
     pub body: &'a [Option<BodyGap>],
@@ -124,9 +131,9 @@ pub struct Impact<'a> {
 
 /// A failing pair's push ([`Impact::push`]): its free first-side vertices
 /// each move by `first` times `change`, its free second-side ones by
-/// −`second` times it, and its vertices the failsafe may not move not at
-/// all. With free vertices on both sides the factors are the other side's
-/// free count, so the two sides' momenta are equal and opposite.
+/// −`second` times it, and the others not at all. With free vertices on
+/// both sides the factors are the other side's free count, so the two
+/// sides' momenta are equal and opposite.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Push {
     /// The change, m: t along the slab's normal, less up to μ t of the
@@ -136,49 +143,64 @@ pub struct Push {
     pub first: u32,
     /// The second side's factor.
     pub second: u32,
+    /// Which of the pair's four vertices the push moves.
+    pub free: [bool; 4],
 }
 
 impl Impact<'_> {
+    /// Whether vertex `v` may move along `direction`: not fixed, and not
+    /// stopped against the body where that brings it nearer.
+    fn free(&self, v: u32, direction: Vec3) -> bool {
+        let v = v as usize;
+        let into = |g: &BodyGap| g.normal.dot(direction) < 0.0;
+        let held_by_body = self.stopped[v] && self.body[v].as_ref().is_some_and(into);
+        !(self.fixed[v] || held_by_body)
+    }
+
     /// The push that makes a failing pair pass, or `None` where it passes
     /// or no push can (it touches, with no slab, or a slab's failing
     /// vertex pair holds no free vertex): a zone must take it.
     ///
-    /// Free vertices move by a common t along the slab's normal n, the
-    /// first side's by `first` t and the second's by −`second` t, so a
-    /// vertex pair (a, b) of the two sides closes by w_a first + w_b second
-    /// times t less (w: 1 free, 0 not). Across each usable slab, t is the
-    /// least that brings every vertex pair's approach n·(d_b − d_a) to
-    /// 63/64 of the slab's allowance (so rounding does not leave it
-    /// failing by an ulp); the slab needing the least t is taken. Friction
-    /// then takes up to μ t off the relative tangential step of the two
-    /// sides' mean steps, no more than stops it (Coulomb, with the push's
-    /// momentum as the normal impulse).
+    /// Across a slab of normal n, the first side's free vertices (those
+    /// that may move along n) move by `first` t n and the second's (along
+    /// −n) by −`second` t n, so a vertex pair (a, b) of the two sides
+    /// closes by w_a first + w_b second times t less (w: 1 free, 0 not).
+    /// Across each usable slab, t is the least that brings every vertex
+    /// pair's approach n·(d_b − d_a) to 63/64 of the slab's allowance (so
+    /// rounding does not leave it failing by an ulp); the slab needing the
+    /// least t is taken. Friction then takes up to μ t off the relative
+    /// tangential step of the two sides' mean steps, no more than stops it
+    /// (Coulomb, with the push's momentum as the normal impulse).
     pub fn push(&self, pair: &NearPair, d: &[Vec3]) -> Option<Push> {
         if pair.touching() {
             return None;
         }
         let step = |v: u32| d[v as usize];
-        let free = |v: u32| !self.fixed[v as usize];
         let (p, q) = pair.sides();
-        let count = |side: &[u32]| side.iter().filter(|&&v| free(v)).count() as u32;
-        let (first, second) = match (count(p), count(q)) {
-            (0, 0) => return None,
-            (0, _) => (0, 1),
-            (_, 0) => (1, 0),
-            (free_p, free_q) => (free_q, free_p),
-        };
-        let mut best: Option<(f32, Vec3)> = None;
+        let mut best: Option<(f32, Vec3, Push)> = None;
         for slab in pair.usable(self.keep) {
             let n = slab.normal;
+            let free: [bool; 4] = std::array::from_fn(|k| {
+                let direction = if k < p.len() { n } else { -n };
+                self.free(pair.vertices[k], direction)
+            });
+            let (free_p, free_q) = free.split_at(p.len());
+            let count = |side: &[bool]| side.iter().filter(|&&f| f).count() as u32;
+            let (first, second) = match (count(free_p), count(free_q)) {
+                (0, 0) => (0, 0),
+                (0, _) => (0, 1),
+                (_, 0) => (1, 0),
+                (free_p, free_q) => (free_q, free_p),
+            };
             let allowance = slab.allowance(self.keep);
             let aim = allowance - allowance / 64.0;
             let (mut most, mut t, mut pushable) = (0.0f32, 0.0f32, true);
-            for &a in p {
-                for &b in q {
+            for (j, &a) in p.iter().enumerate() {
+                for (k, &b) in q.iter().enumerate() {
                     let approach = n.dot(step(b) - step(a));
                     most = most.max(approach);
                     if approach > aim {
-                        let rate = (free(a) as u32 * first + free(b) as u32 * second) as f32;
+                        let rate = (free_p[j] as u32 * first + free_q[k] as u32 * second) as f32;
                         pushable &= rate > 0.0;
                         t = t.max((approach - aim) / rate);
                     }
@@ -187,11 +209,17 @@ impl Impact<'_> {
             if most <= allowance {
                 return None;
             }
-            if pushable && best.is_none_or(|(least, _)| t < least) {
-                best = Some((t, n));
+            if pushable && best.as_ref().is_none_or(|(least, ..)| t < *least) {
+                let push = Push {
+                    change: Vec3::ZERO,
+                    first,
+                    second,
+                    free,
+                };
+                best = Some((t, n, push));
             }
         }
-        let (t, n) = best?;
+        let (t, n, push) = best?;
         let mean = |side: &[u32]| {
             let sum = side.iter().fold(Vec3::ZERO, |s, &v| s + step(v));
             sum / side.len() as f32
@@ -200,23 +228,25 @@ impl Impact<'_> {
         let tangential = relative - n * n.dot(relative);
         let slide = tangential.length();
         // How fast the relative mean step changes with the change.
-        let rate = (count(p) * first) as f32 / p.len() as f32
-            + (count(q) * second) as f32 / q.len() as f32;
+        let (free_p, free_q) = push.free.split_at(p.len());
+        let moving = |side: &[bool]| side.iter().filter(|&&f| f).count() as u32;
+        let rate = (moving(free_p) * push.first) as f32 / p.len() as f32
+            + (moving(free_q) * push.second) as f32 / q.len() as f32;
         let friction = match slide > 0.0 {
             true => tangential * ((slide / rate).min(self.mu * t) / slide),
             false => Vec3::ZERO,
         };
         Some(Push {
             change: n * t - friction,
-            first,
-            second,
+            ..push
         })
     }
 
     /// The body wins: each vertex whose step `d` brings it nearer the
     /// body's surface than the floor, across the plane it had contact with
-    /// at the start, moves out along its normal to the floor, and is fixed
-    /// from then on (zones move with it). The body takes the momentum.
+    /// at the start (or was pushed out to), moves out along its normal to
+    /// the floor, and is stopped from then on: no push moves it nearer,
+    /// and its zone moves with the body. The body takes the momentum.
     pub fn clip(&mut self, i: usize, d: &mut Vec3) {
         let Some(g) = self.body[i] else {
             return;
@@ -225,7 +255,7 @@ impl Impact<'_> {
         let least = self.keep.floor - g.gap;
         if along < least {
             *d += g.normal * (least - along);
-            self.fixed[i] = true;
+            self.stopped[i] = true;
         }
     }
 
@@ -243,11 +273,10 @@ impl Impact<'_> {
         let base = fixed3(push.change / shared as f32);
         let split = pair.sides().0.len();
         std::array::from_fn(|k| {
-            let v = pair.vertices[k];
-            let factor = match (self.fixed[v as usize], k < split) {
-                (true, _) => 0,
-                (false, true) => push.first as i64,
-                (false, false) => -(push.second as i64),
+            let factor = match (push.free[k], k < split) {
+                (false, _) => 0,
+                (true, true) => push.first as i64,
+                (true, false) => -(push.second as i64),
             };
             base.map(|b| factor * b)
         })
@@ -303,9 +332,11 @@ impl Impact<'_> {
     /// the step's detections, so a zone only grows. Each round: every pair
     /// that fails lowers its vertices' labels to the least of theirs as
     /// they stood (`next`), then each label becomes its label's next; then
-    /// every zoned vertex the failsafe may move takes its zone's mean step,
-    /// or, where the zone holds a vertex it may not move, that of the
-    /// lowest such (its anchor), which the zone then moves with.
+    /// every zoned vertex that is not fixed takes its zone's step: that
+    /// of its lowest fixed vertex; else, where it holds a vertex stopped
+    /// against the body, the body's step there (the zone moves with the
+    /// body, as far from it as it started); else its mean step, which
+    /// keeps its momentum. A step is kept out of the body ([`Impact::clip`]).
     pub fn zone_rounds(
         &mut self,
         pairs: &[NearPair],
@@ -315,10 +346,11 @@ impl Impact<'_> {
     ) {
         let n = d.len();
         let mut next = vec![0u32; n];
-        // Per zone, at its label: the fixed-point sum of its free vertices'
-        // steps and their count, and its anchor.
+        // Per zone, at its label: the fixed-point sum of its unfixed
+        // vertices' steps and their count, and its lowest fixed and
+        // stopped vertices.
         let mut sums = vec![([0i64; 3], 0u32); n];
-        let mut anchor = vec![u32::MAX; n];
+        let (mut pin, mut body) = (vec![u32::MAX; n], vec![u32::MAX; n]);
         for _ in 0..ZONE_ROUNDS {
             let failing: Vec<&NearPair> = pairs.iter().filter(|p| !self.passes(p, d)).collect();
             if failing.is_empty() {
@@ -338,31 +370,38 @@ impl Impact<'_> {
             }
             for i in (0..n).filter(|&i| zoned[i]) {
                 let z = label[i] as usize;
-                match self.fixed[i] {
-                    true => anchor[z] = anchor[z].min(i as u32),
-                    false => {
-                        let (sum, count) = &mut sums[z];
-                        for (s, q) in sum.iter_mut().zip(fixed3(d[i])) {
-                            *s += q;
-                        }
-                        *count += 1;
-                    }
+                if self.fixed[i] {
+                    pin[z] = pin[z].min(i as u32);
+                    continue;
                 }
+                if self.stopped[i] {
+                    body[z] = body[z].min(i as u32);
+                }
+                let (sum, count) = &mut sums[z];
+                for (s, q) in sum.iter_mut().zip(fixed3(d[i])) {
+                    *s += q;
+                }
+                *count += 1;
             }
             for i in 0..n {
                 if !zoned[i] || self.fixed[i] {
                     continue;
                 }
                 let z = label[i] as usize;
-                let mut step = match anchor[z] {
-                    u32::MAX => vec3_of(sums[z].0) / sums[z].1 as f32,
-                    a => d[a as usize],
+                let mut step = match (pin[z], body[z]) {
+                    (u32::MAX, u32::MAX) => vec3_of(sums[z].0) / sums[z].1 as f32,
+                    (u32::MAX, b) => {
+                        let gap = self.body[b as usize].expect("a stopped vertex has a gap");
+                        gap.surface_step
+                    }
+                    (a, _) => d[a as usize],
                 };
                 self.clip(i, &mut step);
                 d[i] = step;
             }
+            pin.fill(u32::MAX);
+            body.fill(u32::MAX);
             sums.fill(([0; 3], 0));
-            anchor.fill(u32::MAX);
         }
     }
 }
@@ -382,11 +421,12 @@ mod tests {
 
     /// The failsafe over a lone pair's four vertices, `fixed` of them it
     /// may not move, μ = 0.5, no body.
-    fn lone(fixed: [bool; 4]) -> Impact<'static> {
+    fn lone(fixed: &'static [bool; 4]) -> Impact<'static> {
         Impact {
             keep: KEEP,
             mu: 0.5,
-            fixed: fixed.to_vec(),
+            fixed,
+            stopped: vec![false; 4],
             body: &[None; 4],
         }
     }
@@ -423,7 +463,7 @@ mod tests {
     /// (Coulomb), stopping a slow one.
     #[test]
     fn a_push_passes_keeps_momentum_and_obeys_coulomb() {
-        let impact = lone([false; 4]);
+        let impact = lone(&[false; 4]);
         for slide in [0.0, 1e-3, 0.05] {
             let (pair, d) = falling_vertex(0.01, slide);
             assert!(!pair.passes(|v| d[v as usize], KEEP));
@@ -468,12 +508,12 @@ mod tests {
     /// takes the whole push; with both sides fixed, nothing can push.
     #[test]
     fn a_vertex_that_may_not_move_stays() {
-        let impact = lone([false, true, false, false]);
+        let impact = lone(&[false, true, false, false]);
         let (pair, d) = falling_vertex(0.01, 0.0);
         let after = pushed(&impact, &pair, &d);
         assert_eq!(after[1], Vec3::ZERO);
         assert!(pair.passes(|v| after[v as usize], KEEP));
-        let stuck = lone([true; 4]);
+        let stuck = lone(&[true; 4]);
         assert_eq!(stuck.push(&pair, &d), None);
     }
 
@@ -484,7 +524,7 @@ mod tests {
     #[test]
     fn zones_move_as_one() {
         let (pair, d) = falling_vertex(0.01, 0.02);
-        let mut impact = lone([false; 4]);
+        let mut impact = lone(&[false; 4]);
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
         assert_eq!(zoned, [true; 4]);
@@ -495,10 +535,76 @@ mod tests {
             "{steps:?}"
         );
         assert!(pair.passes(|v| steps[v as usize], KEEP));
-        let mut impact = lone([false, false, true, false]);
+        let mut impact = lone(&[false, false, true, false]);
         let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
         impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
         assert!(steps.iter().all(|s| *s == d[2]), "{steps:?}");
+    }
+
+    /// A vertex gap 2 mm above a body face of normal `normal` whose
+    /// surface steps by `surface_step`.
+    fn gap(normal: Vec3, surface_step: Vec3) -> Option<BodyGap> {
+        Some(BodyGap {
+            normal,
+            gap: 2e-3,
+            surface_step,
+        })
+    }
+
+    /// The body wins and the layer it stops pushes the one behind: a
+    /// triangle lying on the body, stopped against it, takes none of a
+    /// falling vertex's push (the vertex takes it all and passes), where a
+    /// free triangle would be pushed into the body; stopped against a body
+    /// on the vertex's side instead, it is pushed away from it as if free.
+    #[test]
+    fn a_layer_stopped_against_the_body_pushes_the_layer_behind() {
+        let (pair, d) = falling_vertex(0.01, 0.0);
+        let below = [
+            None,
+            gap(Vec3::Z, Vec3::ZERO),
+            gap(Vec3::Z, Vec3::ZERO),
+            gap(Vec3::Z, Vec3::ZERO),
+        ];
+        let mut impact = Impact {
+            body: &below,
+            ..lone(&[false; 4])
+        };
+        let free = pushed(&impact, &pair, &d);
+        assert!(free[1].z < 0.0, "a free triangle is pushed down: {free:?}");
+        impact.stopped = vec![false, true, true, true];
+        let after = pushed(&impact, &pair, &d);
+        assert!(after[1..].iter().all(|s| *s == Vec3::ZERO), "{after:?}");
+        assert!(pair.passes(|v| after[v as usize], KEEP));
+        assert!(after[0].z > free[0].z, "the vertex takes the whole push");
+        let above = [
+            None,
+            gap(-Vec3::Z, Vec3::ZERO),
+            gap(-Vec3::Z, Vec3::ZERO),
+            gap(-Vec3::Z, Vec3::ZERO),
+        ];
+        let impact = Impact {
+            body: &above,
+            stopped: vec![false, true, true, true],
+            ..lone(&[false; 4])
+        };
+        assert_eq!(pushed(&impact, &pair, &d), free);
+    }
+
+    /// A zone holding a vertex the body stopped moves with the body's
+    /// surface, as far from it as it started, not by its mean step.
+    #[test]
+    fn a_zone_the_body_stopped_moves_with_the_body() {
+        let (pair, d) = falling_vertex(0.01, 0.02);
+        let surface = Vec3::new(0.0, 0.0, 3e-3);
+        let body = [None, None, gap(Vec3::Z, surface), None];
+        let mut impact = Impact {
+            body: &body,
+            stopped: vec![false, false, true, false],
+            ..lone(&[false; 4])
+        };
+        let (mut steps, mut label, mut zoned) = (d.clone(), vec![0, 1, 2, 3], vec![false; 4]);
+        impact.zone_rounds(&[pair], &mut steps, &mut label, &mut zoned);
+        assert!(steps.iter().all(|s| *s == surface), "{steps:?}");
     }
 
     #[test]

@@ -413,10 +413,12 @@ impl CpuSim {
             Stage::Separate => {
                 let keep = &self.scene.config.self_contact;
                 if keep.enabled {
-                    let fixed: Vec<bool> = (cloth.pinned.iter().zip(&self.backed))
-                        .map(|(&pinned, &backed)| pinned || backed)
-                        .collect();
                     let body = impact::body_gaps(&self.contacts, &cloth.pinned, h);
+                    // A vertex pushed out with no contact at the start has
+                    // no plane to be kept out of the body by: it stays.
+                    let fixed: Vec<bool> = (0..body.len())
+                        .map(|i| cloth.pinned[i] || (self.backed[i] && body[i].is_none()))
+                        .collect();
                     let within = separate::Within {
                         triangles: &cloth.triangles,
                         edges: &self.edges,

@@ -447,7 +447,8 @@ pub struct Within<'a> {
     pub keep: &'a SelfContactConfig,
     /// μ, the `[contact]` one.
     pub mu: f32,
-    /// Per vertex: pinned, or pushed out of the body this step.
+    /// Per vertex: pinned, or pushed out of the body with no contact at
+    /// the step's start.
     pub fixed: &'a [bool],
     /// Per vertex, its gap to the body where it had contact with it at the
     /// step's start ([`BodyGap`]).
@@ -481,7 +482,8 @@ impl Within<'_> {
         let mut impact = Impact {
             keep,
             mu: self.mu,
-            fixed: self.fixed.to_vec(),
+            fixed: self.fixed,
+            stopped: vec![false; n],
             body: self.body,
         };
         let mut label: Vec<u32> = (0..n as u32).collect();
@@ -520,9 +522,7 @@ impl Within<'_> {
             v[i] += (d[i] - solved[i]) / self.h;
             done.changed += 1;
         }
-        done.stopped = (impact.fixed.iter().zip(self.fixed))
-            .filter(|&(&now, &before)| now && !before)
-            .count();
+        done.stopped = impact.stopped.iter().filter(|&&s| s).count();
         done.pushed = pushed.iter().filter(|&&p| p).count();
         done.zoned = zoned.iter().filter(|&&z| z).count();
         done

@@ -63,6 +63,9 @@ pub mod separations {
     pub const ZONED: u32 = 8;
     /// Flag: stopped by the body in the failsafe.
     pub const BODY: u32 = 16;
+    /// Marks a zone's anchor word offered by a vertex stopped against the
+    /// body, so that any fixed vertex's index (below it) wins.
+    pub const ANCHOR_BODY: u32 = 1 << 31;
 }
 
 /// Words of stage "separate"'s header (wgsl/separate.wgsl), after its
@@ -172,7 +175,7 @@ const _: () = assert!(multigrid::MAX_LEVELS <= WORKGROUP);
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them, nor `level::COARSE`).
-pub const SHARED: [(&str, u32); 65] = [
+pub const SHARED: [(&str, u32); 66] = [
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -196,6 +199,7 @@ pub const SHARED: [(&str, u32); 65] = [
     ("FLAG_PUSHED", separations::PUSHED),
     ("FLAG_ZONED", separations::ZONED),
     ("FLAG_BODY", separations::BODY),
+    ("ANCHOR_BODY", separations::ANCHOR_BODY),
     ("SELF_PAIR_COUNT", self_header::PAIR_COUNT),
     ("SELF_FAILING", self_header::FAILING),
     ("SELF_CHANGED", self_header::CHANGED),
