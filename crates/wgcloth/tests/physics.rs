@@ -66,14 +66,16 @@ fn thesis_scene_keeps_cloth_out_of_the_sphere_for_a_full_period() {
             deepest = deepest.max(s.max_penetration);
             contacts += s.contacts;
         }
-        eprintln!("{model:?}: deepest {deepest:.4} m, {contacts} contacts over {steps} steps");
+        eprintln!("{model:?}: deepest {deepest:e} m, {contacts} contacts over {steps} steps");
         assert!(
             contacts > 1000,
             "{model:?}: the sphere must actually hit the cloth"
         );
-        assert!(
-            deepest < 0.01,
-            "{model:?}: a vertex went {deepest} m inside the sphere"
+        // Before any push-out: the contact forces alone keep every vertex
+        // out of the sphere, which moves up to 8 mm a step.
+        assert_eq!(
+            deepest, 0.0,
+            "{model:?}: the solve left a vertex {deepest} m inside the sphere"
         );
     }
 }
