@@ -38,7 +38,7 @@ use crate::cpu::separate::NearPair;
 /// Impulse rounds a detection of near pairs runs before impact zones.
 pub const IMPULSE_ROUNDS: u32 = 8;
 /// Rounds of impact zones a detection runs after its impulse rounds.
-pub const ZONE_ROUNDS: u32 = 4;
+pub const ZONE_ROUNDS: u32 = 16;
 
 /// Fixed-point units a metre: steps are summed as integers of 2^-32 m.
 pub const UNITS: f32 = 4_294_967_296.0;
