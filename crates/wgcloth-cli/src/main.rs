@@ -97,6 +97,10 @@ struct GenDataArgs {
     /// Uniform samples of the declared input domain.
     #[arg(long, default_value_t = 800_000)]
     uniform: usize,
+    /// Samples of the resting regime (depth 0.1–5 mm, slide up to 5 cm/s,
+    /// approach within ±1 cm/s; friction data only).
+    #[arg(long, default_value_t = 0)]
+    resting: usize,
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Replace an existing file.
@@ -543,8 +547,11 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
     );
     let data = wgcloth_learn::dataset::generate(
         args.model,
-        args.recorded,
-        args.uniform,
+        wgcloth_learn::dataset::Counts {
+            recorded: args.recorded,
+            uniform: args.uniform,
+            resting: args.resting,
+        },
         args.seed,
         |what, f| {
             bar.set_message(what.to_string());
@@ -556,16 +563,18 @@ fn gen_data(args: &GenDataArgs) -> Result<()> {
         ("seed".to_string(), args.seed.to_string()),
         ("recorded".to_string(), args.recorded.to_string()),
         ("uniform".to_string(), args.uniform.to_string()),
+        ("resting".to_string(), args.resting.to_string()),
     ]
     .into();
     data.write(&args.out, meta, args.force)?;
     println!(
-        "{}: {} {} samples ({} recorded, {} uniform), seed {}",
+        "{}: {} {} samples ({} recorded, {} uniform, {} resting), seed {}",
         args.out.display(),
         data.len(),
         args.model.name(),
         args.recorded,
         args.uniform,
+        args.resting,
         args.seed
     );
     Ok(())
@@ -702,6 +711,16 @@ fn eval_net(args: &EvalNetArgs) -> Result<()> {
         "jacobian     median relative error of the position Jacobian {:.3e}",
         e.jacobian_median_relative_error
     );
+    if let Some(r) = e.resting {
+        println!(
+            "resting      force error relative to eqs. 8–9, median / p95: {:.3} / {:.3} at the default coefficients, {:.3} / {:.3} over the domain's ({} samples each)",
+            r.default_median, r.default_p95, r.domain_median, r.domain_p95, r.samples
+        );
+        println!(
+            "cone         of the uniform samples, {} where eqs. 8–9 push and g_n ≤ 0, {} with friction along the slide",
+            e.not_pushing, e.along_slide
+        );
+    }
     Ok(())
 }
 

@@ -7,7 +7,7 @@
 //! File format (`wgcloth-contacts/1`): a safetensors file with f32 tensors
 //! `inputs` [N, 10] (cx cy cz vx vy vz kn kd kt mu) or [N, 7] (bx cx cy cz
 //! px py pz) and `targets` [N, 3], metadata `format`, `model` (`friction`,
-//! the default, or `naive`), `seed`, `recorded`, `uniform`.
+//! the default, or `naive`), `seed`, `recorded`, `uniform`, `resting`.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -16,7 +16,7 @@ use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 use crate::domain::{
     MAX_DEPTH, MAX_SPEED, Rng, Sample, bounds, friction_sample, naive_sample, random_coefficients,
-    uniform_sample,
+    resting_sample, uniform_sample,
 };
 use wgcloth::config::{Config, ModelKind, MotionKind};
 use wgcloth::cpu::CpuSim;
@@ -236,19 +236,40 @@ impl Dataset {
     }
 }
 
-/// gen-data: `recorded` contacts from simulation plus `uniform` domain
-/// samples of a network's inputs, shuffled; deterministic for a seed.
+/// How many samples of each source `gen-data` draws.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Counts {
+    /// Contacts recorded from randomised sphere runs.
+    pub recorded: usize,
+    /// Uniform samples of the declared domain.
+    pub uniform: usize,
+    /// Samples of the resting regime (friction data only).
+    pub resting: usize,
+}
+
+/// gen-data: recorded contacts from simulation, uniform domain samples and
+/// (friction) resting-regime samples of a network's inputs, shuffled;
+/// deterministic for a seed.
 pub fn generate(
     kind: NetKind,
-    recorded: usize,
-    uniform: usize,
+    Counts {
+        recorded,
+        uniform,
+        resting,
+    }: Counts,
     seed: u64,
     mut progress: impl FnMut(&str, f32),
 ) -> Result<Dataset> {
-    if recorded + uniform == 0 {
+    if recorded + uniform + resting == 0 {
         return Err(Error::config(
             "--recorded",
-            "with --uniform 0 there would be no samples; ask for some of either",
+            "with --uniform 0 and --resting 0 there would be no samples; ask for some",
+        ));
+    }
+    if kind == NetKind::Naive && resting > 0 {
+        return Err(Error::config(
+            "--resting",
+            "is for friction data; the naive network has no resting regime",
         ));
     }
     let mut rng = Rng::new(seed);
@@ -287,6 +308,10 @@ pub fn generate(
     }
     for _ in 0..uniform {
         data.push(uniform_sample(kind, &mut rng));
+    }
+    for _ in 0..resting {
+        let k = random_coefficients(&mut rng);
+        data.push(resting_sample(&mut rng, &k));
     }
     progress("sampling", 1.0);
     for k in (1..data.len()).rev() {

@@ -15,6 +15,14 @@ pub const KD: (f32, f32) = (0.0, 10.0);
 pub const KT: (f32, f32) = (1.0, 1000.0);
 pub const MU: (f32, f32) = (0.0, 1.0);
 
+/// The resting regime (issue 65), where cloth lies on a surface: depth
+/// 0.1–5 mm, slide up to 5 cm/s, approach within ±1 cm/s. Forces there are
+/// millinewtons to a few newtons, far below the domain's tens, so a
+/// network that is good domain-wide can still be wrong here.
+pub const RESTING_DEPTH: (f32, f32) = (1e-4, 5e-3);
+pub const RESTING_SLIDE: f32 = 0.05;
+pub const RESTING_APPROACH: f32 = 0.01;
+
 /// Naive network, in its local frame (`cpu::contact::local_frame`):
 /// triangles with corners within 0.15 m of a, points over them at most
 /// 0.05 m deep.
@@ -134,6 +142,28 @@ pub fn uniform_inputs(kind: NetKind, rng: &mut Rng) -> Vec<f32> {
         },
         |f| f.inputs(kind, &k),
     )
+}
+
+/// A friction sample of the resting regime with coefficients `k`: depth,
+/// slide speed and approach speed uniform in their ranges, ĉ uniform on
+/// the sphere and the slide along a uniform direction of its tangent plane.
+pub fn resting_sample(rng: &mut Rng, k: &Coefficients) -> Sample {
+    let c_hat = loop {
+        let p = rng.in_ball(1.0);
+        if p.length_squared() > 1e-4 {
+            break p.normalize();
+        }
+    };
+    let t_hat = loop {
+        let p = rng.in_ball(1.0).reject_from(c_hat);
+        if p.length_squared() > 1e-4 {
+            break p.normalize();
+        }
+    };
+    let depth = rng.range(RESTING_DEPTH);
+    let v = rng.range((-RESTING_APPROACH, RESTING_APPROACH)) * c_hat
+        + rng.range((0.0, RESTING_SLIDE)) * t_hat;
+    friction_sample(depth * c_hat, v, k)
 }
 
 /// A uniform sample of a network's declared domain (in the world frame for

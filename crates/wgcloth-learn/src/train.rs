@@ -14,7 +14,7 @@ use glam::Vec3;
 
 use crate::dataset::Dataset;
 use crate::domain::{Rng, bounds};
-use wgcloth::cpu::contact::{Coefficients, ContactFrame};
+use wgcloth::cpu::contact::{Coefficients, ContactFrame, STICK_LOG_MAX};
 use wgcloth::error::{Error, Result};
 use wgcloth::nn::mlp::Layer;
 use wgcloth::nn::weights::{NetKind, WeightsFile};
@@ -92,28 +92,45 @@ struct Net {
 
 /// How the contact-frame network's rows are formed from the scaled input
 /// x at +slide: x ⊙ flip + shift is the row at −slide and x ⊙ still +
-/// rest the row at slide 0; the output is g_n from the row at 0 and
-/// g_t = (y_t(s) − y_t(−s)) / 2, the pick masks selecting each column.
+/// rest the row at slide 0. Its training rows carry two more columns after
+/// the network's inputs, k_t s / L and μ, so the output's form
+/// (`cpu::contact::cone`) can be written divided by the load L:
+/// (g_n, g_t) / L = (softplus(y_n(0)), −min(k_t s e^w / L, μ softplus(y_n(0)))),
+/// w the even part of the second output.
 struct FrameRows {
     flip: Tensor,
     shift: Tensor,
     still: Tensor,
     rest: Tensor,
-    normal: Tensor,
-    friction: Tensor,
+}
+
+/// The columns of a contact-frame training row after the network's
+/// inputs: k_t s / L and μ.
+const FRAME_EXTRA: usize = 2;
+
+fn softplus(y: &Tensor) -> candle_core::Result<Tensor> {
+    y.relu()? + y.abs()?.neg()?.exp()?.affine(1.0, 1.0)?.log()?
 }
 
 impl Net {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        let y = self.layers(x)?;
         let Some(f) = &self.frame else {
-            return Ok(y);
+            return self.layers(x);
         };
-        let mirrored = self.layers(&x.broadcast_mul(&f.flip)?.broadcast_add(&f.shift)?)?;
-        let at_rest = self.layers(&x.broadcast_mul(&f.still)?.broadcast_add(&f.rest)?)?;
-        at_rest
-            .broadcast_mul(&f.normal)?
-            .broadcast_add(&(y - mirrored)?.broadcast_mul(&f.friction)?)
+        let width = x.dim(1)? - FRAME_EXTRA;
+        let (inputs, rate, mu) = (
+            x.narrow(1, 0, width)?,
+            x.narrow(1, width, 1)?,
+            x.narrow(1, width + 1, 1)?,
+        );
+        let y = self.layers(&inputs)?;
+        let mirrored = self.layers(&inputs.broadcast_mul(&f.flip)?.broadcast_add(&f.shift)?)?;
+        let at_rest = self.layers(&inputs.broadcast_mul(&f.still)?.broadcast_add(&f.rest)?)?;
+        let share = softplus(&at_rest.narrow(1, 0, 1)?)?;
+        let w =
+            ((y.narrow(1, 1, 1)? + mirrored.narrow(1, 1, 1)?)? * 0.5)?.minimum(STICK_LOG_MAX)?;
+        let friction = (rate * w.exp()?)?.minimum(&(mu * &share)?)?.neg()?;
+        Tensor::cat(&[share, friction], 1)
     }
 
     fn layers(&self, x: &Tensor) -> candle_core::Result<Tensor> {
@@ -132,8 +149,9 @@ fn rows(t: &Tensor, idx: &[u32]) -> candle_core::Result<Tensor> {
     t.index_select(&Tensor::new(idx, t.device())?, 0)
 }
 
-/// Standardised MSE of `net` on (x, y), in batches, per world component:
-/// the contact-frame network's two outputs carry the error of three.
+/// Standardised MSE of `net` on (x, y), in batches, per output: the
+/// thesis's measure for the world-frame networks; for the contact-frame
+/// network the error of (g_n, g_t) relative to the load L.
 fn evaluate(net: &Net, x: &Tensor, y: &Tensor, batch: usize) -> candle_core::Result<f64> {
     let n = x.dim(0)?;
     let mut sum = 0.0;
@@ -142,7 +160,7 @@ fn evaluate(net: &Net, x: &Tensor, y: &Tensor, batch: usize) -> candle_core::Res
         let d = (net.forward(&x.narrow(0, start, len)?)? - y.narrow(0, start, len)?)?;
         sum += d.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
     }
-    Ok(sum / (n * 3) as f64)
+    Ok(sum / (n * y.dim(1)?) as f64)
 }
 
 fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>> {
@@ -165,9 +183,12 @@ fn snapshot(varmap: &VarMap, n_layers: usize) -> candle_core::Result<Vec<Layer>>
         .collect()
 }
 
-/// Training rows for a network of `kind` from `data`: inputs [n × inputs]
-/// and targets [n × outputs]. The contact-frame network learns (g_n, g_t)
-/// at +slide of each friction sample (a sample at c = 0 has no frame).
+/// Training rows for a network of `kind` from `data`: inputs and targets,
+/// [n × outputs]. The contact-frame network learns (g_n, g_t) / L at
+/// +slide of each friction sample, L = k_n r + k_d max(a, 0) the load of
+/// its output's form (`cpu::contact::cone`), so a millinewton contact at
+/// rest weighs as much as a deep one; its rows carry k_t s / L and μ after
+/// the inputs (a sample at c = 0 has no frame).
 fn rows_for(kind: NetKind, data: &Dataset) -> (Vec<f32>, Vec<f32>) {
     if kind != NetKind::FrictionContact {
         return (data.inputs.clone(), data.targets.concat());
@@ -184,18 +205,24 @@ fn rows_for(kind: NetKind, data: &Dataset) -> (Vec<f32>, Vec<f32>) {
         if let Some(frame) =
             ContactFrame::new(Vec3::from_slice(&x[..3]), Vec3::from_slice(&x[3..6]))
         {
-            inputs.extend(&frame.inputs(kind, &k)[..7]);
-            targets.extend(frame.targets(Vec3::from_array(*g)));
+            let row = &frame.inputs(kind, &k)[..7];
+            let (depth, approach, slide) = (row[0], row[1], row[2]);
+            let load = k.kn * depth + k.kd * approach.max(0.0);
+            inputs.extend(row);
+            inputs.extend([k.kt * slide / load, k.mu]);
+            targets.extend(frame.targets(Vec3::from_array(*g)).map(|t| t / load));
         }
     }
     (inputs, targets)
 }
 
 /// The output scaler (mean, std) from training targets [n × outputs]. The
-/// contact-frame network's outputs share the world components' std,
-/// √(E|g|²/3), so its loss is the world frame's standardised error, and
-/// g_t's mean is 0, as an odd output cannot carry one.
+/// contact-frame network's outputs are the logits of its output's form,
+/// unscaled.
 fn output_scaler(kind: NetKind, targets: &[f32], outputs: usize) -> (Vec<f32>, Vec<f32>) {
+    if kind == NetKind::FrictionContact {
+        return (vec![0.0; outputs], vec![1.0; outputs]);
+    }
     let n = (targets.len() / outputs) as f64;
     let mut mean = vec![0.0f64; outputs];
     let mut var = vec![0.0f64; outputs];
@@ -203,11 +230,6 @@ fn output_scaler(kind: NetKind, targets: &[f32], outputs: usize) -> (Vec<f32>, V
         for o in 0..outputs {
             mean[o] += y[o] as f64 / n;
         }
-    }
-    if kind == NetKind::FrictionContact {
-        let power: f64 = targets.iter().map(|y| (*y as f64).powi(2)).sum::<f64>() / n;
-        let std = ((power / 3.0).sqrt().max(1e-6)) as f32;
-        return (vec![mean[0] as f32, 0.0], vec![std; 2]);
     }
     for y in targets.chunks_exact(outputs) {
         for o in 0..outputs {
@@ -296,15 +318,27 @@ pub fn train(
         // A warm start keeps the scaling its weights were trained with.
         (mean, std) = (init.output_mean.clone(), init.output_std.clone());
     }
+    // The contact-frame rows' extra columns pass unscaled.
+    let row = width
+        + if kind == NetKind::FrictionContact {
+            FRAME_EXTRA
+        } else {
+            0
+        };
     let scaled_x: Vec<f32> = inputs
-        .chunks_exact(width)
-        .flat_map(|x| (0..width).map(|k| (x[k] - lo[k]) / (hi[k] - lo[k])))
+        .chunks_exact(row)
+        .flat_map(|x| {
+            (0..row).map(|k| match k < width {
+                true => (x[k] - lo[k]) / (hi[k] - lo[k]),
+                false => x[k],
+            })
+        })
         .collect();
     let scaled_y: Vec<f32> = targets
         .chunks_exact(outputs)
         .flat_map(|y| (0..outputs).map(|o| (y[o] - mean[o]) / std[o]))
         .collect();
-    let x_all = Tensor::from_vec(scaled_x, (len, width), &dev).map_err(candle)?;
+    let x_all = Tensor::from_vec(scaled_x, (len, row), &dev).map_err(candle)?;
     let y_all = Tensor::from_vec(scaled_y, (len, outputs), &dev).map_err(candle)?;
     let (x_train, y_train) = (
         x_all.narrow(0, 0, n_train).map_err(candle)?,
@@ -332,8 +366,6 @@ pub fn train(
                 shift: Tensor::new(&shift, &dev)?,
                 still: Tensor::new(&still, &dev)?,
                 rest: Tensor::new(&rest, &dev)?,
-                normal: Tensor::new(&[1.0f32, 0.0], &dev)?,
-                friction: Tensor::new(&[0.0f32, 0.5], &dev)?,
             })
         })
         .transpose()
@@ -439,8 +471,7 @@ pub fn train(
             opt.backward_step(&loss).map_err(candle)?;
             train_sum += loss.to_scalar::<f32>().map_err(candle)? as f64 * chunk.len() as f64;
         }
-        // Per world component, as `evaluate` reports.
-        let train_mse = train_sum / n_train as f64 * outputs as f64 / 3.0;
+        let train_mse = train_sum / n_train as f64;
         let val_mse = evaluate(&net, &x_val, &y_val, 4096).map_err(candle)?;
         curve.push((train_mse, val_mse));
         progress(epoch + 1, train_mse, val_mse);

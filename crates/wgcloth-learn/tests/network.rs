@@ -11,9 +11,18 @@ use glam::{Mat3, Quat, Vec3};
 use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_net};
 use wgcloth::nn::weights::{NetKind, WeightsFile};
 use wgcloth::nn::{Layer, Mlp};
-use wgcloth_learn::dataset::{Dataset, generate};
+use wgcloth_learn::dataset::{Counts, Dataset, generate};
 use wgcloth_learn::eval::evaluate;
 use wgcloth_learn::train::{TrainOptions, train};
+
+/// `recorded` simulated and `uniform` domain samples, none resting.
+fn counts(recorded: usize, uniform: usize) -> Counts {
+    Counts {
+        recorded,
+        uniform,
+        resting: 0,
+    }
+}
 
 fn random_net(sizes: &[usize], seed: u64) -> Mlp {
     let mut rng = Rng(seed);
@@ -74,8 +83,11 @@ fn assert_jacobians_match_differences(
                 .iter()
                 .map(|d| (*d - got).length())
                 .fold(f32::INFINITY, f32::min);
+            // Rounding in f32 differences of a force of |f0| is about
+            // ε |f0| / h; the contact-frame form's forces are tens of newtons.
+            let rounding = 4.0 * f32::EPSILON * f0.length() / h;
             assert!(
-                best <= 1e-2 * got.length().max(0.1),
+                best <= 1e-2 * got.length().max(0.1) + rounding,
                 "{what} column {col} at c {c}, v {v}: {got} vs {candidates:?}"
             );
         }
@@ -116,8 +128,11 @@ fn network_force_jacobians_match_finite_differences_along_the_contact_frame() {
                 .iter()
                 .map(|d| (*d - got).length())
                 .fold(f32::INFINITY, f32::min);
+            // Rounding in f32 differences of a force of |f0| is about
+            // ε |f0| / h; the contact-frame form's forces are tens of newtons.
+            let rounding = 4.0 * f32::EPSILON * f0.length() / h;
             assert!(
-                best <= 1e-2 * got.length().max(0.1),
+                best <= 1e-2 * got.length().max(0.1) + rounding,
                 "along {what} at c {c}, v {v}: {got} vs {:?}",
                 (fp - fm) / (2.0 * h)
             );
@@ -149,17 +164,21 @@ fn contact_frame_network_jacobians_match_finite_differences() {
 /// finite there. The contact-frame network's Jacobians also approach their
 /// limit, its normal force does not depend on the sliding, and its force
 /// turns with the contact (g(Rc, Rv) = R g(c, v)); the world-frame
-/// network's cannot, as it sees the world's axes.
+/// network's cannot, as it sees the world's axes. The contact-frame
+/// network's output form (`cpu::contact::cone`) also pushes at every
+/// contact and never puts friction along the slide, whatever its weights;
+/// the world-frame network's cone is a clamp, which does neither.
 #[test]
 fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
     let world_ranges = [0.1, 0.1, 0.1, 4.0, 4.0, 4.0, 990.0, 10.0, 999.0, 1.0];
-    // The contact-frame network's g_n (whose sign does not turn with the
-    // contact) made to vary enough to change sign over the samples.
+    // The contact-frame network's stick stiffness made to vary widely, so
+    // its friction both sticks and slips.
     let mut contact = scaled_random_net(&[7, 24, 24, 2], &CONTACT_RANGES, 10);
     let last = contact.layers.last_mut().unwrap();
-    last.weight[..last.inputs]
+    last.weight[last.inputs..]
         .iter_mut()
-        .for_each(|w| *w *= 20.0);
+        .for_each(|w| *w *= 5.0);
+    last.bias[1] -= 3.0;
     let networks = [
         (NetKind::FrictionContact, contact),
         (
@@ -170,7 +189,7 @@ fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
     for (kind, net) in &networks {
         let g = |c: Vec3, v: Vec3| friction_net(net, *kind, c, v, &K);
         let mut rng = Rng(6);
-        let mut pushing = 0;
+        let (mut pushing, mut sticking) = (0, 0);
         for _ in 0..40 {
             let (c, v) = (rng.vec3(-0.05, 0.05), rng.vec3(-1.0, 1.0));
             let a = g(c, v);
@@ -200,7 +219,11 @@ fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
                 K.mu
             );
             pushing += usize::from(f_n > 0.0);
+            let slide = v.reject_from(n);
+            let along = a.force.dot(slide);
             if *kind == NetKind::FrictionContact {
+                assert!(along <= 0.0, "friction {along} along the slide");
+                sticking += usize::from(f_t < K.mu * f_n * (1.0 - 1e-3));
                 // g_n is taken at slide 0 (the world-frame network's is
                 // the even part in the slide).
                 let faster = g(c, v + 0.7 * v.reject_from(n));
@@ -208,12 +231,14 @@ fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
             }
 
             // v along c: no sliding, no friction, finite Jacobians; and
-            // sliding at 1 µm/s is within rounding of it.
+            // sliding at 20 µm/s is close to it (slower, t̂ is off the tangent
+            // plane by the rounding of 0.3 m/s of approach, which a
+            // stiffness at rest of k_t e^w ≈ 230 turns into percent).
             let n = c.normalize();
             let rest = g(c, 0.3 * n);
             assert!(rest.force.cross(n).length() <= 1e-6 * rest.force.length().max(1.0));
             assert!(rest.d_c.is_finite() && rest.d_v.is_finite());
-            let creeping = g(c, 0.3 * n + 2e-6 * n.any_orthonormal_vector());
+            let creeping = g(c, 0.3 * n + 2e-5 * n.any_orthonormal_vector());
             assert!(creeping.force.cross(n).length() <= 1e-3 * rest.force.length().max(1.0));
             // The world-frame network's tangential stiffness differs with
             // the direction of sliding; at rest it takes the mean.
@@ -221,21 +246,31 @@ fn friction_networks_keep_the_cone_and_are_frictionless_at_rest() {
                 assert_close(creeping.d_v, rest.d_v, 1e-2, 1e-2, "∂g/∂v as sliding stops");
             }
         }
-        // Random weights push at some contacts and not at others; both
-        // must have been seen for the cone's checks to mean something.
+        // The world-frame network's random weights push at some contacts
+        // and not at others; both must have been seen for its clamp's
+        // checks to mean something. The contact-frame network pushes at
+        // every one, by its form.
         eprintln!("{kind:?}: {pushing} of 40 push");
+        let expected = match kind {
+            NetKind::FrictionContact => 40..=40,
+            _ => 5..=35,
+        };
         assert!(
-            (5..=35).contains(&pushing),
+            expected.contains(&pushing),
             "{kind:?}: {pushing} of 40 push"
         );
+        // And its friction both sticks and slips over the samples.
+        if *kind == NetKind::FrictionContact {
+            assert!((5..=35).contains(&sticking), "{sticking} of 40 stick");
+        }
     }
 }
 
 #[test]
 fn gen_data_is_deterministic_for_a_seed() {
-    let a = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
-    let b = generate(NetKind::Friction, 300, 700, 7, |_, _| {}).unwrap();
-    let c = generate(NetKind::Friction, 300, 700, 8, |_, _| {}).unwrap();
+    let a = generate(NetKind::Friction, counts(300, 700), 7, |_, _| {}).unwrap();
+    let b = generate(NetKind::Friction, counts(300, 700), 7, |_, _| {}).unwrap();
+    let c = generate(NetKind::Friction, counts(300, 700), 8, |_, _| {}).unwrap();
     assert_eq!(a.len(), 1000);
     assert_eq!(a, b);
     assert_ne!(a, c);
@@ -250,8 +285,11 @@ fn gen_data_is_deterministic_for_a_seed() {
 
 #[test]
 fn naive_data_is_deterministic_local_frame_geometry() {
-    let a = generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap();
-    assert_eq!(a, generate(NetKind::Naive, 300, 700, 7, |_, _| {}).unwrap());
+    let a = generate(NetKind::Naive, counts(300, 700), 7, |_, _| {}).unwrap();
+    assert_eq!(
+        a,
+        generate(NetKind::Naive, counts(300, 700), 7, |_, _| {}).unwrap()
+    );
     assert_eq!((a.len(), a.width()), (1000, 7));
     for (x, y) in a.inputs.chunks_exact(7).zip(&a.targets) {
         // b on +x, c above the x axis in the xy-plane, the point at most
@@ -264,7 +302,7 @@ fn naive_data_is_deterministic_local_frame_geometry() {
 
 #[test]
 fn a_tiny_training_run_lowers_the_loss_tenfold() {
-    let data = generate(NetKind::Friction, 500, 11500, 3, |_, _| {}).unwrap();
+    let data = generate(NetKind::Friction, counts(500, 11500), 3, |_, _| {}).unwrap();
     let opts = TrainOptions {
         hidden: vec![64, 64],
         epochs: 50,
@@ -280,7 +318,7 @@ fn a_tiny_training_run_lowers_the_loss_tenfold() {
     );
     assert!(trained.best_validation * 10.0 <= trained.initial_validation);
     // The naive network of thesis 2.4 (7 → 16 ×5 → 3) on its own data.
-    let data = generate(NetKind::Naive, 300, 1700, 3, |_, _| {}).unwrap();
+    let data = generate(NetKind::Naive, counts(300, 1700), 3, |_, _| {}).unwrap();
     let opts = TrainOptions {
         hidden: vec![16; 5],
         epochs: 40,
@@ -295,11 +333,11 @@ fn a_tiny_training_run_lowers_the_loss_tenfold() {
     assert!(trained.best_validation * 10.0 <= trained.initial_validation);
 }
 
-/// The contact-frame network trains on friction data and is scored on g in
-/// the world frame, where its error matches its validation figure.
+/// The contact-frame network trains on friction data, relative to its
+/// form's load, and is scored on g in the world frame.
 #[test]
 fn a_contact_frame_network_learns_and_scores_in_the_world_frame() {
-    let data = generate(NetKind::Friction, 0, 12000, 3, |_, _| {}).unwrap();
+    let data = generate(NetKind::Friction, counts(0, 12000), 3, |_, _| {}).unwrap();
     let opts = TrainOptions {
         hidden: vec![32, 32],
         epochs: 20,
@@ -320,15 +358,10 @@ fn a_contact_frame_network_learns_and_scores_in_the_world_frame() {
     let file = WeightsFile::parse(&bytes, Path::new("trained")).unwrap();
     assert_eq!(file, trained.weights);
     let e = evaluate(&file, None, 20_000, 9);
-    let ratio = e.uniform_mse / trained.best_validation;
-    assert!(
-        (0.5..2.0).contains(&ratio),
-        "uniform {} vs validation {}",
-        e.uniform_mse,
-        trained.best_validation
-    );
+    eprintln!("contact frame: {e:?}");
+    assert!(e.uniform_mse <= 4e-4, "{e:?}");
     // Naive data has no contact frame.
-    let naive = generate(NetKind::Naive, 0, 100, 3, |_, _| {}).unwrap();
+    let naive = generate(NetKind::Naive, counts(0, 100), 3, |_, _| {}).unwrap();
     let err = train(&naive, &opts, |_, _, _| {}).unwrap_err().to_string();
     assert!(err.contains("--contact-frame"), "{err}");
 }
@@ -434,7 +467,7 @@ fn the_shipped_networks_keep_the_thesis_scene_stable_and_out_of_the_sphere() {
 
 #[test]
 fn a_warm_start_begins_where_the_given_weights_left_off() {
-    let data = generate(NetKind::Friction, 200, 1800, 5, |_, _| {}).unwrap();
+    let data = generate(NetKind::Friction, counts(200, 1800), 5, |_, _| {}).unwrap();
     let opts = TrainOptions {
         hidden: vec![32, 32],
         epochs: 15,
@@ -479,7 +512,7 @@ fn the_shipped_networks_keep_their_accuracy() {
     use wgcloth::nn::weights::{FRICTION_SMALL, FRICTION_THESIS, NAIVE};
     // (network, most standardised MSE, most median Jacobian error).
     for (shipped, mse, jacobian) in [
-        (FRICTION_SMALL, 1e-4, 0.08),
+        (FRICTION_SMALL, 5e-5, 0.015),
         (FRICTION_THESIS, 1e-3, 0.1),
         (NAIVE, 1e-7, 1e-3),
     ] {
@@ -496,6 +529,28 @@ fn the_shipped_networks_keep_their_accuracy() {
             shipped.path
         );
     }
+}
+
+/// The default network where cloth rests (issue 65): within 5 % of eqs.
+/// 8–9 by the median and 20 % at the 95th percentile, at the default
+/// coefficients and over the domain's, as the step applies its force; it
+/// pushes wherever eqs. 8–9 push and never puts friction along the slide.
+#[test]
+fn the_default_network_is_right_where_cloth_rests() {
+    let file = wgcloth::nn::weights::FRICTION_SMALL.read().unwrap();
+    let e = evaluate(&file, None, 20_000, 12);
+    let r = e.resting.unwrap();
+    eprintln!(
+        "{r:?}; not pushing {}, along the slide {}",
+        e.not_pushing, e.along_slide
+    );
+    for (median, p95) in [
+        (r.default_median, r.default_p95),
+        (r.domain_median, r.domain_p95),
+    ] {
+        assert!(median <= 0.05 && p95 <= 0.20, "{r:?}");
+    }
+    assert_eq!((e.not_pushing, e.along_slide), (0, 0));
 }
 
 /// friction-net against the analytic model it learned, on the thesis

@@ -145,7 +145,7 @@ fn a_world_frame_network_read_in_the_contact_frame_keeps_the_exact_law() {
                     j.extend((0..3).map(|t| exact.d_v.col(t)[o]));
                 }
             }
-            let got = frame.network_force(NetKind::Friction, &y, &j, k.mu);
+            let got = frame.network_force(NetKind::Friction, &y, &j, &k);
             let want = friction(c, v, &k);
             assert!((got.force - want.force).length() <= 1e-4 * want.force.length());
             assert_close(got.d_c, want.d_c, 1e-2, 1e-3, "∂g/∂c read in the frame");

@@ -106,8 +106,6 @@ fn local_frame(s: u32, k: Contact) -> LocalFrame {
     return f;
 }
 
-// Below this slide speed ṫ has no direction (cpu::contact::SLIDE_AT_REST).
-const SLIDE_AT_REST: f32 = 1e-6;
 
 // A contact in its own frame (mirrors cpu::contact::ContactFrame); depth 0
 // has no frame.
@@ -256,6 +254,38 @@ fn frame_row(entry: u32, f: ContactFrame) -> FrameRow {
     return row;
 }
 
+// ln(1 + e^y) (cpu::contact::softplus).
+fn softplus(y: f32) -> f32 {
+    return max(y, 0.0) + log(1.0 + exp(-abs(y)));
+}
+
+// A value and its gradient in (depth, approach, slide).
+struct Graded {
+    y: f32,
+    d: vec3<f32>,
+}
+
+// The contact-frame network's outputs in the form of eqs. 8–9's cone
+// (cpu::contact::cone): g_n = L softplus(y_n) with L = k_n r + k_d max(a, 0),
+// g_t = −min(k_t e^w s, μ g_n). Returns (g_n, g_t).
+fn cone(normal: Graded, rate: Graded, f: ContactFrame) -> array<Graded, 2> {
+    let load = params.kn * f.depth + params.kd * max(f.approach, 0.0);
+    let d_load = vec3<f32>(params.kn, select(0.0, params.kd, f.approach > 0.0), 0.0);
+    let share = softplus(normal.y);
+    let g_n = Graded(load * share, share * d_load + (load / (1.0 + exp(-normal.y))) * normal.d);
+    var w = rate;
+    if w.y > STICK_LOG_MAX {
+        w = Graded(STICK_LOG_MAX, vec3<f32>(0.0));
+    }
+    let stick = params.kt * exp(w.y);
+    let cap = params.mu * g_n.y;
+    var g_t = Graded(-cap, -params.mu * g_n.d);
+    if stick * f.slide <= cap {
+        g_t = Graded(-stick * f.slide, -stick * (vec3<f32>(0.0, 0.0, 1.0) + f.slide * w.d));
+    }
+    return array<Graded, 2>(g_n, g_t);
+}
+
 // g and its Jacobians from a friction network's entries `entry` (+slide),
 // `entry + 1` (−slide) and, for the contact-frame network, `entry + 2`
 // (slide 0): mirrors ContactFrame::force.
@@ -266,34 +296,47 @@ fn contact_net_force(entry: u32, c: vec3<f32>, v: vec3<f32>) -> ForceJacobian {
     }
     let plus = frame_row(entry, f);
     let minus = frame_row(entry + 1u, f);
-    // The odd part for g_t; the mirror's slide derivative flips. g_n at
-    // slide 0 where there is a third row, else the even part.
-    var g_t = 0.5 * (plus.y.y - minus.y.y);
-    var d_gt: vec3<f32>;
-    var g_n = 0.5 * (plus.y.x + minus.y.x);
-    var d_gn: vec3<f32>;
+    // Even and odd parts in the slide; the mirror's slide derivative flips.
+    var even: array<Graded, 2>;
+    var odd = Graded(0.5 * (plus.y.y - minus.y.y), vec3<f32>(0.0));
+    for (var o = 0u; o < 2u; o++) {
+        even[o].y = 0.5 * (plus.y[o] + minus.y[o]);
+    }
     for (var t = 0u; t < 3u; t++) {
         let b = select(1.0, -1.0, t == 2u) * minus.d[t];
-        d_gt[t] = 0.5 * (plus.d[t].y - b.y);
-        d_gn[t] = 0.5 * (plus.d[t].x + b.x);
+        odd.d[t] = 0.5 * (plus.d[t].y - b.y);
+        even[0].d[t] = 0.5 * (plus.d[t].x + b.x);
+        even[1].d[t] = 0.5 * (plus.d[t].y + b.y);
     }
+    var g_n: f32;
+    var d_gn: vec3<f32>;
+    var g_t: f32;
+    var d_gt: vec3<f32>;
     if frame_rows() == CONTACT_FRAME_ROWS {
         let still = frame_row(entry + 2u, f);
-        g_n = still.y.x;
-        d_gn = vec3<f32>(still.d[0].x, still.d[1].x, 0.0);
-    }
-    // Inside the friction cone (cpu::contact::coulomb): g_n ≥ 0, |g_t| ≤ μ g_n.
-    if g_n <= 0.0 {
-        g_n = 0.0;
-        g_t = 0.0;
-        d_gn = vec3<f32>(0.0);
-        d_gt = vec3<f32>(0.0);
-    }
-    let cap = params.mu * g_n;
-    if abs(g_t) > cap {
-        let side = sign(g_t);
-        g_t = side * cap;
-        d_gt = side * params.mu * d_gn;
+        let held = cone(Graded(still.y.x, vec3<f32>(still.d[0].x, still.d[1].x, 0.0)), even[1], f);
+        g_n = held[0].y;
+        d_gn = held[0].d;
+        g_t = held[1].y;
+        d_gt = held[1].d;
+    } else {
+        // Inside the friction cone (cpu::contact::coulomb): g_n ≥ 0, |g_t| ≤ μ g_n.
+        g_n = even[0].y;
+        d_gn = even[0].d;
+        g_t = odd.y;
+        d_gt = odd.d;
+        if g_n <= 0.0 {
+            g_n = 0.0;
+            g_t = 0.0;
+            d_gn = vec3<f32>(0.0);
+            d_gt = vec3<f32>(0.0);
+        }
+        let cap = params.mu * g_n;
+        if abs(g_t) > cap {
+            let side = sign(g_t);
+            g_t = side * cap;
+            d_gt = side * params.mu * d_gn;
+        }
     }
     let p = IDENTITY - outer(f.c_hat, f.c_hat);
     let n = -f.c_hat;

@@ -214,27 +214,25 @@ fn naive_net_output(frame: &LocalFrame, f: &[f32], j: &[f32]) -> ForceJacobian {
 
 /// Below this slide speed (m/s) ṫ has no direction: friction is taken as
 /// zero and g_t / s as its limit ∂g_t/∂s.
-const SLIDE_AT_REST: f32 = 1e-6;
+pub const SLIDE_AT_REST: f32 = 1e-6;
 
 /// A contact in its own frame, where both friction networks are evaluated.
 /// Eqs. 8–9 give g = g_n n + g_t t̂ with n = −ĉ and t̂ = ṫ/|ṫ|, where g_n
 /// and g_t depend only on the depth r = |c|, the approach speed
 /// a = v_rel·ĉ (ḋ), the slide speed s = |ṫ| and the coefficients. The
-/// contact-frame network learns these two scalars, and the directions are
-/// exact. The world-frame network (thesis 2.7) is evaluated at the same
-/// contact turned to the frame's directions and its g read along n and t̂:
-/// the thesis used its g as it came, which holds no cone, has friction
-/// where nothing slides, and fails Coulomb's law (issue 21). Either way the
-/// output y is made odd in s for g_t,
+/// contact-frame network learns two scalars from which [`cone`] forms g_n
+/// and g_t, and the directions are exact. The world-frame network (thesis
+/// 2.7) is evaluated at the same contact turned to the frame's directions
+/// and its g read along n and t̂: the thesis used its g as it came, which
+/// holds no cone, has friction where nothing slides, and fails Coulomb's
+/// law (issue 21). Its g_t is the odd part in s,
 ///   g_t = (y_t(s) − y_t(−s)) / 2,
-/// so friction vanishes with ṫ as it must and g_t / s stays finite: the
-/// Jacobian's (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest. g_n is
-/// the contact-frame network's y_n(0), so it does not depend on the slide
-/// (eq. 8; that network's own slide dependence turned, through the
-/// Coulomb bound, into a friction that grew with speed and braked a
-/// sliding patch), and the world-frame network's even part
-/// (y_n(s) + y_n(−s)) / 2: it saw few samples at zero slide (a uniform ball
-/// of v_rel has slide density ∝ s) and its y_n(0) errs 2× more.
+/// so friction vanishes with ṫ as it must and g_t / s stays finite (the
+/// Jacobian's (g_t / s)(I − t̂t̂ᵀ) ∂ṫ term cannot blow up at rest), and its
+/// g_n the even part: it saw few samples at zero slide (a uniform ball of
+/// v_rel has slide density ∝ s) and its y_n(0) errs 2× more. The
+/// contact-frame network's normal output is read at slide 0 (eq. 8 does
+/// not depend on the slide) and its rate output as the even part.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactFrame {
     c_hat: Vec3,
@@ -325,9 +323,15 @@ impl ContactFrame {
     /// [`inputs`](ContactFrame::inputs), read in this frame (as the
     /// contact-frame network's: (g_n, g_t) a row, and row-major [2 × (depth,
     /// approach, slide)]) and held to the friction cone.
-    pub fn network_force(&self, kind: NetKind, y: &[f32], j: &[f32], mu: f32) -> ForceJacobian {
+    pub fn network_force(
+        &self,
+        kind: NetKind,
+        y: &[f32],
+        j: &[f32],
+        k: &Coefficients,
+    ) -> ForceJacobian {
         let still = (kind == NetKind::FrictionContact).then(|| (y[4], &j[12..15]));
-        self.moving_force(kind, y, j, still, mu)
+        self.moving_force(kind, y, j, still, k)
     }
 
     /// [`network_force`](ContactFrame::network_force) from the rows at
@@ -340,13 +344,13 @@ impl ContactFrame {
         y: &[f32],
         j: &[f32],
         still: Option<(f32, &[f32])>,
-        mu: f32,
+        k: &Coefficients,
     ) -> ForceJacobian {
         match kind {
-            NetKind::FrictionContact => self.force(y, j, still, mu),
+            NetKind::FrictionContact => self.force(y, j, still, k),
             _ => {
                 let (y, j) = self.read_world_rows(y, j);
-                self.force(&y, &j, None, mu)
+                self.force(&y, &j, None, k)
             }
         }
     }
@@ -385,27 +389,49 @@ impl ContactFrame {
         [-g.dot(self.c_hat), g.dot(self.t_hat)]
     }
 
-    /// g and its Jacobians from the frame's (g_n, g_t) y and their
-    /// derivatives j (row-major [2 × (depth, approach, slide)]) at +slide
-    /// and −slide, and g_n with its (depth, approach) derivatives at slide 0
-    /// where there is such a row; held to eq. 8's "no pulling" and to
-    /// Coulomb's law with coefficient `mu` ([`coulomb`]).
-    fn force(&self, y: &[f32], j: &[f32], still: Option<(f32, &[f32])>, mu: f32) -> ForceJacobian {
+    /// g and its Jacobians from a friction network's rows at +slide and
+    /// −slide, y (two outputs a row) and their derivatives j (row-major
+    /// [2 × (depth, approach, slide)] a row), and for the contact-frame
+    /// network its still row's first output with that output's derivatives
+    /// ([`cone`]); the world-frame network's (g_n, g_t) are the even and
+    /// odd parts of its rows, held to eq. 8's "no pulling" and to Coulomb's
+    /// law ([`coulomb`]).
+    fn force(
+        &self,
+        y: &[f32],
+        j: &[f32],
+        still: Option<(f32, &[f32])>,
+        k: &Coefficients,
+    ) -> ForceJacobian {
         let (y0, y1) = (&y[..2], &y[2..4]);
         let (j0, j1) = (&j[..6], &j[6..12]);
-        // The odd part for g_t (the mirror row's slide is −s, so its slide
-        // derivatives enter with the other sign); g_n at slide 0 where
-        // there is a third row, else the even part.
-        let g_t = 0.5 * (y0[1] - y1[1]);
-        let d_gt = 0.5 * Vec3::new(j0[3] - j1[3], j0[4] - j1[4], j0[5] + j1[5]);
-        let (g_n, d_gn) = match still {
-            Some((g_n, d)) => (g_n, Vec3::new(d[0], d[1], 0.0)),
-            None => (
-                0.5 * (y0[0] + y1[0]),
-                0.5 * Vec3::new(j0[0] + j1[0], j0[1] + j1[1], j0[2] - j1[2]),
-            ),
+        // Even and odd parts in the slide: the mirror row's slide is −s, so
+        // its slide derivatives enter with the other sign.
+        let even = |o: usize| {
+            (
+                0.5 * (y0[o] + y1[o]),
+                0.5 * Vec3::new(
+                    j0[3 * o] + j1[3 * o],
+                    j0[3 * o + 1] + j1[3 * o + 1],
+                    j0[3 * o + 2] - j1[3 * o + 2],
+                ),
+            )
         };
-        let ((g_n, d_gn), (g_t, d_gt)) = coulomb((g_n, d_gn), (g_t, d_gt), mu);
+        let ((g_n, d_gn), (g_t, d_gt)) = match still {
+            Some((y_n, d)) => cone(
+                (y_n, Vec3::new(d[0], d[1], 0.0)),
+                even(1),
+                (self.depth, self.approach, self.slide),
+                k,
+            ),
+            None => {
+                let odd = (
+                    0.5 * (y0[1] - y1[1]),
+                    0.5 * Vec3::new(j0[3] - j1[3], j0[4] - j1[4], j0[5] + j1[5]),
+                );
+                coulomb(even(0), odd, k.mu)
+            }
+        };
         let (c_hat, t_hat, r, a) = (self.c_hat, self.t_hat, self.depth, self.approach);
         let p = Mat3::IDENTITY - outer(c_hat, c_hat);
         // Gradients of a function of (r, a, s): ∂r/∂c = ĉ; ∂a/∂c = ṫ/r,
@@ -430,15 +456,13 @@ impl ContactFrame {
     }
 }
 
-/// The contact-frame network's (g_n, g_t), each with its gradient in
+/// The world-frame network's (g_n, g_t), each with its gradient in
 /// (depth, approach, slide), put inside the friction cone: g_n ≥ 0 (eq. 8
 /// never pulls) and |g_t| ≤ μ g_n (eq. 9's Coulomb bound), with the clamped
-/// value's own gradient. The network's outputs are free scalars with
-/// absolute errors of 0.1–1 N, against millinewton forces at resting
-/// contact: the shipped one's g_n is negative below about 0.9 mm of depth,
-/// and nothing kept its g_t under μ g_n. Inside the cone the network
-/// decides, at its edge Coulomb does.
-/// Mirrored by `contact_net_force` in wgsl/contact.wgsl.
+/// value's own gradient. Its outputs are free scalars with absolute errors
+/// of 0.1–1 N, against millinewton forces at resting contact; inside the
+/// cone the network decides, at its edge Coulomb does. Mirrored in
+/// `contact_net_force` (wgsl/contact.wgsl).
 pub fn coulomb(normal: (f32, Vec3), tangent: (f32, Vec3), mu: f32) -> ((f32, Vec3), (f32, Vec3)) {
     if normal.0 <= 0.0 {
         return ((0.0, Vec3::ZERO), (0.0, Vec3::ZERO));
@@ -454,6 +478,59 @@ pub fn coulomb(normal: (f32, Vec3), tangent: (f32, Vec3), mu: f32) -> ((f32, Vec
     (normal, tangent)
 }
 
+/// The log of the largest stick stiffness factor [`cone`] takes from the
+/// network (e^20 ≈ 5·10⁸): a trained network stays far below it; it only
+/// keeps e^w finite, so a slide of 0 never meets an infinite rate.
+pub const STICK_LOG_MAX: f32 = 20.0;
+
+/// ln(1 + e^y), written so it neither overflows nor differs from the
+/// kernels' (wgsl/contact.wgsl has no log1p).
+fn softplus(y: f32) -> f32 {
+    y.max(0.0) + (1.0 + (-y.abs()).exp()).ln()
+}
+
+/// The contact-frame network's two outputs read in the form of eqs. 8–9's
+/// friction cone (issue 65): the output's form, not a clamp, keeps the
+/// force a push with friction against the slide and within Coulomb's
+/// bound, and carries the law's scales, so the network learns only
+/// dimensionless factors and its error shrinks with the load:
+///   g_n = L softplus(y_n),  L = k_n r + k_d max(a, 0)     (eq. 8's load when nothing separates)
+///   g_t = −min(k_t e^w s, μ g_n)                            (eq. 9, stick then slip)
+/// with y_n the still row's first output and w the even part of the moving
+/// rows' second (so ∂w/∂s = 0 at rest). The network learns how separating
+/// lowers the load (softplus(y_n) = 1 + k_d a / (k_n r) there, 1 when
+/// approaching) and the stick stiffness's factor on k_t (1 for eqs. 8–9).
+/// g_n > 0 for every input, and g_t ≤ 0 ≤ s: friction never points along
+/// the slide. Each output comes with its gradient in (depth r, approach a,
+/// slide s); `normal` and `rate` are (y_n, ∂y_n) and (w, ∂w). Mirrored by
+/// `cone` in wgsl/contact.wgsl.
+pub fn cone(
+    normal: (f32, Vec3),
+    rate: (f32, Vec3),
+    (r, a, s): (f32, f32, f32),
+    k: &Coefficients,
+) -> ((f32, Vec3), (f32, Vec3)) {
+    let (y_n, d_yn) = normal;
+    let load = k.kn * r + k.kd * a.max(0.0);
+    let d_load = Vec3::new(k.kn, if a > 0.0 { k.kd } else { 0.0 }, 0.0);
+    let share = softplus(y_n);
+    let g_n = load * share;
+    let d_gn = share * d_load + (load / (1.0 + (-y_n).exp())) * d_yn;
+    let (w, d_w) = if rate.0 > STICK_LOG_MAX {
+        (STICK_LOG_MAX, Vec3::ZERO)
+    } else {
+        rate
+    };
+    let stick = k.kt * w.exp();
+    let cap = k.mu * g_n;
+    let friction = if stick * s <= cap {
+        (-stick * s, -stick * (Vec3::Z + s * d_w))
+    } else {
+        (-cap, -k.mu * d_gn)
+    };
+    ((g_n, d_gn), friction)
+}
+
 /// g and its Jacobians from a friction network of `kind` (world or
 /// contact frame), evaluated in the contact's frame ([`ContactFrame`]).
 pub fn friction_net(net: &Mlp, kind: NetKind, c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
@@ -461,7 +538,7 @@ pub fn friction_net(net: &Mlp, kind: NetKind, c: Vec3, v: Vec3, k: &Coefficients
         return ForceJacobian::ZERO;
     };
     let (y, j) = net.forward_jacobian(&frame.inputs(kind, k), kind.wrt());
-    frame.network_force(kind, &y, &j, k.mu)
+    frame.network_force(kind, &y, &j, k)
 }
 
 impl Model {
@@ -551,8 +628,7 @@ impl Model {
                         &y[moving_rows * outs * i..],
                         &j[moving_rows * outs * t * i..],
                     );
-                    f.moving_force(kind, y, j, g_n, coefficients.mu)
-                        .scaled(*scale)
+                    f.moving_force(kind, y, j, g_n, coefficients).scaled(*scale)
                 })
             }
             Model::NaiveNet { net, stiffness } => {

@@ -2,7 +2,7 @@
 //! stage is compiled with [`prelude`] in front of it, and no WGSL file
 //! declares one of these itself (a test checks both directions).
 
-use crate::cpu::{impact, separate};
+use crate::cpu::{contact, impact, separate};
 use crate::health;
 use crate::multigrid;
 
@@ -246,7 +246,9 @@ pub const SHARED: [(&str, u32); 66] = [
 ];
 
 /// The `f32` constants the kernels read, by their WGSL names.
-pub const SHARED_F32: [(&str, f32); 4] = [
+pub const SHARED_F32: [(&str, f32); 6] = [
+    ("SLIDE_AT_REST", contact::SLIDE_AT_REST),
+    ("STICK_LOG_MAX", contact::STICK_LOG_MAX),
     ("SMOOTH_WEIGHT", multigrid::SMOOTH_WEIGHT),
     ("SMOOTH_MARGIN", multigrid::SMOOTH_MARGIN),
     ("FIXED_UNITS", impact::UNITS),

@@ -62,12 +62,15 @@ pub const FRICTION_INPUTS: [&str; 10] =
 /// The friction network's outputs: g = f / s, world frame.
 pub const FRICTION_OUTPUTS: [&str; 3] = ["gx", "gy", "gz"];
 /// The friction network in the contact frame: depth |c|, approach speed
-/// v_rel·ĉ, signed sliding speed ±|ṫ|, coefficients; outputs g along n and
-/// along ṫ/|ṫ| (see `cpu::contact::ContactFrame`).
+/// v_rel·ĉ, signed sliding speed ±|ṫ|, coefficients (see
+/// `cpu::contact::ContactFrame`).
 pub const FRICTION_CONTACT_INPUTS: [&str; 7] =
     ["depth", "approach", "slide", "kn", "kd", "kt", "mu"];
-/// The contact-frame network's outputs: g along n and along ṫ/|ṫ|.
-pub const FRICTION_CONTACT_OUTPUTS: [&str; 2] = ["gn", "gt"];
+/// The contact-frame network's outputs, the logits of its output's form
+/// (`cpu::contact::cone`): y_n, with g_n = L softplus(y_n), and w, with
+/// stick stiffness k_t e^w. Files from before issue 65 named them "gn, gt"
+/// and are refused.
+pub const FRICTION_CONTACT_OUTPUTS: [&str; 2] = ["load", "stick"];
 /// The naive network's inputs (thesis 2.4): b's x, corner c and the point p
 /// in the local frame with corner a at the origin, b on +x and the normal
 /// on +z, so cz = 0 (`cpu::contact::LocalFrame`).
