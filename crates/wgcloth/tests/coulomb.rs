@@ -1,7 +1,8 @@
-//! Coulomb's law on an incline, for the analytic friction model and the
-//! shipped friction network, on the CPU and the GPU, at the default contact
-//! and solver settings: a cloth patch holds below the friction angle and
-//! slides at g (sin θ − μ cos θ) above it.
+//! Coulomb's law on an incline, for the analytic friction model, the
+//! default friction network and the thesis-size one in the same output
+//! form, on the CPU and the GPU, at the default contact and solver
+//! settings: a cloth patch holds below the friction angle and slides at
+//! g (sin θ − μ cos θ) above it.
 
 mod common;
 
@@ -11,7 +12,39 @@ use wgcloth::cpu::CpuSim;
 use wgcloth::gpu::{GpuSim, Kernels, SolvedSteps};
 use wgcloth::{Config, Scene};
 
-const MODELS: [ModelKind; 2] = [ModelKind::Friction, ModelKind::FrictionNet];
+/// A friction model as these tests run it: a kind, and for a network the
+/// weights file (crate-relative) when not the default one.
+#[derive(Clone, Copy)]
+struct Model {
+    kind: ModelKind,
+    weights: Option<&'static str>,
+}
+
+impl std::fmt::Debug for Model {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self.weights {
+            None => write!(f, "{}", self.kind.name()),
+            Some(w) => write!(f, "{} ({w})", self.kind.name()),
+        }
+    }
+}
+
+const MODELS: [Model; 3] = [
+    Model {
+        kind: ModelKind::Friction,
+        weights: None,
+    },
+    Model {
+        kind: ModelKind::FrictionNet,
+        weights: None,
+    },
+    // The thesis's hidden layers (256, 256, 128 ×5) in the contact frame's
+    // output form (crates/wgcloth/weights/README.md).
+    Model {
+        kind: ModelKind::FrictionNet,
+        weights: Some("weights/friction_mlp_thesis_cone.safetensors"),
+    },
+];
 const G: f32 = 9.81;
 /// The steps each run takes (2 s); the second half is measured, once the
 /// patch has settled into the contact band.
@@ -20,16 +53,19 @@ const STEPS: usize = 200;
 /// A free 0.2 m cloth patch lying on a static plane tilted by `tilt` about
 /// z, its vertices just inside the contact band; every contact and solver
 /// setting is the default (μ = 0.5).
-fn patch_on_incline(tilt: f32, model: ModelKind) -> Scene {
+fn patch_on_incline(tilt: f32, model: Model) -> Scene {
     Scene::new(&patch_config(tilt, model)).unwrap()
 }
 
-fn patch_config(tilt: f32, model: ModelKind) -> Config {
+fn patch_config(tilt: f32, model: Model) -> Config {
     let mut c = Config {
         scene: SceneKind::Sphere,
-        model,
+        model: model.kind,
         ..Default::default()
     };
+    c.contact.weights = model
+        .weights
+        .map(|w| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(w));
     let r = &mut c.rigid;
     r.shape = Shape::Plane;
     r.plane_size = [20.0, 20.0];
@@ -87,7 +123,7 @@ fn on_gpu(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, scene: &Scene) -> T
 }
 
 /// Each model's scene on the CPU, then (where there is an adapter) on the GPU.
-fn each_run(scene: impl Fn(ModelKind) -> Scene, check: impl Fn(&str, ModelKind, Trace)) {
+fn each_run(scene: impl Fn(Model) -> Scene, check: impl Fn(&str, Model, Trace)) {
     for model in MODELS {
         check("CPU", model, on_cpu(&scene(model)));
     }

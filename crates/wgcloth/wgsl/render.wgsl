@@ -1,5 +1,5 @@
-// Render pipeline (thesis Figures 1–2): the cloth and the rigid body with
-// two-sided Phong shading, an optional cloth wireframe, and each contact's
+// Render pipeline (thesis Figures 1–2): the cloth, smoothly shaded with
+// vertex normals, and the rigid body, flat, both with two-sided Phong, an optional cloth wireframe, and each contact's
 // force as a green segment. Vertices are pulled from the simulator's own
 // storage buffers by index, so nothing is copied to draw a frame. Not a
 // compute stage: src/render owns its pipelines.
@@ -9,6 +9,8 @@ struct Camera {
     eye: vec4<f32>,
     // Direction towards the light.
     light: vec4<f32>,
+    // The cloth grid's vertices per row and per column (x, y).
+    grid: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> camera: Camera;
@@ -24,15 +26,38 @@ struct Camera {
 struct Surface {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,
+    // The vertex normal, zero where the surface is drawn flat.
+    @location(1) normal: vec3<f32>,
 }
 
 fn surface_at(p: vec3<f32>) -> Surface {
-    return Surface(camera.view_proj * vec4<f32>(p, 1.0), p);
+    return Surface(camera.view_proj * vec4<f32>(p, 1.0), p, vec3<f32>(0.0));
+}
+
+// Cloth vertex (row r, column c) = r * nx + c.
+fn grid_position(c: u32, r: u32) -> vec3<f32> {
+    return positions[r * camera.grid.x + c].xyz;
+}
+
+// A cloth vertex's normal from its grid neighbours: the cross product of
+// the central differences along the row and the column (one-sided at the
+// border), which weighs the four cells around the vertex alike.
+fn grid_normal(v: u32) -> vec3<f32> {
+    let nx = camera.grid.x;
+    let ny = camera.grid.y;
+    let c = v % nx;
+    let r = v / nx;
+    let along_row = grid_position(min(c + 1u, nx - 1u), r) - grid_position(max(c, 1u) - 1u, r);
+    let along_column = grid_position(c, min(r + 1u, ny - 1u)) - grid_position(c, max(r, 1u) - 1u);
+    return cross(along_row, along_column);
 }
 
 @vertex
 fn vs_cloth(@builtin(vertex_index) i: u32) -> Surface {
-    return surface_at(positions[triangles[i]].xyz);
+    let v = triangles[i];
+    var s = surface_at(positions[v].xyz);
+    s.normal = grid_normal(v);
+    return s;
 }
 
 @vertex
@@ -58,14 +83,25 @@ fn vs_line(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
     return camera.view_proj * vec4<f32>(lines[i].xyz, 1.0);
 }
 
-// Phong with the face normal turned towards the viewer, so both sides of
-// the cloth are lit; the face normal comes from the screen-space
-// derivatives of the position, as the cloth has no normal buffer.
-fn phong(world: vec3<f32>, base: vec3<f32>) -> vec4<f32> {
-    var n = normalize(cross(dpdx(world), dpdy(world)));
+// Phong on the side facing the viewer, so both sides of the cloth are
+// lit. The face normal comes from the screen-space derivatives of the
+// position; the interpolated vertex normal, where there is one, shades,
+// turned to the face normal's side (a fold's vertex normals may point
+// away from a face the viewer sees).
+fn phong(s: Surface, base: vec3<f32>) -> vec4<f32> {
+    let world = s.world;
+    var face = normalize(cross(dpdx(world), dpdy(world)));
     let to_eye = normalize(camera.eye.xyz - world);
-    if dot(n, to_eye) < 0.0 {
-        n = -n;
+    if dot(face, to_eye) < 0.0 {
+        face = -face;
+    }
+    var n = face;
+    let vertex = s.normal;
+    if dot(vertex, vertex) > 0.0 {
+        n = normalize(vertex);
+        if dot(n, face) < 0.0 {
+            n = -n;
+        }
     }
     let l = normalize(camera.light.xyz);
     let diffuse = max(dot(n, l), 0.0);
@@ -75,12 +111,12 @@ fn phong(world: vec3<f32>, base: vec3<f32>) -> vec4<f32> {
 
 @fragment
 fn fs_cloth(s: Surface) -> @location(0) vec4<f32> {
-    return phong(s.world, vec3<f32>(0.85, 0.35, 0.25));
+    return phong(s, vec3<f32>(0.85, 0.35, 0.25));
 }
 
 @fragment
 fn fs_body(s: Surface) -> @location(0) vec4<f32> {
-    return phong(s.world, vec3<f32>(0.35, 0.45, 0.85));
+    return phong(s, vec3<f32>(0.35, 0.45, 0.85));
 }
 
 @fragment

@@ -72,6 +72,10 @@ pub struct Source<'a> {
     pub triangles: &'a wgpu::Buffer,
     /// Number of cloth triangles drawn.
     pub triangle_count: u32,
+    /// The cloth grid's vertices per row and per column (vertex (r, c) is
+    /// `r * nx + c`): the shader's vertex normals come from a vertex's
+    /// grid neighbours.
+    pub grid: [u32; 2],
     /// The body's vertices placed in the world, one vec4 each.
     pub body_vertices: &'a wgpu::Buffer,
     /// The body's triangles, three u32 each; a binding, as they may be a
@@ -94,6 +98,7 @@ impl<'a> Source<'a> {
             positions: sim.positions(),
             triangles: sim.indices(),
             triangle_count: scene.cloth.triangles.len() as u32,
+            grid: [scene.cloth.nx, scene.cloth.ny],
             body_vertices,
             body_triangles,
             body_triangle_count: body_triangle_count(scene),
@@ -123,6 +128,7 @@ pub struct HostScene {
     body_triangles: wgpu::Buffer,
     lines: wgpu::Buffer,
     triangle_count: u32,
+    grid: [u32; 2],
     body_triangle_count: u32,
     line_count: u32,
 }
@@ -160,6 +166,7 @@ impl HostScene {
             body_triangles: buffer("body triangles", bytemuck::cast_slice(&body_triangles)),
             lines: buffer("force lines", &vec![0u8; 32 * slots]),
             triangle_count: scene.cloth.triangles.len() as u32,
+            grid: [scene.cloth.nx, scene.cloth.ny],
             body_triangle_count: body_triangle_count(scene),
             line_count: slot_count(scene),
         }
@@ -205,6 +212,7 @@ impl HostScene {
             positions: &self.positions,
             triangles: &self.triangles,
             triangle_count: self.triangle_count,
+            grid: self.grid,
             body_vertices: &self.body_vertices,
             body_triangles: self.body_triangles.as_entire_buffer_binding(),
             body_triangle_count: self.body_triangle_count,
@@ -221,6 +229,7 @@ struct CameraUniform {
     view_proj: [[f32; 4]; 4],
     eye: [f32; 4],
     light: [f32; 4],
+    grid: [u32; 4],
 }
 
 /// The render pipelines for one colour format, to draw into any target
@@ -387,6 +396,7 @@ impl Pipelines {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
             light: camera.light.extend(0.0).to_array(),
+            grid: [source.grid[0], source.grid[1], 0, 0],
         };
         queue.write_buffer(&self.camera, 0, bytemuck::bytes_of(&uniform));
         fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
