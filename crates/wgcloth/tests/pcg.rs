@@ -14,7 +14,8 @@ use wgcloth::math::Sym3;
 use wgcloth::scene::Cloth;
 use wgcloth::{Config, Scene};
 
-/// The free-vertex block A_FF as a dense f64 matrix, and b_F − A_FP x_P.
+/// The free-vertex block A_FF as a dense f64 matrix, and b_F − A_FP x_P,
+/// built from A's blocks (not from its product).
 fn dense_free_system(
     a: &BlockMatrix,
     cloth: &Cloth,
@@ -54,6 +55,19 @@ fn dense_free_system(
                 a.off[cloth.adjacency.spring[k] as usize].to_mat3(),
                 &mut rhs,
             );
+        }
+    }
+    // The cloth–cloth contacts' blocks, off the springs' pattern.
+    for (pair, block) in a.couplings.blocks() {
+        for (k, &i) in pair.vertices.iter().enumerate() {
+            for (l, &j) in pair.vertices.iter().enumerate().filter(|&(l, _)| l != k) {
+                put(
+                    i as usize,
+                    j as usize,
+                    pair.beta[k] * pair.beta[l] * *block,
+                    &mut rhs,
+                );
+            }
         }
     }
     for (k, &i) in free.iter().enumerate() {
@@ -205,14 +219,32 @@ fn pcg_matches_direct_solve_on_random_spd_systems() {
     }
 }
 
+/// Every model's contact blocks, the networks' input Jacobians included,
+/// leave A symmetric positive definite (the Cholesky factorisation of
+/// `cholesky_solve` asserts both) and PCG solves it: on the default
+/// sphere, and (the friction models) on a coarse 8² cloth against the
+/// sphere subdivided 5 times, many body vertices to a cloth triangle,
+/// where the GPU's solve once broke down (issue 65). That system is too
+/// ill-conditioned for an f32 residual of 1e-6 to place the solution
+/// within 1e-4 of the direct one (it lands 1.2e-4 away), so there only
+/// A's definiteness is checked.
 #[test]
 fn real_step_matrices_are_spd_and_pcg_matches_direct_solve() {
-    for model in [ModelKind::Friction, ModelKind::Naive] {
+    let models = [
+        ModelKind::Friction,
+        ModelKind::Naive,
+        ModelKind::FrictionNet,
+        ModelKind::NaiveNet,
+    ];
+    let fine_body = [ModelKind::Friction, ModelKind::FrictionNet];
+    let cases = models.map(|m| (m, 10, 3)).into_iter();
+    for (model, grid, subdivisions) in cases.chain(fine_body.map(|m| (m, 8, 5))) {
         let mut config = Config {
             model,
             ..Default::default()
         };
-        config.cloth.grid = [10, 10];
+        config.cloth.grid = [grid, grid];
+        config.rigid.subdivisions = subdivisions;
         let mut sim = CpuSim::new(Scene::new(&config).unwrap());
         let mut checked = 0;
         for _ in 0..120 {
@@ -221,15 +253,61 @@ fn real_step_matrices_are_spd_and_pcg_matches_direct_solve() {
             // Check the system of every 10th step that had contacts.
             if stats.contacts > 0 && sim.state.step.is_multiple_of(10) {
                 let (a, b) = sim.system();
-                check_against_direct(a, &sim.scene.cloth, b, &v_before);
+                if subdivisions == 3 {
+                    check_against_direct(a, &sim.scene.cloth, b, &v_before);
+                } else {
+                    let (_, dense, rhs) = dense_free_system(a, &sim.scene.cloth, b, &v_before);
+                    cholesky_solve(dense, rhs);
+                }
                 checked += 1;
             }
         }
         assert!(
             checked >= 3,
-            "{model:?}: only {checked} steps with contacts"
+            "{model:?} ({grid}², body subdivided {subdivisions}×): only {checked} steps with contacts"
         );
     }
+}
+
+/// The cloth–cloth contacts' blocks (stage `self_contact`, eqs. 8–9
+/// between cloth vertices) leave A symmetric positive definite too: a
+/// weightless 12² cloth folded in half, its layers 3 mm apart (inside the
+/// 5 mm band) and closing at 1.2 m/s.
+#[test]
+fn step_matrices_with_cloth_on_cloth_contacts_are_spd_and_pcg_matches_direct_solve() {
+    let mut config = Config {
+        scene: SceneKind::Hang,
+        ..Default::default()
+    };
+    config.cloth.grid = [12, 12];
+    config.cloth.pins = wgcloth::config::Pins::None;
+    config.cloth.stiffness = 50.0;
+    config.solver.gravity = [0.0; 3];
+    config.self_contact.enabled = true;
+    let mut sim = CpuSim::new(Scene::new(&config).unwrap());
+    let (nx, ny) = (sim.scene.cloth.nx as usize, sim.scene.cloth.ny as usize);
+    let rest = sim.scene.cloth.rest_positions.clone();
+    for (i, (x, v)) in sim.state.x.iter_mut().zip(&mut sim.state.v).enumerate() {
+        let upper = i / nx >= ny / 2;
+        if upper {
+            *x = rest[(ny - 1 - i / nx) * nx + i % nx] + Vec3::new(0.0, 0.0, 0.003);
+        }
+        *v = Vec3::new(0.0, 0.0, if upper { -0.6 } else { 0.6 });
+    }
+    let mut checked = 0;
+    for _ in 0..6 {
+        let v_before = sim.state.v.clone();
+        let stats = sim.step();
+        if stats.self_contacts > 0 {
+            let (a, b) = sim.system();
+            check_against_direct(a, &sim.scene.cloth, b, &v_before);
+            checked += 1;
+        }
+    }
+    assert!(
+        checked >= 3,
+        "only {checked} steps with cloth–cloth contacts"
+    );
 }
 
 /// What a solve's tolerance leaves of a run, which `wgcloth validate` and

@@ -429,6 +429,12 @@ impl Couplings {
         }
     }
 
+    /// Each pair with its block B: what A holds off the springs' pattern,
+    /// β_k β_l B at (k, l ≠ k).
+    pub fn blocks(&self) -> impl Iterator<Item = (&Pair, &Mat3)> {
+        self.pairs.iter().zip(&self.blocks)
+    }
+
     /// Row i of the couplings times `x`: Σ over vertex i's pairs of
     /// β_k B Σ_{l ≠ k} β_l x_l.
     pub fn row(&self, i: usize, x: &[Vec3]) -> Vec3 {
