@@ -14,7 +14,7 @@ use glam::Vec3;
 
 use crate::dataset::Dataset;
 use crate::domain::{Rng, bounds};
-use wgcloth::cpu::contact::{Coefficients, ContactFrame, STICK_LOG_MAX};
+use wgcloth::cpu::contact::{Coefficients, ContactFrame, STICK_LOG_MAX, cone_load};
 use wgcloth::error::{Error, Result};
 use wgcloth::nn::mlp::Layer;
 use wgcloth::nn::weights::{NetKind, WeightsFile};
@@ -207,7 +207,7 @@ fn rows_for(kind: NetKind, data: &Dataset) -> (Vec<f32>, Vec<f32>) {
         {
             let row = &frame.inputs(kind, &k)[..7];
             let (depth, approach, slide) = (row[0], row[1], row[2]);
-            let load = k.kn * depth + k.kd * approach.max(0.0);
+            let load = cone_load(depth, approach, &k);
             inputs.extend(row);
             inputs.extend([k.kt * slide / load, k.mu]);
             targets.extend(frame.targets(Vec3::from_array(*g)).map(|t| t / load));

@@ -489,6 +489,13 @@ fn softplus(y: f32) -> f32 {
     y.max(0.0) + (1.0 + (-y.abs()).exp()).ln()
 }
 
+/// L = k_n r + k_d max(a, 0), the load eq. 8 gives a contact at depth r
+/// approaching at a when nothing separates: the scale of [`cone`]'s g_n,
+/// and what training divides the targets by.
+pub fn cone_load(r: f32, a: f32, k: &Coefficients) -> f32 {
+    k.kn * r + k.kd * a.max(0.0)
+}
+
 /// The contact-frame network's two outputs read in the form of eqs. 8–9's
 /// friction cone (issue 65): the output's form, not a clamp, keeps the
 /// force a push with friction against the slide and within Coulomb's
@@ -511,7 +518,7 @@ pub fn cone(
     k: &Coefficients,
 ) -> ((f32, Vec3), (f32, Vec3)) {
     let (y_n, d_yn) = normal;
-    let load = k.kn * r + k.kd * a.max(0.0);
+    let load = cone_load(r, a, k);
     let d_load = Vec3::new(k.kn, if a > 0.0 { k.kd } else { 0.0 }, 0.0);
     let share = softplus(y_n);
     let g_n = load * share;
