@@ -743,7 +743,7 @@ fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
     let v = run::validate(&ctx, scene, steps, |_, _, _| {}, || bar.inc(1))?;
     bar.finish_and_clear();
     // A faithful GPU may end as far from the CPU as another faithful CPU
-    // run does (wgcloth::cpu::sensitivity).
+    // run does (wgcloth::sensitivity).
     let s = v.sensitivity;
     let allowed = args.tolerance + 4.0 * s.faithful(&ctx.adapter).drift;
     let rule = match wgcloth::gpu::context::computes_as_the_cpu(&ctx.adapter) {
@@ -767,7 +767,7 @@ fn validate(args: &ValidateArgs) -> Result<std::result::Result<(), Mismatch>> {
         s.nudged.drift,
         wgcloth::cpu::PERTURBATION,
         s.tolerance.drift,
-        wgcloth::cpu::sensitivity::TIGHTER,
+        wgcloth::sensitivity::TIGHTER,
         allowed,
         args.tolerance,
         v.gpu_contacts,

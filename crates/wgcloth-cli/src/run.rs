@@ -10,7 +10,6 @@ use crate::frames::Recording;
 use crate::in_flight::InFlight;
 use crate::monitor::Monitor;
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::sensitivity::{Reference, Sensitivity, largest_distance};
 use wgcloth::cpu::{self, CpuSim, State, integrate};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
@@ -18,6 +17,7 @@ use wgcloth::gpu::mlp::NetworkKernel;
 use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, SolvedSteps, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
+use wgcloth::sensitivity::{Reference, Sensitivity, largest_distance};
 use wgcloth::stage::{SelfContactStages, Stage};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

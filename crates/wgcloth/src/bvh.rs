@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
+use crate::parallel::GRAIN;
 
 /// An axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]

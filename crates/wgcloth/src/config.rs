@@ -344,10 +344,24 @@ pub struct ContactConfig {
     pub weights: Option<PathBuf>,
 }
 
+/// Friction-model coefficients, in the network's input order: the
+/// `[contact]` ones as the friction models (`cpu::contact`) take them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coefficients {
+    /// Contact stiffness k_n (eq. 8).
+    pub kn: f32,
+    /// Contact damping k_d on the approach speed ḋ (eq. 8).
+    pub kd: f32,
+    /// Friction stiffness k_t on the tangential velocity ṫ (eq. 9).
+    pub kt: f32,
+    /// Coulomb coefficient μ (eq. 9).
+    pub mu: f32,
+}
+
 impl ContactConfig {
     /// k_n, k_d, k_t and μ, as the friction models take them.
-    pub fn coefficients(&self) -> crate::cpu::contact::Coefficients {
-        crate::cpu::contact::Coefficients {
+    pub fn coefficients(&self) -> Coefficients {
+        Coefficients {
             kn: self.kn,
             kd: self.kd,
             kt: self.kt,

@@ -31,6 +31,8 @@
 //! - [`nn`]: the contact networks, their weights files and their inputs.
 //! - [`render`]: drawing a scene's frames from the simulator's buffers.
 //! - [`health`]: what a step must leave, and where divergence started.
+//! - [`sensitivity`]: how far two faithful runs of a scene end apart, what
+//!   a GPU run is held to against the CPU's.
 //! - [`intersections`]: the cloth triangle pairs that pass through each
 //!   other; [`cpu::separate`] (and its WGSL twin) holds each step back so
 //!   that none does, with `[self_contact]` on.
@@ -46,8 +48,10 @@ pub mod intersections;
 pub mod math;
 pub mod multigrid;
 pub mod nn;
+mod parallel;
 pub mod render;
 pub mod scene;
+pub mod sensitivity;
 pub mod stage;
 
 pub use config::Config;

@@ -8,10 +8,10 @@ use std::sync::Arc;
 use common::sphere;
 use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::sensitivity::{Reference, Sensitivity};
 use wgcloth::cpu::{CpuSim, PERTURBATION};
 use wgcloth::gpu::{CgBudget, GpuContext, GpuSim, Kernels, SolvedSteps, context};
 use wgcloth::math::{Sym3, closest_on_triangle};
+use wgcloth::sensitivity::{Reference, Sensitivity};
 use wgcloth::{Config, Scene};
 
 fn gpu() -> Option<(GpuContext, Arc<Kernels>)> {

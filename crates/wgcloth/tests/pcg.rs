@@ -9,9 +9,9 @@ use glam::{Mat3, Vec3};
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::pcg::{BlockMatrix, PcgScratch, Preconditioner, Smoother, SolveSettings, solve};
-use wgcloth::cpu::sensitivity::{Reference, Sensitivity, Spread};
 use wgcloth::math::Sym3;
 use wgcloth::scene::Cloth;
+use wgcloth::sensitivity::{Reference, Sensitivity, Spread};
 use wgcloth::{Config, Scene};
 
 /// The free-vertex block A_FF as a dense f64 matrix, and b_F − A_FP x_P,
@@ -311,7 +311,7 @@ fn step_matrices_with_cloth_on_cloth_contacts_are_spd_and_pcg_matches_direct_sol
 }
 
 /// What a solve's tolerance leaves of a run, which `wgcloth validate` and
-/// the GPU parity tests allow a GPU (`cpu::sensitivity`). With no contact
+/// the GPU parity tests allow a GPU (`sensitivity`). With no contact
 /// the run solved 100 times tighter ends within 0.1 mm of the CPU's; in
 /// contact, where the stiff system leaves the velocities far less accurate
 /// than the residual, 1e-3 and 1e-5 end millimetres apart, further than

@@ -9,11 +9,11 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
 use crate::cpu::collide::Contact;
 use crate::cpu::contact::Response;
 use crate::cpu::pcg::BlockMatrix;
 use crate::math::Sym3;
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 
 /// Scalars of one step.

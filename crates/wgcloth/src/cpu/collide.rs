@@ -16,10 +16,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::bvh::{Aabb, Bvh};
-use crate::cpu::GRAIN;
 use crate::cpu::body_grid::BodyGrid;
 use crate::cpu::rigid::RigidFrame;
 use crate::math::{Barycentric, barycentric, inside_triangle};
+use crate::parallel::GRAIN;
 use crate::scene::{Cloth, RigidBody};
 
 /// One contact, in the form every model and the assembly share.

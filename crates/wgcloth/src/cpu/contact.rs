@@ -12,6 +12,7 @@
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
+pub use crate::config::Coefficients;
 use crate::config::{ContactConfig, ModelKind};
 use crate::cpu::collide::{Contact, Geometry};
 use crate::math::{outer, project_nsd, symmetric_part};
@@ -46,19 +47,6 @@ impl ForceJacobian {
             d_v: self.d_v * s,
         }
     }
-}
-
-/// Friction-model coefficients, in the network's input order.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Coefficients {
-    /// Contact stiffness k_n (eq. 8).
-    pub kn: f32,
-    /// Contact damping k_d on the approach speed ḋ (eq. 8).
-    pub kd: f32,
-    /// Friction stiffness k_t on the tangential velocity ṫ (eq. 9).
-    pub kt: f32,
-    /// Coulomb coefficient μ (eq. 9).
-    pub mu: f32,
 }
 
 /// Naive penalty force (thesis eq. 6): f = −c_n d̃ n, which with c = n d̃ is

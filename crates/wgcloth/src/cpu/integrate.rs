@@ -5,8 +5,8 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
 use crate::health::{NOT_FINITE, TOO_FAST};
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 
 /// x' = x + h v' for every free vertex, with h = `dt` and v' the solved

@@ -7,9 +7,9 @@
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
 use crate::cpu::rigid::RigidFrame;
 use crate::math::closest_on_triangle;
+use crate::parallel::GRAIN;
 use crate::scene::RigidBody;
 
 /// The direction of the inside test's ray, +x: the hierarchy's boxes are

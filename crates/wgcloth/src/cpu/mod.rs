@@ -13,7 +13,6 @@ pub mod multigrid;
 pub mod pcg;
 pub mod rigid;
 pub mod self_contact;
-pub mod sensitivity;
 pub mod separate;
 pub mod springs;
 
@@ -33,10 +32,6 @@ use collide::{Contact, Tolerances};
 use contact::{Model, Response};
 use pcg::{BlockMatrix, PcgOutcome, PcgScratch};
 use rigid::RigidFrame;
-
-/// Smallest slice a rayon task gets: below this, splitting costs more than
-/// the work (a 32² cloth's vectors stay on one thread).
-pub const GRAIN: usize = 2048;
 
 /// What one step did, over its substeps ([`Scene::substeps`]).
 #[derive(Clone, Debug, Default)]

@@ -17,7 +17,6 @@ use glam::{Mat3, Vec3, Vec4};
 use rayon::prelude::*;
 
 use crate::config::Smoother;
-use crate::cpu::GRAIN;
 use crate::cpu::pcg::BlockMatrix;
 use crate::math::{RowSum, Sym3};
 use crate::multigrid::{
@@ -25,6 +24,7 @@ use crate::multigrid::{
     STORED_STENCIL, levels, node_colour, parents, patch_grid, patch_inverse, row_weight,
     stencil_slot, stored_at, weight,
 };
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 
 /// The hierarchy's operators and work vectors, kept between steps.

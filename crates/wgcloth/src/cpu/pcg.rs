@@ -8,11 +8,11 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 pub use crate::config::{Preconditioner, Smoother};
-use crate::cpu::GRAIN;
 use crate::cpu::multigrid::Multigrid;
 use crate::cpu::self_contact::Couplings;
 use crate::math::Sym3;
 use crate::multigrid::Level;
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 use crate::scene::cloth::Adjacency;
 

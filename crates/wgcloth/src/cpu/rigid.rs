@@ -3,7 +3,7 @@
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
+use crate::parallel::GRAIN;
 use crate::scene::RigidBody;
 
 /// The rigid body in world space at one instant.

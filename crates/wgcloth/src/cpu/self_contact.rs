@@ -32,11 +32,11 @@ use glam::{Mat3, Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::bvh::{Aabb, Bvh};
-use crate::cpu::GRAIN;
 use crate::cpu::collide::{Tolerances, point_triangle};
 use crate::cpu::contact::{Coefficients, friction, response};
 use crate::cpu::separate::{self, Candidate, EDGE_PAIR, candidates};
 use crate::math::{Sym3, closest_between_segments, closest_on_triangle, segment_parameters};
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 
 /// The most pairs a vertex takes part in (the GPU's list per vertex, or

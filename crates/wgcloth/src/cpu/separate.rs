@@ -36,9 +36,9 @@ use rayon::prelude::*;
 
 use crate::bvh::{Aabb, Bvh};
 use crate::config::SelfContactConfig;
-use crate::cpu::GRAIN;
 use crate::cpu::impact::{BodyGap, Impact};
 use crate::math::{closest_between_segments, closest_on_triangle};
+use crate::parallel::GRAIN;
 
 /// Every edge of `triangles` once, by vertex (lower index first), sorted.
 pub fn triangle_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {

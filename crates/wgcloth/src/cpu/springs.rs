@@ -6,8 +6,8 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::cpu::GRAIN;
 use crate::math::Sym3;
+use crate::parallel::GRAIN;
 use crate::scene::Cloth;
 
 /// Force on the spring's first vertex i (the second gets the opposite) and

@@ -5,6 +5,7 @@
 use crate::cpu::{contact, impact, separate};
 use crate::health;
 use crate::multigrid;
+pub use crate::nn::weights::{CONTACT_FRAME_ROWS, WORLD_FRAME_ROWS};
 
 /// Invocations per workgroup of the per-element kernels.
 pub const WORKGROUP: u32 = 256;
@@ -16,12 +17,6 @@ pub const TILE: u32 = 8;
 /// Lanes of a face–vertex workgroup: one per cell of a tile.
 pub const FACE_VERTEX_LANES: u32 = TILE * TILE;
 
-/// Network rows per contact of the contact-frame network
-/// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
-pub const CONTACT_FRAME_ROWS: u32 = 3;
-/// Network rows per contact of the world-frame friction network
-/// (`NetKind::Friction`), read in the contact frame: at +slide and −slide.
-pub const WORLD_FRAME_ROWS: u32 = 2;
 /// Invocations per workgroup of the network batch's kernels (`batch::plan`,
 /// `mlp::per_contact`).
 pub const BATCH_GROUP: u32 = 64;

@@ -64,7 +64,7 @@ pub fn describe(info: &wgpu::AdapterInfo) -> String {
 /// multiply-adds, and divides and takes square roots within the ulps WGSL
 /// allows: on an NVIDIA H200 a spring's force differed by about an ulp of
 /// its length, and its solves stopped an iteration earlier or later
-/// ([`crate::cpu::sensitivity`]).
+/// ([`crate::sensitivity`]).
 pub fn computes_as_the_cpu(info: &wgpu::AdapterInfo) -> bool {
     info.device_type == wgpu::DeviceType::Cpu
 }

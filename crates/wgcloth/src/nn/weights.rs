@@ -78,6 +78,13 @@ pub const NAIVE_INPUTS: [&str; 7] = ["bx", "cx", "cy", "cz", "px", "py", "pz"];
 /// The naive network's outputs: f / c in the local frame.
 pub const NAIVE_OUTPUTS: [&str; 3] = ["fx", "fy", "fz"];
 
+/// Network rows per contact of the contact-frame network
+/// (`NetKind::FrictionContact`): at +slide, at −slide and at slide 0.
+pub const CONTACT_FRAME_ROWS: u32 = 3;
+/// Network rows per contact of the world-frame friction network
+/// (`NetKind::Friction`), read in the contact frame: at +slide and −slide.
+pub const WORLD_FRAME_ROWS: u32 = 2;
+
 /// What a network computes: a weights file's `model` metadata.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NetKind {
@@ -124,7 +131,6 @@ impl NetKind {
     /// force, which eq. 8 makes independent of the slide
     /// (`cpu::contact::ContactFrame`).
     pub fn evaluations(self) -> usize {
-        use crate::gpu::constants::{CONTACT_FRAME_ROWS, WORLD_FRAME_ROWS};
         match self {
             NetKind::Naive => 1,
             NetKind::Friction => WORLD_FRAME_ROWS as usize,
