@@ -76,7 +76,7 @@ fn the_gpu_finds_and_changes_what_the_cpu_does_on_a_pleated_cloth() {
     let scene = Scene::new(&scene_config("pleat")).unwrap();
     let mut cpu = CpuSim::new(scene.clone());
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, &scene).unwrap();
-    let capacity = separate::PAIRS_PER_VERTEX as usize * scene.cloth.vertex_count();
+    let capacity = separate::NEAR_PAIRS_PER_VERTEX as usize * scene.cloth.vertex_count();
     let (mut overflowed, mut zones, mut last_resort, mut box_stops) = (false, false, false, false);
     // 1.2 s in, then 1.25 s and 1.5 s in, where the box pushes the pile.
     for (at, factor) in [(120, 3.0), (120, 15.0), (125, 2.0), (150, 10.0)] {

@@ -56,7 +56,7 @@ pub const DETECTIONS: u32 = 4;
 pub const ROUNDS: u32 = 8;
 /// Near pairs the GPU's list holds per cloth vertex (wgsl/separate.wgsl);
 /// past that the step falls back as when the rounds do not settle.
-pub const PAIRS_PER_VERTEX: u32 = 8;
+pub const NEAR_PAIRS_PER_VERTEX: u32 = 8;
 /// Marks an edge–edge pair in the GPU's list: a bit of its first vertex
 /// index, which never reaches it (a cloth has at most 2^26 vertices).
 pub const EDGE_PAIR: u32 = 1 << 31;

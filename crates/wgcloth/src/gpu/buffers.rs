@@ -230,7 +230,7 @@ pub(crate) fn params_for(scene: &Scene, sections: &Sections) -> Params {
         self_gamma: cfg.self_contact.gamma,
         self_floor: cfg.self_contact.floor,
         self_capacity: match cfg.self_contact.enabled {
-            true => separate::PAIRS_PER_VERTEX * cloth.vertex_count() as u32,
+            true => separate::NEAR_PAIRS_PER_VERTEX * cloth.vertex_count() as u32,
             false => 0,
         },
         rest_spacing: self_contact::grid_spacing(cloth).to_array(),
@@ -340,17 +340,19 @@ pub(crate) fn hops(grids: &[Grid]) -> Vec<Hop> {
 const PAIR_BYTES: usize = 16;
 
 /// Shortens stage "separate"'s pair list to what one binding holds, where
-/// `PAIRS_PER_VERTEX` per vertex would not fit: a step whose pairs overflow
-/// the list walks the cloth again for its rounds (the same result, slower),
-/// so a large cloth still runs within a device's limits.
+/// `separate::NEAR_PAIRS_PER_VERTEX` per vertex would not fit: a step
+/// whose pairs overflow the list walks the cloth again for its rounds (the
+/// same result, slower), so a large cloth still runs within a device's
+/// limits.
 pub(crate) fn fit_pair_list(limits: &wgpu::Limits, params: &mut Params) {
     let bindable = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
     let most = bindable / PAIR_BYTES as u64;
     params.self_capacity = params.self_capacity.min(most.min(u32::MAX as u64) as u32);
-    // Stage "self_contact": four contacts per vertex and PAIRS_PER_VERTEX
-    // entries in each vertex's list, or what one binding holds.
+    // Stage "self_contact": four contacts per vertex and
+    // self_contact::PAIRS_PER_VERTEX entries in each vertex's list, or what
+    // one binding holds.
     if params.cloth_thickness > 0.0 {
         let n = params.n_vertices as u64;
         let most = bindable / size_of::<ClothPair>() as u64;

@@ -176,8 +176,9 @@ pub struct Params {
     pub self_gamma: f32,
     /// `self_contact.floor`, m.
     pub self_floor: f32,
-    /// Near pairs the list holds (stage "separate"): `PAIRS_PER_VERTEX`
-    /// per vertex, or what one binding holds (`gpu::buffers::fit_pair_list`).
+    /// Near pairs the list holds (stage "separate"):
+    /// `separate::NEAR_PAIRS_PER_VERTEX` per vertex, or what one binding
+    /// holds (`gpu::buffers::fit_pair_list`).
     pub self_capacity: u32,
     /// `self_contact.thickness` when self-contact is on, else 0: stage
     /// "self_contact" runs when above 0.
