@@ -112,7 +112,7 @@ impl AddAssign for Sym3 {
 /// Σ_k A_k x_k, a block row times a vector, with each column's products
 /// summed apart: one dependent add per block in each of three chains,
 /// where `acc += A_k * x_k` makes three in one (5–10 % off the CPU's
-/// multigrid iteration at 1024², BENCHMARKS.md). The V-cycle's rows use
+/// multigrid iteration at 1024²). The V-cycle's rows use
 /// it. CG's own product keeps one chain: there it gained nothing, and its
 /// rounding moved Jacobi's iterations to 1e-4 past the GPU parity test's
 /// bound.

@@ -22,7 +22,7 @@
 // goes on copies only its scalars, and kernels read them alone: lavapipe
 // executes every branch, masked, for each 8 invocations whether they take
 // it or not (Mesa's gallivm pushes a mask for an `if`), and copying the
-// sizes too made its iterations 2.5 to 5 times as long (BENCHMARKS.md).
+// sizes too made its iterations 2.5 to 5 times as long.
 // For the same reason every way an iteration ends writes its scalars in
 // one store, and a stop's sizes are zeroed one per invocation, not in a loop.
 

@@ -103,8 +103,7 @@ fn near_corners(i: u32, cx: vec4<f32>, cy: vec4<f32>) -> u32 {
 // of its second side's at rest, so that it is not apart at rest
 // (Sheet::vertices_near_at_rest): tested before any geometry. The walk
 // names no such pair (refused_corners), but lavapipe ran the stage about
-// 5 % slower without this test (BENCHMARKS.md, "Two vertices near at
-// rest are enough").
+// 5 % slower without this test.
 fn vertices_near_at_rest(p: vec4<u32>, edge: bool) -> bool {
     if !neighbours_near() {
         return false;

@@ -25,7 +25,7 @@ const MAX_CELLS: u64 = 1 << 21;
 
 /// Cells per reach: quarter-reach cells keep a sphere's lists near four
 /// triangles; half-reach ones listed six and were slower, eighth-reach ones
-/// three and were no faster (BENCHMARKS.md, "The CPU's collide stage").
+/// three and were no faster.
 const CELLS_PER_REACH: f32 = 4.0;
 
 /// Each prism and slab is widened by this share of a cell, so that no

@@ -388,8 +388,7 @@ impl Multigrid {
     /// rows in an order the colours allow ([`Pass::rows`]). Each patch is
     /// solved from the same z as when each colour took its turn over the
     /// grid, but a row's blocks are read while the row before them is still
-    /// in cache, where each colour read two nodes of four in half the rows
-    /// (BENCHMARKS.md, "A patch row at a time").
+    /// in cache, where each colour read two nodes of four in half the rows.
     ///
     /// The rows are cut into bands, a band to a task, each on a copy of its
     /// rows and those beside it as they stand before the sweep. A band
@@ -781,8 +780,7 @@ impl Pass<'_> {
     /// which changes no result. The rows of a sweep follow each other two
     /// and three rows apart, which the hardware's prefetcher does not
     /// follow, and a coarse level's forward sweep is the V-cycle's first
-    /// read of its stencils since the finer levels' passes evicted them
-    /// (BENCHMARKS.md, "A patch row at a time").
+    /// read of its stencils since the finer levels' passes evicted them.
     // Out of line: inlined into the row loop, the 512² solve took 2 % to
     // 5 % longer.
     #[inline(never)]

@@ -9,7 +9,7 @@
 //! invocation without barriers, its Jacobian in forward mode with the
 //! tangents in the lanes of each unit's vec4, for CPU adapters such as
 //! lavapipe, which run it 2.8× (the thesis-size network) to 13× faster
-//! than `layer` (BENCHMARKS.md).
+//! than `layer`.
 
 use std::ops::Range;
 
