@@ -12,233 +12,183 @@ use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
 use crate::gpu::shaders::{self, Binding, STAGES};
 
-/// Every entry point of every stage: pipelines are found by this, never
-/// by name. Each names its WGSL file and the entry point in it; a test
-/// checks that the files have no other.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Entry {
+/// Declares [`Entry`], [`Entry::ALL`] and [`Entry::wgsl`] from one list,
+/// so an entry point is written once: its variant, its WGSL file (stage)
+/// and its name in that file.
+macro_rules! entry_points {
+    ($($(#[$doc:meta])* $name:ident => ($file:literal, $entry:literal),)*) => {
+        /// Every entry point of every stage: pipelines are found by this,
+        /// never by name. Each names its WGSL file and the entry point in
+        /// it; a test checks that the files have no other.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        pub enum Entry {
+            $($(#[$doc])* $name,)*
+        }
+
+        impl Entry {
+            /// Every entry point, in declaration order (`Entry as usize`).
+            pub const ALL: [Entry; [$($entry),*].len()] = [$(Entry::$name),*];
+
+            /// The WGSL file (stage) and the entry point in it.
+            pub const fn wgsl(self) -> (&'static str, &'static str) {
+                match self {
+                    $(Entry::$name => ($file, $entry),)*
+                }
+            }
+        }
+    };
+}
+
+entry_points! {
     /// Places the rigid body at the end of the step (`rigid::main`).
-    Rigid,
+    Rigid => ("rigid", "main"),
     /// Refits the bounds of the cloth tiles (`collide::tiles`).
-    CollideTiles,
+    CollideTiles => ("collide", "tiles"),
     /// Refits the super-tile bounds from the tiles (`collide::supertiles`).
-    CollideSupertiles,
+    CollideSupertiles => ("collide", "supertiles"),
     /// The rigid triangle closest to each cloth vertex (`collide::vertex_face`).
-    CollideVertexFace,
+    CollideVertexFace => ("collide", "vertex_face"),
     /// The cloth triangle closest to each rigid vertex (`collide::face_vertex`).
-    CollideFaceVertex,
+    CollideFaceVertex => ("collide", "face_vertex"),
     /// The same, one invocation per rigid vertex
     /// (`collide::face_vertex_serial`).
-    CollideFaceVertexSerial,
+    CollideFaceVertexSerial => ("collide", "face_vertex_serial"),
     /// Each triangle's face–vertex contacts linked in rigid-vertex order (`collide::order`).
-    CollideOrder,
+    CollideOrder => ("collide", "order"),
     /// The analytic models' response of every contact slot (`contact::respond_slots`).
-    ContactRespondSlots,
+    ContactRespondSlots => ("contact", "respond_slots"),
     /// Empties the network batch (`contact::reset_batch`).
-    ContactResetBatch,
+    ContactResetBatch => ("contact", "reset_batch"),
     /// Appends every valid contact and its inputs to the network batch
     /// (`contact::gather`).
-    ContactGather,
+    ContactGather => ("contact", "gather"),
     /// Responses from the network's outputs (`contact::respond_batch`).
-    ContactRespondBatch,
+    ContactRespondBatch => ("contact", "respond_batch"),
     /// A's diagonal block and b, per vertex (`assemble::vertex`).
-    AssembleVertex,
+    AssembleVertex => ("assemble", "vertex"),
     /// A's off-diagonal block, per spring (`assemble::spring`).
-    AssembleSpring,
+    AssembleSpring => ("assemble", "spring"),
     /// r = S (b − A x), z = P⁻¹ r, and partial rᵀz and bᵀP⁻¹b (`pcg::init`).
-    PcgInit,
+    PcgInit => ("pcg", "init"),
     /// PCG's starting scalars (`pcg::init_scalars`).
-    PcgInitScalars,
+    PcgInitScalars => ("pcg", "init_scalars"),
     /// The first iteration: p = z, q = S A p and partial pᵀq (`pcg::spmv`).
-    PcgSpmv,
+    PcgSpmv => ("pcg", "spmv"),
     /// Jacobi: x += α p, r −= α q, z = P⁻¹ r, partial rᵀz and rᵀr (`pcg::update`).
-    PcgUpdate,
+    PcgUpdate => ("pcg", "update"),
     /// Multigrid: x += α p, r −= α q and partial rᵀr (`pcg::advance`).
-    PcgAdvance,
+    PcgAdvance => ("pcg", "advance"),
     /// Ends an iteration and starts the next: the scalars, p' = z + β p,
     /// q = S A p' and partial p'ᵀq (`pcg::next`).
-    PcgNext,
+    PcgNext => ("pcg", "next"),
     /// Ends the last iteration: its scalars alone (`pcg::conclude`).
-    PcgConclude,
+    PcgConclude => ("pcg", "conclude"),
     /// p = x, which `PcgCoupleInit` reads (`pcg::couple_start`).
-    PcgCoupleStart,
+    PcgCoupleStart => ("pcg", "couple_start"),
     /// r −= S C x for the cloth–cloth couplings C, z = P⁻¹ r, partial rᵀz
     /// and rᵀr (`pcg::couple_init`).
-    PcgCoupleInit,
+    PcgCoupleInit => ("pcg", "couple_init"),
     /// q += S C p and partial pᵀq (`pcg::couple`).
-    PcgCouple,
+    PcgCouple => ("pcg", "couple"),
     /// Folds the solve's outcome into the run statistics (`pcg::finish`).
-    PcgFinish,
+    PcgFinish => ("pcg", "finish"),
     /// A coarse level's Galerkin operator and smoother (`multigrid::galerkin`).
-    MgGalerkin,
+    MgGalerkin => ("multigrid", "galerkin"),
     /// A level's residual after its pre-smoothing (`multigrid::residual`).
-    MgResidual,
+    MgResidual => ("multigrid", "residual"),
     /// Its restriction to the next level (`multigrid::down`).
-    MgDown,
+    MgDown => ("multigrid", "down"),
     /// The coarsest levels, down and up, in one workgroup (`multigrid::tail`).
-    MgTail,
+    MgTail => ("multigrid", "tail"),
     /// A level's guess: pre-smoothing plus the interpolated coarse
     /// correction (`multigrid::guess_up`).
-    MgGuess,
+    MgGuess => ("multigrid", "guess_up"),
     /// Post-smoothing of the guess; z on the cloth (`multigrid::up`).
-    MgUp,
+    MgUp => ("multigrid", "up"),
     /// A level's patch inverses, for the patch smoother (`multigrid::patches`).
-    MgPatches,
+    MgPatches => ("multigrid", "patches"),
     /// A forward sweep of one colour's patches (`multigrid::patch_down`).
-    MgPatchDown,
+    MgPatchDown => ("multigrid", "patch_down"),
     /// A backward sweep of one colour's patches (`multigrid::patch_up`).
-    MgPatchUp,
+    MgPatchUp => ("multigrid", "patch_up"),
     /// x' = x + h v', the clock and the health flags (`integrate::main`).
-    Integrate,
+    Integrate => ("integrate", "main"),
     /// Penetration depth, the push-out and the contact total (`measure::main`).
-    Measure,
+    Measure => ("measure", "main"),
     /// Each vertex's step from the solve, its zone its own (`separate::start`).
-    SeparateStart,
+    SeparateStart => ("separate", "start"),
     /// A detection's steps, kept for its passes (`separate::sweep`).
-    SeparateSweep,
+    SeparateSweep => ("separate", "sweep"),
     /// A detection: least separations and holds cleared, each cell's swept box (`separate::prepare`).
-    SeparatePrepare,
+    SeparatePrepare => ("separate", "prepare"),
     /// Refits the cloth tiles to the boxes the step sweeps (`separate::tiles`).
-    SeparateTiles,
+    SeparateTiles => ("separate", "tiles"),
     /// Each vertex and the edges it starts against the cloth near their
     /// paths, listing the near pairs (`separate::walks`).
-    SeparateWalks,
+    SeparateWalks => ("separate", "walks"),
     /// After a detection: the passes over its pairs (`separate::plan_walked`).
-    SeparatePlanWalked,
+    SeparatePlanWalked => ("separate", "plan_walked"),
     /// A test of the listed pairs, counting the failing ones at their vertices (`separate::test_pairs`).
-    SeparateTestPairs,
+    SeparateTestPairs => ("separate", "test_pairs"),
     /// The same over the walks, when the list overflowed (`separate::test_walks`).
-    SeparateTestWalks,
+    SeparateTestWalks => ("separate", "test_walks"),
     /// After a test: the round goes on, or the rounds end (`separate::plan_tested`).
-    SeparatePlanTested,
+    SeparatePlanTested => ("separate", "plan_tested"),
     /// An impulse round's pushes of the listed failing pairs (`separate::push_pairs`).
-    SeparatePushPairs,
+    SeparatePushPairs => ("separate", "push_pairs"),
     /// The same over the walks (`separate::push_walks`).
-    SeparatePushWalks,
+    SeparatePushWalks => ("separate", "push_walks"),
     /// Each vertex's step changed by its summed pushes (`separate::apply`).
-    SeparateApply,
+    SeparateApply => ("separate", "apply"),
     /// Between a detection's impulse and zone rounds (`separate::plan_phase`).
-    SeparatePlanPhase,
+    SeparatePlanPhase => ("separate", "plan_phase"),
     /// A zone round's hooks of the listed failing pairs (`separate::hook_pairs`).
-    SeparateHookPairs,
+    SeparateHookPairs => ("separate", "hook_pairs"),
     /// The same over the walks (`separate::hook_walks`).
-    SeparateHookWalks,
+    SeparateHookWalks => ("separate", "hook_walks"),
     /// Labels to their labels' next, and each zone's sums (`separate::jump`).
-    SeparateJump,
+    SeparateJump => ("separate", "jump"),
     /// Each free zoned vertex takes its zone's step (`separate::spread`).
-    SeparateSpread,
+    SeparateSpread => ("separate", "spread"),
     /// The zone sums cleared (`separate::clear`).
-    SeparateClear,
+    SeparateClear => ("separate", "clear"),
     /// Before a detection: its passes, unless the step has settled (`separate::plan_detect`).
-    SeparatePlanDetect,
+    SeparatePlanDetect => ("separate", "plan_detect"),
     /// After the last detection's test: the last resort, where pairs fail (`separate::plan_last`).
-    SeparatePlanLast,
+    SeparatePlanLast => ("separate", "plan_last"),
     /// A round of the last resort over the listed near pairs (`separate::round`).
-    SeparateRound,
+    SeparateRound => ("separate", "round"),
     /// Its round's walks when the list overflowed (`separate::recheck`).
-    SeparateRecheck,
+    SeparateRecheck => ("separate", "recheck"),
     /// Its round's newly held vertices counted and folded in (`separate::settle`).
-    SeparateSettle,
+    SeparateSettle => ("separate", "settle"),
     /// Its next round's dispatches (`separate::plan`).
-    SeparatePlan,
+    SeparatePlan => ("separate", "plan"),
     /// Each vertex's changed step applied, and the statistics (`separate::finish`).
-    SeparateFinish,
+    SeparateFinish => ("separate", "finish"),
     /// Each grid cell's box at the step's start (`self_contact::cells`).
-    SelfContactCells,
+    SelfContactCells => ("self_contact", "cells"),
     /// Each vertex's and each edge it starts' cloth–cloth contacts
     /// (`self_contact::walks`).
-    SelfContactWalks,
+    SelfContactWalks => ("self_contact", "walks"),
     /// Each contact's force and blocks, linked to its vertices (`self_contact::link`).
-    SelfContactLink,
+    SelfContactLink => ("self_contact", "link"),
     /// Each vertex's contacts sorted and added to A and b (`self_contact::gather`).
-    SelfContactGather,
+    SelfContactGather => ("self_contact", "gather"),
     /// Sizes a network batch's indirect dispatches (`batch::plan`).
-    BatchPlan,
+    BatchPlan => ("batch", "plan"),
     /// One dense network layer as a tiled matrix product (`mlp::layer`).
-    MlpLayer,
+    MlpLayer => ("mlp", "layer"),
     /// The whole network, one contact per invocation, up to three Jacobian
     /// columns (`mlp::per_contact`).
-    MlpPerContact,
+    MlpPerContact => ("mlp", "per_contact"),
     /// The same, up to seven columns (`mlp::per_contact_wide`).
-    MlpPerContactWide,
+    MlpPerContactWide => ("mlp", "per_contact_wide"),
     /// Each contact's force as a segment for the renderer (`lines::force_lines`).
-    ForceLines,
+    ForceLines => ("lines", "force_lines"),
 }
 
 impl Entry {
-    /// Every entry point, in declaration order (`Entry as usize`).
-    pub const ALL: [Entry; 69] = [
-        Entry::Rigid,
-        Entry::CollideTiles,
-        Entry::CollideSupertiles,
-        Entry::CollideVertexFace,
-        Entry::CollideFaceVertex,
-        Entry::CollideFaceVertexSerial,
-        Entry::CollideOrder,
-        Entry::ContactRespondSlots,
-        Entry::ContactResetBatch,
-        Entry::ContactGather,
-        Entry::ContactRespondBatch,
-        Entry::AssembleVertex,
-        Entry::AssembleSpring,
-        Entry::PcgInit,
-        Entry::PcgInitScalars,
-        Entry::PcgSpmv,
-        Entry::PcgUpdate,
-        Entry::PcgAdvance,
-        Entry::PcgNext,
-        Entry::PcgConclude,
-        Entry::PcgCoupleStart,
-        Entry::PcgCoupleInit,
-        Entry::PcgCouple,
-        Entry::PcgFinish,
-        Entry::MgGalerkin,
-        Entry::MgResidual,
-        Entry::MgDown,
-        Entry::MgTail,
-        Entry::MgGuess,
-        Entry::MgUp,
-        Entry::MgPatches,
-        Entry::MgPatchDown,
-        Entry::MgPatchUp,
-        Entry::Integrate,
-        Entry::Measure,
-        Entry::SeparateStart,
-        Entry::SeparateSweep,
-        Entry::SeparatePrepare,
-        Entry::SeparateTiles,
-        Entry::SeparateWalks,
-        Entry::SeparatePlanWalked,
-        Entry::SeparateTestPairs,
-        Entry::SeparateTestWalks,
-        Entry::SeparatePlanTested,
-        Entry::SeparatePushPairs,
-        Entry::SeparatePushWalks,
-        Entry::SeparateApply,
-        Entry::SeparatePlanPhase,
-        Entry::SeparateHookPairs,
-        Entry::SeparateHookWalks,
-        Entry::SeparateJump,
-        Entry::SeparateSpread,
-        Entry::SeparateClear,
-        Entry::SeparatePlanDetect,
-        Entry::SeparatePlanLast,
-        Entry::SeparateRound,
-        Entry::SeparateRecheck,
-        Entry::SeparateSettle,
-        Entry::SeparatePlan,
-        Entry::SeparateFinish,
-        Entry::SelfContactCells,
-        Entry::SelfContactWalks,
-        Entry::SelfContactLink,
-        Entry::SelfContactGather,
-        Entry::BatchPlan,
-        Entry::MlpLayer,
-        Entry::MlpPerContact,
-        Entry::MlpPerContactWide,
-        Entry::ForceLines,
-    ];
-
     /// Whether its pipelines are made per kind of level ([`LevelKind`]),
     /// each with the WGSL overrides its file declares without a default:
     /// every multigrid kernel, of the V-cycle and of its setup.
@@ -255,81 +205,6 @@ impl Entry {
                 | Entry::MgPatchDown
                 | Entry::MgPatchUp
         )
-    }
-
-    /// The WGSL file (stage) and the entry point in it.
-    pub const fn wgsl(self) -> (&'static str, &'static str) {
-        match self {
-            Entry::Rigid => ("rigid", "main"),
-            Entry::CollideTiles => ("collide", "tiles"),
-            Entry::CollideSupertiles => ("collide", "supertiles"),
-            Entry::CollideVertexFace => ("collide", "vertex_face"),
-            Entry::CollideFaceVertex => ("collide", "face_vertex"),
-            Entry::CollideFaceVertexSerial => ("collide", "face_vertex_serial"),
-            Entry::CollideOrder => ("collide", "order"),
-            Entry::ContactRespondSlots => ("contact", "respond_slots"),
-            Entry::ContactResetBatch => ("contact", "reset_batch"),
-            Entry::ContactGather => ("contact", "gather"),
-            Entry::ContactRespondBatch => ("contact", "respond_batch"),
-            Entry::AssembleVertex => ("assemble", "vertex"),
-            Entry::AssembleSpring => ("assemble", "spring"),
-            Entry::PcgInit => ("pcg", "init"),
-            Entry::PcgInitScalars => ("pcg", "init_scalars"),
-            Entry::PcgSpmv => ("pcg", "spmv"),
-            Entry::PcgUpdate => ("pcg", "update"),
-            Entry::PcgAdvance => ("pcg", "advance"),
-            Entry::PcgNext => ("pcg", "next"),
-            Entry::PcgConclude => ("pcg", "conclude"),
-            Entry::PcgCoupleStart => ("pcg", "couple_start"),
-            Entry::PcgCoupleInit => ("pcg", "couple_init"),
-            Entry::PcgCouple => ("pcg", "couple"),
-            Entry::PcgFinish => ("pcg", "finish"),
-            Entry::MgGalerkin => ("multigrid", "galerkin"),
-            Entry::MgResidual => ("multigrid", "residual"),
-            Entry::MgDown => ("multigrid", "down"),
-            Entry::MgTail => ("multigrid", "tail"),
-            Entry::MgGuess => ("multigrid", "guess_up"),
-            Entry::MgUp => ("multigrid", "up"),
-            Entry::MgPatches => ("multigrid", "patches"),
-            Entry::MgPatchDown => ("multigrid", "patch_down"),
-            Entry::MgPatchUp => ("multigrid", "patch_up"),
-            Entry::Integrate => ("integrate", "main"),
-            Entry::Measure => ("measure", "main"),
-            Entry::SeparateStart => ("separate", "start"),
-            Entry::SeparateSweep => ("separate", "sweep"),
-            Entry::SeparatePrepare => ("separate", "prepare"),
-            Entry::SeparateTiles => ("separate", "tiles"),
-            Entry::SeparateWalks => ("separate", "walks"),
-            Entry::SeparatePlanWalked => ("separate", "plan_walked"),
-            Entry::SeparateTestPairs => ("separate", "test_pairs"),
-            Entry::SeparateTestWalks => ("separate", "test_walks"),
-            Entry::SeparatePlanTested => ("separate", "plan_tested"),
-            Entry::SeparatePushPairs => ("separate", "push_pairs"),
-            Entry::SeparatePushWalks => ("separate", "push_walks"),
-            Entry::SeparateApply => ("separate", "apply"),
-            Entry::SeparatePlanPhase => ("separate", "plan_phase"),
-            Entry::SeparateHookPairs => ("separate", "hook_pairs"),
-            Entry::SeparateHookWalks => ("separate", "hook_walks"),
-            Entry::SeparateJump => ("separate", "jump"),
-            Entry::SeparateSpread => ("separate", "spread"),
-            Entry::SeparateClear => ("separate", "clear"),
-            Entry::SeparatePlanDetect => ("separate", "plan_detect"),
-            Entry::SeparatePlanLast => ("separate", "plan_last"),
-            Entry::SeparateRound => ("separate", "round"),
-            Entry::SeparateRecheck => ("separate", "recheck"),
-            Entry::SeparateSettle => ("separate", "settle"),
-            Entry::SeparatePlan => ("separate", "plan"),
-            Entry::SeparateFinish => ("separate", "finish"),
-            Entry::SelfContactCells => ("self_contact", "cells"),
-            Entry::SelfContactWalks => ("self_contact", "walks"),
-            Entry::SelfContactLink => ("self_contact", "link"),
-            Entry::SelfContactGather => ("self_contact", "gather"),
-            Entry::BatchPlan => ("batch", "plan"),
-            Entry::MlpLayer => ("mlp", "layer"),
-            Entry::MlpPerContact => ("mlp", "per_contact"),
-            Entry::MlpPerContactWide => ("mlp", "per_contact_wide"),
-            Entry::ForceLines => ("lines", "force_lines"),
-        }
     }
 }
 
