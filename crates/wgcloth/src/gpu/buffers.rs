@@ -463,8 +463,8 @@ impl Sizes {
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
-    pub(crate) fn whole(&self) -> [(&'static str, u64); 19] {
-        [
+    pub(crate) fn whole(&self) -> Vec<(&'static str, u64)> {
+        vec![
             ("per-vertex vectors", self.per_vertex),
             ("solver vectors", self.solver_vector),
             ("PCG z and q", 2 * self.solver_vector),

@@ -170,7 +170,7 @@ const _: () = assert!(multigrid::MAX_LEVELS <= WORKGROUP);
 /// Every constant the kernels read, by its WGSL name (`model::NAIVE_NET`
 /// and `motion::STATIC` are the kernels' `else` branches, so they never
 /// name them, nor `level::COARSE`).
-pub const SHARED: [(&str, u32); 66] = [
+pub const SHARED: &[(&str, u32)] = &[
     ("WORKGROUP", WORKGROUP),
     ("CONTACT_FRAME_ROWS", CONTACT_FRAME_ROWS),
     ("WORLD_FRAME_ROWS", WORLD_FRAME_ROWS),
@@ -241,7 +241,7 @@ pub const SHARED: [(&str, u32); 66] = [
 ];
 
 /// The `f32` constants the kernels read, by their WGSL names.
-pub const SHARED_F32: [(&str, f32); 6] = [
+pub const SHARED_F32: &[(&str, f32)] = &[
     ("SLIDE_AT_REST", contact::SLIDE_AT_REST),
     ("STICK_LOG_MAX", contact::STICK_LOG_MAX),
     ("SMOOTH_WEIGHT", multigrid::SMOOTH_WEIGHT),

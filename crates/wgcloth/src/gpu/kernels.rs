@@ -506,7 +506,7 @@ impl Kernels {
             }],
         });
         let mut compiled = Vec::new();
-        for (stage, _) in STAGES {
+        for &(stage, _) in STAGES {
             let mut reflected = shaders::reflect(stage, variant)
                 .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl: {e}")))?;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -682,7 +682,7 @@ mod tests {
         for (k, entry) in Entry::ALL.into_iter().enumerate() {
             assert_eq!(entry as usize, k, "{entry:?} out of order");
         }
-        for (stage, _) in STAGES {
+        for &(stage, _) in STAGES {
             let variant = shaders::Variant {
                 mlp_threads: 16,
                 split: false,

@@ -9,7 +9,7 @@ use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
 
 /// The stage files, by name.
-pub const STAGES: [(&str, &str); 13] = [
+pub const STAGES: &[(&str, &str)] = &[
     ("rigid", include_str!("../../wgsl/rigid.wgsl")),
     ("collide", include_str!("../../wgsl/collide.wgsl")),
     ("contact", include_str!("../../wgsl/contact.wgsl")),
@@ -31,7 +31,7 @@ pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
 /// Shared code with bindings of its own (so not in `COMMON`), and the
 /// stages it is prepended to.
-pub const INCLUDES: [(&str, &str, &[&str]); 9] = [
+pub const INCLUDES: &[(&str, &str, &[&str])] = &[
     (
         "topology",
         include_str!("../../wgsl/topology.wgsl"),
@@ -373,7 +373,8 @@ mod tests {
     fn files() -> Vec<(&'static str, &'static str)> {
         let includes = INCLUDES.iter().map(|(name, text, _)| (*name, *text));
         STAGES
-            .into_iter()
+            .iter()
+            .copied()
             .chain(includes)
             .chain([("common", COMMON), ("sums_subgroup", SUBGROUP_SUMS)])
             .collect()
@@ -439,7 +440,7 @@ mod tests {
 
     fn check_bindings(variant: Variant, limit: u32) {
         let limits = wgpu::Limits::default();
-        for (stage, _) in STAGES {
+        for &(stage, _) in STAGES {
             let entries = reflect(stage, variant)
                 .unwrap_or_else(|e| panic!("{stage}.wgsl ({variant:?}):\n{e}"));
             assert!(!entries.is_empty(), "{stage} has no entry point");
