@@ -1,3 +1,4 @@
+// Includes: topology, springs.
 // Stage "assemble": the linearised backward Euler system (thesis eqs. 1–3
 // with the velocity Jacobian D), gathered per vertex and per spring, each
 // spring's force and block computed here (wgsl/springs.wgsl, eqs. 4–5):

@@ -1,3 +1,4 @@
+// Includes: topology, bvh, tiles.
 // Stage "collide": contact detection in both directions (thesis 2.2–2.3).
 // CPU twin: src/cpu/collide.rs, which finds exactly the same contacts.
 //

@@ -1,3 +1,4 @@
+// Includes: topology, response.
 // Stage "contact": each contact's force and Jacobian blocks from the
 // selected model. CPU twin: src/cpu/contact.rs (same equations, same
 // branch structure). The network models gather the step's contacts into a

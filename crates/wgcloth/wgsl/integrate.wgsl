@@ -1,3 +1,4 @@
+// Includes: topology.
 // Stage "integrate": x' = x + h v'; pinned vertices return to their
 // prescribed positions with zero velocity; with self-contact, x is kept
 // as where the step started (separate.wgsl holds the step back from it);

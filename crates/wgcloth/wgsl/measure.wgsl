@@ -1,3 +1,4 @@
+// Includes: topology, bvh.
 // Stage "measure": how deep the cloth got inside the rigid body after the
 // solve (a ray-parity inside test, then the distance to the nearest point
 // of the surface; no depth limit), folded into the run's maximum, the

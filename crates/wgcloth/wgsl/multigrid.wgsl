@@ -1,3 +1,4 @@
+// Includes: topology, sums, partials.
 // Stage "pcg", its multigrid preconditioner: one symmetric V(1,1)-cycle on
 // the cloth grid's hierarchy (src/multigrid.rs), the Galerkin coarse
 // operators Pᵀ A P rebuilt every step, each level but the coarsest smoothed

@@ -1,3 +1,4 @@
+// Includes: topology, sums, partials.
 // Stage "pcg": preconditioned conjugate gradient on A v' = b, pinned rows
 // filtered (Baraff & Witkin's modified PCG), preconditioned by Jacobi (the
 // thesis's) or by a multigrid V-cycle (wgsl/multigrid.wgsl). CPU twin:

@@ -1,3 +1,4 @@
+// Includes: topology, tiles, walk, response.
 // Stage "self_contact": the cloth pushing against itself (issue 23), as
 // forces in the implicit solve. CPU twin: src/cpu/self_contact.rs, which
 // finds the same contacts and adds the same terms in the same order.

@@ -1,3 +1,4 @@
+// Includes: topology, tiles, walk, impact.
 // Stage "separate": each cloth vertex's step, from where it started to
 // where the solve and the push-out left it, changed where the cloth would
 // otherwise pass through itself (issue 23). CPU twin: src/cpu/separate.rs

@@ -29,64 +29,19 @@ pub const STAGES: &[(&str, &str)] = &[
 /// the shared structs and helpers).
 pub const COMMON: &str = include_str!("../../wgsl/common.wgsl");
 
-/// Shared code with bindings of its own (so not in `COMMON`), and the
-/// stages it is prepended to.
-pub const INCLUDES: &[(&str, &str, &[&str])] = &[
-    (
-        "topology",
-        include_str!("../../wgsl/topology.wgsl"),
-        &[
-            "collide",
-            "contact",
-            "assemble",
-            "pcg",
-            "multigrid",
-            "self_contact",
-            "separate",
-            "integrate",
-            "measure",
-        ],
-    ),
-    (
-        "bvh",
-        include_str!("../../wgsl/bvh.wgsl"),
-        &["collide", "measure"],
-    ),
-    (
-        "tiles",
-        include_str!("../../wgsl/tiles.wgsl"),
-        &["collide", "self_contact", "separate"],
-    ),
-    (
-        "walk",
-        include_str!("../../wgsl/walk.wgsl"),
-        &["self_contact", "separate"],
-    ),
-    (
-        "response",
-        include_str!("../../wgsl/response.wgsl"),
-        &["contact", "self_contact"],
-    ),
-    (
-        "springs",
-        include_str!("../../wgsl/springs.wgsl"),
-        &["assemble"],
-    ),
-    (
-        "impact",
-        include_str!("../../wgsl/impact.wgsl"),
-        &["separate"],
-    ),
-    (
-        "sums",
-        include_str!("../../wgsl/sums.wgsl"),
-        &["pcg", "multigrid"],
-    ),
-    (
-        "partials",
-        include_str!("../../wgsl/partials.wgsl"),
-        &["pcg", "multigrid"],
-    ),
+/// Shared code with bindings of its own (so not in `COMMON`), in the order
+/// a stage that names some of them (its `// Includes:` line,
+/// [`includes_of`]) gets them.
+pub const INCLUDES: &[(&str, &str)] = &[
+    ("topology", include_str!("../../wgsl/topology.wgsl")),
+    ("bvh", include_str!("../../wgsl/bvh.wgsl")),
+    ("tiles", include_str!("../../wgsl/tiles.wgsl")),
+    ("walk", include_str!("../../wgsl/walk.wgsl")),
+    ("response", include_str!("../../wgsl/response.wgsl")),
+    ("springs", include_str!("../../wgsl/springs.wgsl")),
+    ("impact", include_str!("../../wgsl/impact.wgsl")),
+    ("sums", include_str!("../../wgsl/sums.wgsl")),
+    ("partials", include_str!("../../wgsl/partials.wgsl")),
 ];
 
 /// `wgsl/sums_subgroup.wgsl`: the workgroup sums through subgroup
@@ -242,6 +197,15 @@ fn accessors(text: &str, variant: Variant) -> String {
     out
 }
 
+/// The includes a stage's code names on its `// Includes: a, b.` line
+/// (none without one).
+pub fn includes_of(code: &str) -> Vec<&str> {
+    code.lines()
+        .find_map(|l| l.strip_prefix("// Includes: "))
+        .map(|names| names.trim_end_matches('.').split(", ").collect())
+        .unwrap_or_default()
+}
+
 /// The shared constants ([`constants::prelude`], the network tile set to
 /// `mlp_threads` per edge), common code, the stage's includes, the stage's
 /// own code, then the accessors of its solver vectors ([`SOLVER_VECTORS`],
@@ -253,15 +217,14 @@ pub fn source(stage: &str, variant: Variant) -> String {
         .find(|(name, _)| *name == stage)
         .unwrap_or_else(|| panic!("no WGSL stage `{stage}`"))
         .1;
+    let named = includes_of(body);
     let includes: String = INCLUDES
         .iter()
-        .filter(|(_, _, users)| users.contains(&stage))
-        .map(
-            |(name, text, _)| match *name == "sums" && variant.subgroups {
-                true => format!("{SUBGROUP_SUMS}\n"),
-                false => format!("{text}\n"),
-            },
-        )
+        .filter(|(name, _)| named.contains(name))
+        .map(|(name, text)| match *name == "sums" && variant.subgroups {
+            true => format!("{SUBGROUP_SUMS}\n"),
+            false => format!("{text}\n"),
+        })
         .collect();
     let prelude = constants::prelude(variant.mlp_threads);
     match STANDALONE.contains(&stage) {
@@ -371,7 +334,7 @@ mod tests {
 
     /// Every file of `wgsl/`, by name, as written.
     fn files() -> Vec<(&'static str, &'static str)> {
-        let includes = INCLUDES.iter().map(|(name, text, _)| (*name, *text));
+        let includes = INCLUDES.iter().copied();
         STAGES
             .iter()
             .copied()
@@ -458,6 +421,27 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Every name on a stage's `// Includes:` line is an include, and every
+    /// include is named by some stage.
+    #[test]
+    fn each_include_is_named_by_a_stage_and_each_name_is_an_include() {
+        let named: Vec<&str> = STAGES
+            .iter()
+            .flat_map(|(_, text)| includes_of(text))
+            .collect();
+        for name in &named {
+            assert!(
+                INCLUDES.iter().any(|(n, _)| n == name),
+                "`{name}` is no include"
+            );
+        }
+        for (name, _) in INCLUDES {
+            assert!(named.contains(name), "no stage includes `{name}`");
+        }
+        assert_eq!(includes_of("// Includes: a, b.\nfn f() {}"), ["a", "b"]);
+        assert!(includes_of("fn f() {}").is_empty());
     }
 
     #[test]
