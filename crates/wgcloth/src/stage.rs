@@ -2,62 +2,57 @@
 //! pass of a wgsl/ file with the same name; `stage_ms` in reports and the
 //! per-stage benches use these names.
 
-/// A stage of the step, on either backend.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Stage {
+/// Declares [`Stage`], [`Stage::ALL`] and [`Stage::name`] from one list,
+/// in the order a step runs the stages.
+macro_rules! stages {
+    ($($(#[$doc:meta])* $stage:ident => $name:literal,)*) => {
+        /// A stage of the step, on either backend.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum Stage {
+            $($(#[$doc])* $stage,)*
+        }
+
+        impl Stage {
+            /// Every stage, in the order a step runs them.
+            pub const ALL: [Stage; [$($name),*].len()] = [$(Stage::$stage),*];
+
+            /// The stage's name: its cpu/ module, its wgsl/ file and its
+            /// `stage_ms` key.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $(Stage::$stage => $name,)*
+                }
+            }
+        }
+    };
+}
+
+stages! {
     /// Places the rigid body at the end of the step.
-    Rigid,
+    Rigid => "rigid",
     /// Vertex–face and face–vertex contacts.
-    Collide,
+    Collide => "collide",
     /// The contact model's forces and Jacobians (eqs. 6, 8, 9, or a network).
-    Contact,
+    Contact => "contact",
     /// The spring forces and stiffness blocks (eqs. 4–5) and the backward
     /// Euler system A v' = b.
-    Assemble,
+    Assemble => "assemble",
     /// The cloth's contacts with itself and their eqs. 8–9 forces and
     /// blocks added to the system (issue 23), when `self_contact` is on
     /// with a thickness.
-    SelfContact,
+    SelfContact => "self_contact",
     /// Preconditioned CG (multigrid or Jacobi).
-    Pcg,
+    Pcg => "pcg",
     /// x' = x + h v'.
-    Integrate,
+    Integrate => "integrate",
     /// The deepest penetration after the step.
-    Measure,
+    Measure => "measure",
     /// Each vertex's step held back where the cloth would otherwise pass
     /// through itself (issue 23), when `self_contact` is on.
-    Separate,
+    Separate => "separate",
 }
 
 impl Stage {
-    /// Every stage, in the order a step runs them.
-    pub const ALL: [Stage; 9] = [
-        Stage::Rigid,
-        Stage::Collide,
-        Stage::Contact,
-        Stage::Assemble,
-        Stage::SelfContact,
-        Stage::Pcg,
-        Stage::Integrate,
-        Stage::Measure,
-        Stage::Separate,
-    ];
-
-    /// The stage's name: its cpu/ module, its wgsl/ file and its `stage_ms` key.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Stage::Rigid => "rigid",
-            Stage::Collide => "collide",
-            Stage::Contact => "contact",
-            Stage::Assemble => "assemble",
-            Stage::SelfContact => "self_contact",
-            Stage::Pcg => "pcg",
-            Stage::Separate => "separate",
-            Stage::Integrate => "integrate",
-            Stage::Measure => "measure",
-        }
-    }
-
     /// Position in [`Stage::ALL`].
     pub const fn index(self) -> usize {
         self as usize

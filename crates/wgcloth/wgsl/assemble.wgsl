@@ -42,6 +42,7 @@ fn cloth_velocity(c: Contact) -> vec3<f32> {
         + c.beta.z * v[c.vertices.z].xyz;
 }
 
+// A's diagonal block and b, per vertex.
 @compute @workgroup_size(WORKGROUP)
 fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -86,6 +87,7 @@ fn vertex(@builtin(global_invocation_id) id: vec3<u32>) {
     b_set(i, rhs);
 }
 
+// A's off-diagonal block, per spring.
 @compute @workgroup_size(WORKGROUP)
 fn spring(@builtin(global_invocation_id) id: vec3<u32>) {
     let s = id.x;

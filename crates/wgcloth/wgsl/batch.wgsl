@@ -17,6 +17,7 @@ struct BatchParams {
 // Indirect dispatch arguments, 3 × u32 per entry.
 @group(0) @binding(2) var<storage, read_write> dispatch: array<u32>;
 
+// Sizes a network batch's indirect dispatches.
 @compute @workgroup_size(BATCH_GROUP)
 fn plan(@builtin(global_invocation_id) id: vec3<u32>) {
     let e = id.x;

@@ -54,6 +54,7 @@ fn tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     bounds[k] = Bounds(vec4<f32>(lo, 0.0), vec4<f32>(hi, 0.0));
 }
 
+// Refits the super-tile bounds from the tiles.
 @compute @workgroup_size(WORKGROUP)
 fn supertiles(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
@@ -227,6 +228,8 @@ fn tile_near(tx: u32, ty: u32, p: vec3<f32>) -> bool {
     return box_near(tb.lo.xyz, tb.hi.xyz, p, reach());
 }
 
+// The cloth triangle closest to each rigid vertex, one invocation per
+// rigid vertex, on a coarse cloth (gpu::stages::collide).
 @compute @workgroup_size(WORKGROUP)
 fn face_vertex_serial(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
@@ -267,6 +270,7 @@ var<workgroup> lane_t: array<u32, FACE_VERTEX_LANES>;
 // lane has read this one's.
 var<workgroup> lane_winner: u32;
 
+// The cloth triangle closest to each rigid vertex.
 @compute @workgroup_size(FACE_VERTEX_LANES)
 fn face_vertex(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {

@@ -145,6 +145,7 @@ fn frame_grad_v(f: ContactFrame, d: vec3<f32>) -> vec3<f32> {
     return d.y * f.c_hat + d.z * f.t_hat;
 }
 
+// Empties the network batch.
 @compute @workgroup_size(1)
 fn reset_batch() {
     atomicStore(&net_batch[0], 0u);
@@ -378,6 +379,7 @@ fn network_force(entry: u32, s: u32, k: Contact, v_rel: vec3<f32>) -> ForceJacob
     return ForceJacobian(st * (back * g), st * (back * output_jacobian(entry, 1u) * f.rotation), ZERO3);
 }
 
+// Responses from the network's outputs.
 @compute @workgroup_size(WORKGROUP)
 fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     let entry = id.x;

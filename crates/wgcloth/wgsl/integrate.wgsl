@@ -19,6 +19,7 @@ fn finite3(a: vec3<f32>) -> bool {
 // Where the step started (self-contact only).
 @group(1) @binding(5) var<storage, read_write> x_start: array<vec4<f32>>;
 
+// x' = x + h v', the clock and the health flags.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;

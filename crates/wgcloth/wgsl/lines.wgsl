@@ -12,8 +12,9 @@
 @group(1) @binding(5) var<uniform> line_scale: vec4<f32>;
 @group(1) @binding(6) var<storage, read_write> lines: array<vec4<f32>>;
 
+// Each contact's force as a segment for the renderer.
 @compute @workgroup_size(WORKGROUP)
-fn force_lines(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let s = id.x;
     if s >= params.n_vertices + params.n_rigid_vertices {
         return;

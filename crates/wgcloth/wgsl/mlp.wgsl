@@ -156,11 +156,15 @@ fn layer(
 // (z_out) in the tiled kernel's layout. Lavapipe, which runs it, stops an
 // invocation after 65,535 loop iterations (`gpu::mlp` checks).
 
+// The whole network, one contact per invocation, up to three Jacobian
+// columns.
 @compute @workgroup_size(BATCH_GROUP)
 fn per_contact(@builtin(global_invocation_id) id: vec3<u32>) {
     evaluate(id.x, false);
 }
 
+// The whole network, one contact per invocation, up to seven Jacobian
+// columns.
 @compute @workgroup_size(BATCH_GROUP)
 fn per_contact_wide(@builtin(global_invocation_id) id: vec3<u32>) {
     evaluate(id.x, true);

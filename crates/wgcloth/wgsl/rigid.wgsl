@@ -10,6 +10,7 @@
 
 const TAU: f32 = 6.283185307179586;
 
+// Places the rigid body at the end of the step.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     // The end of the step, from the step count: an f32 sum of h drifts.

@@ -414,6 +414,8 @@ fn listed_pair(k: u32, mode: u32) {
     pair(vec4<u32>(first & ~EDGE_PAIR, pairs[k].yzw), edge, mode);
 }
 
+// Each vertex and the edges it starts against the cloth near their paths,
+// listing the near pairs.
 @compute @workgroup_size(WORKGROUP)
 fn walks(@builtin(global_invocation_id) id: vec3<u32>) {
     walk_at(id.x, LISTING);
@@ -426,6 +428,7 @@ fn test_pairs(@builtin(global_invocation_id) id: vec3<u32>) {
     listed_pair(id.x, COUNTING);
 }
 
+// A test over the walks, when the list overflowed.
 @compute @workgroup_size(WORKGROUP)
 fn test_walks(@builtin(global_invocation_id) id: vec3<u32>) {
     walk_at(id.x, COUNTING);
@@ -437,6 +440,7 @@ fn push_pairs(@builtin(global_invocation_id) id: vec3<u32>) {
     listed_pair(id.x, PUSHING);
 }
 
+// An impulse round's pushes over the walks, when the list overflowed.
 @compute @workgroup_size(WORKGROUP)
 fn push_walks(@builtin(global_invocation_id) id: vec3<u32>) {
     walk_at(id.x, PUSHING);
@@ -467,6 +471,7 @@ fn hook_pairs(@builtin(global_invocation_id) id: vec3<u32>) {
     listed_pair(id.x, HOOKING);
 }
 
+// A zone round's hooks over the walks, when the list overflowed.
 @compute @workgroup_size(WORKGROUP)
 fn hook_walks(@builtin(global_invocation_id) id: vec3<u32>) {
     walk_at(id.x, HOOKING);
@@ -641,6 +646,7 @@ fn plan_hold() {
     set_dispatch(SELF_SETTLE_ARGS, select(0u, groups(params.n_vertices), unsettled));
 }
 
+// After a round of the last resort: the next round's dispatches.
 @compute @workgroup_size(1)
 fn plan() {
     plan_hold();

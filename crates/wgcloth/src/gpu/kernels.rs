@@ -10,11 +10,11 @@ use crate::error::{Error, Result};
 use crate::gpu::buffers::Parts;
 use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
+use crate::gpu::pass::Pass;
 use crate::gpu::shaders::{self, Binding, STAGES};
 
-/// Declares [`Entry`], [`Entry::ALL`] and [`Entry::wgsl`] from one list,
-/// so an entry point is written once: its variant, its WGSL file (stage)
-/// and its name in that file.
+/// Declares [`Entry`], [`Entry::ALL`] and [`Entry::wgsl`] from one list:
+/// each entry point's variant, its WGSL file (stage) and its name there.
 macro_rules! entry_points {
     ($($(#[$doc:meta])* $name:ident => ($file:literal, $entry:literal),)*) => {
         /// Every entry point of every stage: pipelines are found by this,
@@ -39,172 +39,15 @@ macro_rules! entry_points {
     };
 }
 
-entry_points! {
-    /// Places the rigid body at the end of the step (`rigid::main`).
-    Rigid => ("rigid", "main"),
-    /// Refits the bounds of the cloth tiles (`collide::tiles`).
-    CollideTiles => ("collide", "tiles"),
-    /// Refits the super-tile bounds from the tiles (`collide::supertiles`).
-    CollideSupertiles => ("collide", "supertiles"),
-    /// The rigid triangle closest to each cloth vertex (`collide::vertex_face`).
-    CollideVertexFace => ("collide", "vertex_face"),
-    /// The cloth triangle closest to each rigid vertex (`collide::face_vertex`).
-    CollideFaceVertex => ("collide", "face_vertex"),
-    /// The same, one invocation per rigid vertex
-    /// (`collide::face_vertex_serial`).
-    CollideFaceVertexSerial => ("collide", "face_vertex_serial"),
-    /// Each triangle's face–vertex contacts linked in rigid-vertex order (`collide::order`).
-    CollideOrder => ("collide", "order"),
-    /// The analytic models' response of every contact slot (`contact::respond_slots`).
-    ContactRespondSlots => ("contact", "respond_slots"),
-    /// Empties the network batch (`contact::reset_batch`).
-    ContactResetBatch => ("contact", "reset_batch"),
-    /// Appends every valid contact and its inputs to the network batch
-    /// (`contact::gather`).
-    ContactGather => ("contact", "gather"),
-    /// Responses from the network's outputs (`contact::respond_batch`).
-    ContactRespondBatch => ("contact", "respond_batch"),
-    /// A's diagonal block and b, per vertex (`assemble::vertex`).
-    AssembleVertex => ("assemble", "vertex"),
-    /// A's off-diagonal block, per spring (`assemble::spring`).
-    AssembleSpring => ("assemble", "spring"),
-    /// r = S (b − A x), z = P⁻¹ r, and partial rᵀz and bᵀP⁻¹b (`pcg::init`).
-    PcgInit => ("pcg", "init"),
-    /// PCG's starting scalars (`pcg::init_scalars`).
-    PcgInitScalars => ("pcg", "init_scalars"),
-    /// The first iteration: p = z, q = S A p and partial pᵀq (`pcg::spmv`).
-    PcgSpmv => ("pcg", "spmv"),
-    /// Jacobi: x += α p, r −= α q, z = P⁻¹ r, partial rᵀz and rᵀr (`pcg::update`).
-    PcgUpdate => ("pcg", "update"),
-    /// Multigrid: x += α p, r −= α q and partial rᵀr (`pcg::advance`).
-    PcgAdvance => ("pcg", "advance"),
-    /// Ends an iteration and starts the next: the scalars, p' = z + β p,
-    /// q = S A p' and partial p'ᵀq (`pcg::next`).
-    PcgNext => ("pcg", "next"),
-    /// Ends the last iteration: its scalars alone (`pcg::conclude`).
-    PcgConclude => ("pcg", "conclude"),
-    /// p = x, which `PcgCoupleInit` reads (`pcg::couple_start`).
-    PcgCoupleStart => ("pcg", "couple_start"),
-    /// r −= S C x for the cloth–cloth couplings C, z = P⁻¹ r, partial rᵀz
-    /// and rᵀr (`pcg::couple_init`).
-    PcgCoupleInit => ("pcg", "couple_init"),
-    /// q += S C p and partial pᵀq (`pcg::couple`).
-    PcgCouple => ("pcg", "couple"),
-    /// Folds the solve's outcome into the run statistics (`pcg::finish`).
-    PcgFinish => ("pcg", "finish"),
-    /// A coarse level's Galerkin operator and smoother (`multigrid::galerkin`).
-    MgGalerkin => ("multigrid", "galerkin"),
-    /// A level's residual after its pre-smoothing (`multigrid::residual`).
-    MgResidual => ("multigrid", "residual"),
-    /// Its restriction to the next level (`multigrid::down`).
-    MgDown => ("multigrid", "down"),
-    /// The coarsest levels, down and up, in one workgroup (`multigrid::tail`).
-    MgTail => ("multigrid", "tail"),
-    /// A level's guess: pre-smoothing plus the interpolated coarse
-    /// correction (`multigrid::guess_up`).
-    MgGuess => ("multigrid", "guess_up"),
-    /// Post-smoothing of the guess; z on the cloth (`multigrid::up`).
-    MgUp => ("multigrid", "up"),
-    /// A level's patch inverses, for the patch smoother (`multigrid::patches`).
-    MgPatches => ("multigrid", "patches"),
-    /// A forward sweep of one colour's patches (`multigrid::patch_down`).
-    MgPatchDown => ("multigrid", "patch_down"),
-    /// A backward sweep of one colour's patches (`multigrid::patch_up`).
-    MgPatchUp => ("multigrid", "patch_up"),
-    /// x' = x + h v', the clock and the health flags (`integrate::main`).
-    Integrate => ("integrate", "main"),
-    /// Penetration depth, the push-out and the contact total (`measure::main`).
-    Measure => ("measure", "main"),
-    /// Each vertex's step from the solve, its zone its own (`separate::start`).
-    SeparateStart => ("separate", "start"),
-    /// A detection's steps, kept for its passes (`separate::sweep`).
-    SeparateSweep => ("separate", "sweep"),
-    /// A detection: least separations and holds cleared, each cell's swept box (`separate::prepare`).
-    SeparatePrepare => ("separate", "prepare"),
-    /// Refits the cloth tiles to the boxes the step sweeps (`separate::tiles`).
-    SeparateTiles => ("separate", "tiles"),
-    /// Each vertex and the edges it starts against the cloth near their
-    /// paths, listing the near pairs (`separate::walks`).
-    SeparateWalks => ("separate", "walks"),
-    /// After a detection: the passes over its pairs (`separate::plan_walked`).
-    SeparatePlanWalked => ("separate", "plan_walked"),
-    /// A test of the listed pairs, counting the failing ones at their vertices (`separate::test_pairs`).
-    SeparateTestPairs => ("separate", "test_pairs"),
-    /// The same over the walks, when the list overflowed (`separate::test_walks`).
-    SeparateTestWalks => ("separate", "test_walks"),
-    /// After a test: the round goes on, or the rounds end (`separate::plan_tested`).
-    SeparatePlanTested => ("separate", "plan_tested"),
-    /// An impulse round's pushes of the listed failing pairs (`separate::push_pairs`).
-    SeparatePushPairs => ("separate", "push_pairs"),
-    /// The same over the walks (`separate::push_walks`).
-    SeparatePushWalks => ("separate", "push_walks"),
-    /// Each vertex's step changed by its summed pushes (`separate::apply`).
-    SeparateApply => ("separate", "apply"),
-    /// Between a detection's impulse and zone rounds (`separate::plan_phase`).
-    SeparatePlanPhase => ("separate", "plan_phase"),
-    /// A zone round's hooks of the listed failing pairs (`separate::hook_pairs`).
-    SeparateHookPairs => ("separate", "hook_pairs"),
-    /// The same over the walks (`separate::hook_walks`).
-    SeparateHookWalks => ("separate", "hook_walks"),
-    /// Labels to their labels' next, and each zone's sums (`separate::jump`).
-    SeparateJump => ("separate", "jump"),
-    /// Each free zoned vertex takes its zone's step (`separate::spread`).
-    SeparateSpread => ("separate", "spread"),
-    /// The zone sums cleared (`separate::clear`).
-    SeparateClear => ("separate", "clear"),
-    /// Before a detection: its passes, unless the step has settled (`separate::plan_detect`).
-    SeparatePlanDetect => ("separate", "plan_detect"),
-    /// After the last detection's test: the last resort, where pairs fail (`separate::plan_last`).
-    SeparatePlanLast => ("separate", "plan_last"),
-    /// A round of the last resort over the listed near pairs (`separate::round`).
-    SeparateRound => ("separate", "round"),
-    /// Its round's walks when the list overflowed (`separate::recheck`).
-    SeparateRecheck => ("separate", "recheck"),
-    /// Its round's newly held vertices counted and folded in (`separate::settle`).
-    SeparateSettle => ("separate", "settle"),
-    /// Its next round's dispatches (`separate::plan`).
-    SeparatePlan => ("separate", "plan"),
-    /// Each vertex's changed step applied, and the statistics (`separate::finish`).
-    SeparateFinish => ("separate", "finish"),
-    /// Each grid cell's box at the step's start (`self_contact::cells`).
-    SelfContactCells => ("self_contact", "cells"),
-    /// Each vertex's and each edge it starts' cloth–cloth contacts
-    /// (`self_contact::walks`).
-    SelfContactWalks => ("self_contact", "walks"),
-    /// Each contact's force and blocks, linked to its vertices (`self_contact::link`).
-    SelfContactLink => ("self_contact", "link"),
-    /// Each vertex's contacts sorted and added to A and b (`self_contact::gather`).
-    SelfContactGather => ("self_contact", "gather"),
-    /// Sizes a network batch's indirect dispatches (`batch::plan`).
-    BatchPlan => ("batch", "plan"),
-    /// One dense network layer as a tiled matrix product (`mlp::layer`).
-    MlpLayer => ("mlp", "layer"),
-    /// The whole network, one contact per invocation, up to three Jacobian
-    /// columns (`mlp::per_contact`).
-    MlpPerContact => ("mlp", "per_contact"),
-    /// The same, up to seven columns (`mlp::per_contact_wide`).
-    MlpPerContactWide => ("mlp", "per_contact_wide"),
-    /// Each contact's force as a segment for the renderer (`lines::force_lines`).
-    ForceLines => ("lines", "force_lines"),
-}
+// Every `@compute` function of `wgsl/`, found by `build.rs`.
+include!(concat!(env!("OUT_DIR"), "/entries.rs"));
 
 impl Entry {
     /// Whether its pipelines are made per kind of level ([`LevelKind`]),
     /// each with the WGSL overrides its file declares without a default:
     /// every multigrid kernel, of the V-cycle and of its setup.
-    pub const fn by_level(self) -> bool {
-        matches!(
-            self,
-            Entry::MgGalerkin
-                | Entry::MgResidual
-                | Entry::MgDown
-                | Entry::MgTail
-                | Entry::MgGuess
-                | Entry::MgUp
-                | Entry::MgPatches
-                | Entry::MgPatchDown
-                | Entry::MgPatchUp
-        )
+    pub fn by_level(self) -> bool {
+        self.wgsl().0 == "multigrid"
     }
 }
 
@@ -287,25 +130,20 @@ pub struct Bound {
 
 impl Bound {
     /// Sets the pipeline and bind group, for a dispatch of the caller's.
-    pub fn set(&self, pass: &mut wgpu::ComputePass) {
+    pub fn set(&self, pass: &mut Pass) {
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(self.index, &self.group, &[]);
+        pass.set_bind_group(self.index, &self.group);
     }
 
     /// Records a dispatch whose workgroup counts the GPU wrote at `offset`
     /// of `args` (three `u32`s).
-    pub fn dispatch_indirect(
-        &self,
-        pass: &mut wgpu::ComputePass,
-        args: &wgpu::Buffer,
-        offset: u64,
-    ) {
+    pub fn dispatch_indirect(&self, pass: &mut Pass, args: &wgpu::Buffer, offset: u64) {
         self.set(pass);
         pass.dispatch_workgroups_indirect(args, offset);
     }
 
     /// Records one invocation per `threads`, in workgroups of `workgroup`.
-    pub fn dispatch(&self, pass: &mut wgpu::ComputePass, threads: u32, workgroup: u32) {
+    pub fn dispatch(&self, pass: &mut Pass, threads: u32, workgroup: u32) {
         self.set(pass);
         pass.dispatch_workgroups(threads.div_ceil(workgroup), 1, 1);
     }

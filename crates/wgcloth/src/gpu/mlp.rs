@@ -21,6 +21,7 @@ use crate::gpu::constants::{BATCH_GROUP, WORKGROUP};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
+use crate::gpu::pass::Pass;
 use crate::nn::Mlp;
 
 /// Mirrors `LayerParams` in wgsl/mlp.wgsl.
@@ -528,14 +529,12 @@ impl GpuMlp {
 
     /// Records the batch: the dispatch sizes, then each chunk's
     /// `per_contact` or every layer of every chunk (chunks past the batch
-    /// size dispatch nothing). Returns the number of dispatches.
-    pub fn record(&self, pass: &mut wgpu::ComputePass) -> u32 {
+    /// size dispatch nothing).
+    pub fn record(&self, pass: &mut Pass) {
         self.plan.dispatch(pass, self.entries, BATCH_GROUP);
         for (e, layer) in self.layers.iter().enumerate() {
-            layer.set(pass);
-            pass.dispatch_workgroups_indirect(&self.dispatch, 12 * e as u64);
+            layer.dispatch_indirect(pass, &self.dispatch, 12 * e as u64);
         }
-        1 + self.layers.len() as u32
     }
 
     /// Indirect arguments for one thread per contact of the batch (the
@@ -613,14 +612,16 @@ impl NetworkBatch {
     }
 
     /// Records the network over the uploaded batch.
-    pub fn record(&self, pass: &mut wgpu::ComputePass) -> u32 {
-        self.net.record(pass)
+    pub fn record(&self, pass: &mut Pass) {
+        self.net.record(pass);
     }
 
     /// Records and submits the network over the uploaded batch.
     pub fn run(&self, device: &wgpu::Device, queue: &wgpu::Queue) {
         let mut encoder = device.create_command_encoder(&Default::default());
-        self.record(&mut encoder.begin_compute_pass(&Default::default()));
+        self.record(&mut Pass::new(
+            encoder.begin_compute_pass(&Default::default()),
+        ));
         queue.submit([encoder.finish()]);
     }
 

@@ -8,22 +8,9 @@ use std::collections::BTreeMap;
 use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
 
-/// The stage files, by name.
-pub const STAGES: &[(&str, &str)] = &[
-    ("rigid", include_str!("../../wgsl/rigid.wgsl")),
-    ("collide", include_str!("../../wgsl/collide.wgsl")),
-    ("contact", include_str!("../../wgsl/contact.wgsl")),
-    ("assemble", include_str!("../../wgsl/assemble.wgsl")),
-    ("pcg", include_str!("../../wgsl/pcg.wgsl")),
-    ("self_contact", include_str!("../../wgsl/self_contact.wgsl")),
-    ("separate", include_str!("../../wgsl/separate.wgsl")),
-    ("multigrid", include_str!("../../wgsl/multigrid.wgsl")),
-    ("integrate", include_str!("../../wgsl/integrate.wgsl")),
-    ("measure", include_str!("../../wgsl/measure.wgsl")),
-    ("batch", include_str!("../../wgsl/batch.wgsl")),
-    ("mlp", include_str!("../../wgsl/mlp.wgsl")),
-    ("lines", include_str!("../../wgsl/lines.wgsl")),
-];
+/// The stage files, by name: every file of `wgsl/` with a `@compute`
+/// entry point, found by `build.rs`.
+pub const STAGES: &[(&str, &str)] = include!(concat!(env!("OUT_DIR"), "/stages.rs"));
 
 /// `wgsl/common.wgsl`: the code every scene stage starts with (`Params`,
 /// the shared structs and helpers).

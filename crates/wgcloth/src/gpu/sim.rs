@@ -17,6 +17,7 @@ use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
+use crate::gpu::pass::Pass;
 use crate::gpu::stages::Stages;
 use crate::scene::Scene;
 use crate::stage::{SelfContactStages, Stage};
@@ -168,10 +169,10 @@ impl GpuSim {
     /// in [`GpuSim::force_lines`], `Scene::metres_per_force` long per unit
     /// of force.
     pub fn record_force_lines(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        let mut pass = Pass::new(encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("lines"),
             timestamp_writes: None,
-        });
+        }));
         self.stages.begin(&mut pass);
         self.stages.lines.encode(&mut pass, &self.params);
     }
@@ -320,19 +321,21 @@ impl GpuSim {
         encoder: &'e mut wgpu::CommandEncoder,
         stage: Stage,
         substep: u32,
-    ) -> wgpu::ComputePass<'e> {
+    ) -> Pass<'e> {
         let k = query_pass(stage, substep);
-        encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(stage.name()),
-            timestamp_writes: self
-                .timer
-                .as_ref()
-                .map(|t| wgpu::ComputePassTimestampWrites {
-                    query_set: &t.queries,
-                    beginning_of_pass_write_index: Some(2 * k),
-                    end_of_pass_write_index: Some(2 * k + 1),
-                }),
-        })
+        Pass::new(
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(stage.name()),
+                timestamp_writes: self
+                    .timer
+                    .as_ref()
+                    .map(|t| wgpu::ComputePassTimestampWrites {
+                        query_set: &t.queries,
+                        beginning_of_pass_write_index: Some(2 * k),
+                        end_of_pass_write_index: Some(2 * k + 1),
+                    }),
+            }),
+        )
     }
 
     /// Which self-contact stages the scene runs.
@@ -405,6 +408,7 @@ impl GpuSim {
             Stage::Integrate => s.integrate.encode(&mut pass, p),
             Stage::Measure => s.measure.encode(&mut pass, p),
         }
+        pass.dispatches()
     }
 
     /// Replaces the cloth state (e.g. with a CPU state, to compare a stage)

@@ -7,6 +7,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Assemble {
     vertex: Bound,
@@ -34,9 +35,8 @@ impl Assemble {
         }
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         self.vertex.dispatch(pass, p.n_vertices, WORKGROUP);
         self.spring.dispatch(pass, p.n_springs, WORKGROUP);
-        2
     }
 }

@@ -6,6 +6,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 /// Cells along the cloth's longer side from which the face–vertex search
 /// takes a workgroup per rigid vertex (wgsl/collide.wgsl, part (b)): a
@@ -66,7 +67,7 @@ impl Collide {
         encoder.clear_buffer(&self.triangle_contacts, 0, Some(heads));
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
@@ -79,6 +80,5 @@ impl Collide {
                 .dispatch(pass, p.n_rigid_vertices, WORKGROUP);
         }
         self.order.dispatch(pass, p.n_rigid_vertices, WORKGROUP);
-        5
     }
 }

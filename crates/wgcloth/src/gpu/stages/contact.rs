@@ -8,6 +8,7 @@ use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 use crate::gpu::mlp::{GpuMlp, NetworkKernel};
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Contact {
     respond_slots: Bound,
@@ -56,25 +57,18 @@ impl Contact {
 
     /// `params` is the pass's group 0, which the network's own kernels
     /// replace (they set it back after).
-    pub(crate) fn encode(
-        &self,
-        pass: &mut wgpu::ComputePass,
-        p: &Params,
-        params: &wgpu::BindGroup,
-    ) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params, params: &wgpu::BindGroup) {
         let (n, r) = (p.n_vertices, p.n_rigid_vertices);
         let Some(net) = &self.network else {
             self.respond_slots.dispatch(pass, n + r, WORKGROUP);
-            return 1;
+            return;
         };
         self.reset_batch.dispatch(pass, 1, 1);
         self.gather.dispatch(pass, n + r, WORKGROUP);
-        let network = net.record(pass);
-        pass.set_bind_group(0, params, &[]);
+        net.record(pass);
+        pass.set_bind_group(0, params);
         // One thread per batch entry, sized on the GPU: no readback.
         let (args, offset) = net.per_contact_dispatch();
-        self.respond_batch.set(pass);
-        pass.dispatch_workgroups_indirect(args, offset);
-        3 + network
+        self.respond_batch.dispatch_indirect(pass, args, offset);
     }
 }

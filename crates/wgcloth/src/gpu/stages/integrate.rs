@@ -5,6 +5,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Integrate {
     integrate: Bound,
@@ -28,8 +29,7 @@ impl Integrate {
         }
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         self.integrate.dispatch(pass, p.n_vertices, WORKGROUP);
-        1
     }
 }

@@ -5,6 +5,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Lines {
     force_lines: Bound,
@@ -21,13 +22,12 @@ impl Lines {
             ("lines", &b.lines),
         ];
         Lines {
-            force_lines: kernels.kernel(Entry::ForceLines).bind(device, &buffers),
+            force_lines: kernels.kernel(Entry::Lines).bind(device, &buffers),
         }
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         let slots = p.n_vertices + p.n_rigid_vertices;
         self.force_lines.dispatch(pass, slots, WORKGROUP);
-        1
     }
 }

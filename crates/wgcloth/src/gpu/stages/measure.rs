@@ -6,6 +6,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Measure {
     measure: Bound,
@@ -29,8 +30,7 @@ impl Measure {
         }
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         self.measure.dispatch(pass, p.n_vertices, WORKGROUP);
-        1
     }
 }

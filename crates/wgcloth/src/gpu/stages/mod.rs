@@ -19,6 +19,7 @@ pub mod separate;
 use crate::gpu::buffers::Buffers;
 use crate::gpu::kernels::Kernels;
 use crate::gpu::mlp::GpuMlp;
+use crate::gpu::pass::Pass;
 use crate::scene::Scene;
 
 /// Every stage of a step, bound to one scene's buffers.
@@ -39,8 +40,8 @@ pub(crate) struct Stages {
 
 impl Stages {
     /// Starts a pass's work: the run's constants in group 0.
-    pub(crate) fn begin(&self, pass: &mut wgpu::ComputePass) {
-        pass.set_bind_group(0, &self.params, &[]);
+    pub(crate) fn begin(&self, pass: &mut Pass) {
+        pass.set_bind_group(0, &self.params);
     }
 
     pub(crate) fn new(

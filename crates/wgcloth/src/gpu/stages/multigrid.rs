@@ -4,10 +4,11 @@
 //! dispatch bound to its pair of levels down to the tail: the levels of at
 //! most [`tail_nodes`] nodes, in one dispatch of one workgroup.
 
-use crate::gpu::buffers::{Buffers, groups};
+use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels, LevelKind, Levels};
 use crate::gpu::layout::{Grid, ScalarsAndSizes};
+use crate::gpu::pass::Pass;
 use crate::multigrid::{
     NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
 };
@@ -92,19 +93,19 @@ impl Multigrid {
                 .collect()
         };
         let patches = patched.then(|| Patches {
-            inverses: hops(Entry::MgPatches, last),
-            down: colours(Entry::MgPatchDown, tail),
-            up: colours(Entry::MgPatchUp, tail),
+            inverses: hops(Entry::MultigridPatches, last),
+            down: colours(Entry::MultigridPatchDown, tail),
+            up: colours(Entry::MultigridPatchUp, tail),
         });
         // With patches only the cloth's `up` runs (its rᵀz).
         let ups = if patches.is_some() { 1 } else { tail };
         Some(Multigrid {
-            galerkin: hops(Entry::MgGalerkin, last),
-            residual: hops(Entry::MgResidual, tail),
-            down: hops(Entry::MgDown, tail),
+            galerkin: hops(Entry::MultigridGalerkin, last),
+            residual: hops(Entry::MultigridResidual, tail),
+            down: hops(Entry::MultigridDown, tail),
             // The tail walks every level from its first.
             tail: bind_as(
-                Entry::MgTail,
+                Entry::MultigridTail,
                 tail,
                 0,
                 if tail == 0 {
@@ -113,8 +114,8 @@ impl Multigrid {
                     Levels::Coarse
                 },
             ),
-            guess: hops(Entry::MgGuess, tail),
-            up: hops(Entry::MgUp, ups),
+            guess: hops(Entry::MultigridGuessUp, tail),
+            up: hops(Entry::MultigridUp, ups),
             patches,
             grids: grids.to_vec(),
         })
@@ -122,80 +123,62 @@ impl Multigrid {
 
     /// Every coarse level's operator from this step's A, finest first, then
     /// every level's patch inverses.
-    pub(crate) fn encode_setup(&self, pass: &mut wgpu::ComputePass) -> u32 {
+    pub(crate) fn encode_setup(&self, pass: &mut Pass) {
         for (l, galerkin) in self.galerkin.iter().enumerate() {
             galerkin.dispatch(pass, self.grids[l + 1].nodes() as u32, WORKGROUP);
         }
-        let mut count = self.galerkin.len();
         if let Some(p) = &self.patches {
             for (l, inverses) in p.inverses.iter().enumerate() {
                 let (px, py) = patch_grid(self.grids[l].shape());
                 inverses.dispatch(pass, px * py, WORKGROUP);
             }
-            count += p.inverses.len();
         }
-        count as u32
     }
 
     /// One V-cycle on the PCG residual, leaving z and partial rᵀz: sized
     /// on the host, or from `scalars`' per-level sizes (zero once the solve
     /// is over).
-    pub(crate) fn encode_cycle(
-        &self,
-        pass: &mut wgpu::ComputePass,
-        scalars: Option<&wgpu::Buffer>,
-    ) -> u32 {
+    pub(crate) fn encode_cycle(&self, pass: &mut Pass, scalars: Option<&wgpu::Buffer>) {
         // A kernel over level l's nodes, or over its patch sweep's threads.
-        let dispatch =
-            |pass: &mut wgpu::ComputePass, kernel: &Bound, level: usize, sweep: bool| match scalars
-            {
-                Some(args) => {
-                    let offset = match sweep {
-                        true => ScalarsAndSizes::patch_groups_offset(level),
-                        false => ScalarsAndSizes::groups_offset(level),
-                    };
-                    kernel.dispatch_indirect(pass, args, offset);
-                }
-                None => {
-                    let shape = self.grids[level].shape();
-                    let threads = match sweep {
-                        true => patch_threads(shape),
-                        false => shape.nodes() as u32,
-                    };
-                    kernel.set(pass);
-                    pass.dispatch_workgroups(groups(threads), 1, 1);
-                }
-            };
+        let dispatch = |pass: &mut Pass, kernel: &Bound, level: usize, sweep: bool| match scalars {
+            Some(args) => {
+                let offset = match sweep {
+                    true => ScalarsAndSizes::patch_groups_offset(level),
+                    false => ScalarsAndSizes::groups_offset(level),
+                };
+                kernel.dispatch_indirect(pass, args, offset);
+            }
+            None => {
+                let shape = self.grids[level].shape();
+                let threads = match sweep {
+                    true => patch_threads(shape),
+                    false => shape.nodes() as u32,
+                };
+                kernel.dispatch(pass, threads, WORKGROUP);
+            }
+        };
         let above = self.down.len();
-        let mut count = 0;
         for l in 0..above {
             if let Some(p) = &self.patches {
                 for sweep in &p.down[l] {
                     dispatch(pass, sweep, l, true);
                 }
-                count += PATCH_COLOURS;
             }
             dispatch(pass, &self.residual[l], l, false);
             dispatch(pass, &self.down[l], l + 1, false);
-            count += 2;
         }
         // One workgroup while the solve goes on: the coarsest level's size.
         dispatch(pass, &self.tail, self.grids.len() - 1, false);
-        count += 1;
         for l in (0..above).rev() {
             dispatch(pass, &self.guess[l], l, false);
-            count += 1;
             if let Some(p) = &self.patches {
                 for sweep in p.up[l].iter().rev() {
                     dispatch(pass, sweep, l, true);
                 }
-                count += PATCH_COLOURS;
             }
             if let Some(up) = self.up.get(l) {
                 dispatch(pass, up, l, false);
-                count += 1;
             }
         }
-        count as u32
     }
 }

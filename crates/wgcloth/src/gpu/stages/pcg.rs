@@ -9,6 +9,7 @@ use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::{Params, ScalarsAndSizes};
+use crate::gpu::pass::Pass;
 use crate::gpu::stages::multigrid::Multigrid;
 use crate::scene::Scene;
 
@@ -90,40 +91,37 @@ impl Pcg {
     /// `iterations` iterations (at most `cg_max_iters`); once converged, `next` and `conclude`
     /// carry the scalars and the rest dispatch no workgroups. Iteration
     /// `it` reads side `it % 2`: `next` ends iteration `it − 1` (side
-    /// `(it − 1) % 2`) and starts `it`. Returns the dispatches recorded.
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params, iterations: u32) -> u32 {
+    /// `(it − 1) % 2`) and starts `it`.
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params, iterations: u32) {
         let n = p.n_vertices;
         let iters = iterations.min(p.cg_max_iters) as usize;
-        let mut count = 3;
         if let Some(mg) = &self.multigrid {
-            count += mg.encode_setup(pass);
+            mg.encode_setup(pass);
         }
         let coupled = p.cloth_thickness > 0.0;
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
         if coupled {
             self.sides[0].couple_start.dispatch(pass, n, WORKGROUP);
             self.sides[0].couple_init.dispatch(pass, n, WORKGROUP);
-            count += 2;
         }
         if let Some(mg) = &self.multigrid {
-            count += mg.encode_cycle(pass, None);
+            mg.encode_cycle(pass, None);
         }
         // Writes scalars[0], which iteration 0 reads, and the dispatch sizes
         // into scalars[1] too.
         self.sides[1].init_scalars.dispatch(pass, 1, 1);
         // Iteration `it`'s x, r and z, sized by the scalars it reads.
-        let update = |pass: &mut wgpu::ComputePass, it: usize| {
+        let update = |pass: &mut Pass, it: usize| {
             let (side, args) = (&self.sides[it % 2], &self.scalars[it % 2]);
             match &self.multigrid {
                 Some(mg) => {
                     side.advance
                         .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
-                    1 + mg.encode_cycle(pass, Some(args))
+                    mg.encode_cycle(pass, Some(args));
                 }
                 None => {
                     side.update
                         .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
-                    1
                 }
             }
         };
@@ -131,9 +129,8 @@ impl Pcg {
             self.sides[0].spmv.dispatch(pass, n, WORKGROUP);
             if coupled {
                 self.sides[0].couple.dispatch(pass, n, WORKGROUP);
-                count += 1;
             }
-            count += 2 + update(pass, 0);
+            update(pass, 0);
             for it in 1..iters {
                 let prev = (it - 1) % 2;
                 let args = (&self.scalars[prev], ScalarsAndSizes::next_groups_offset());
@@ -144,14 +141,12 @@ impl Pcg {
                     self.sides[1 - prev]
                         .couple
                         .dispatch_indirect(pass, args.0, args.1);
-                    count += 1;
                 }
-                count += 1 + update(pass, it);
+                update(pass, it);
             }
             self.sides[(iters - 1) % 2].conclude.dispatch(pass, 1, 1);
         }
         // The last iteration wrote scalars[iters % 2].
         self.sides[iters % 2].finish.dispatch(pass, 1, 1);
-        count
     }
 }

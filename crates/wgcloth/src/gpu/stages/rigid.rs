@@ -5,6 +5,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Rigid {
     place: Bound,
@@ -25,10 +26,9 @@ impl Rigid {
     }
 
     /// Returns the dispatches recorded.
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         // At least one invocation: it also writes the frame.
         self.place
             .dispatch(pass, p.n_rigid_vertices.max(1), WORKGROUP);
-        1
     }
 }

@@ -7,6 +7,7 @@ use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::{WORKGROUP, cloth_header};
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct SelfContact {
     cells: Bound,
@@ -53,7 +54,7 @@ impl SelfContact {
         encoder.clear_buffer(&self.lists, 0, Some(4 * words));
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         let n = p.n_vertices;
         self.cells.dispatch(pass, p.cells_x * p.cells_y, WORKGROUP);
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
@@ -62,6 +63,5 @@ impl SelfContact {
         self.walks.dispatch(pass, n, WORKGROUP);
         self.link.dispatch(pass, p.cloth_capacity, WORKGROUP);
         self.gather.dispatch(pass, n, WORKGROUP);
-        6
     }
 }

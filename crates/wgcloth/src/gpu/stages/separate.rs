@@ -2,14 +2,13 @@
 //! cpu/separate.rs and cpu/impact.rs): each cloth vertex's step changed
 //! where the cloth would otherwise pass through itself (issue 23).
 
-use std::cell::Cell;
-
 use crate::cpu::impact::{IMPULSE_ROUNDS, ZONE_ROUNDS};
 use crate::cpu::separate::{DETECTIONS, ROUNDS};
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::{WORKGROUP, self_header, separations};
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
+use crate::gpu::pass::Pass;
 
 pub(crate) struct Separate {
     start: Bound,
@@ -105,20 +104,17 @@ impl Separate {
         encoder.clear_buffer(&self.separations, at, Some(4 * self_header::WORDS as u64));
     }
 
-    pub(crate) fn encode(&self, pass: &mut wgpu::ComputePass, p: &Params) -> u32 {
+    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
         let n = p.n_vertices;
-        let recorded = Cell::new(0);
-        let direct = |pass: &mut wgpu::ComputePass, kernel: &Bound, invocations, group| {
+        let direct = |pass: &mut Pass, kernel: &Bound, invocations, group| {
             kernel.dispatch(pass, invocations, group);
-            recorded.set(recorded.get() + 1);
         };
         // Every other dispatch is sized by the `plan_*` kernel before it:
         // empty once the step has settled.
-        let indirect = |pass: &mut wgpu::ComputePass, kernel: &Bound, word: u32| {
+        let indirect = |pass: &mut Pass, kernel: &Bound, word: u32| {
             kernel.dispatch_indirect(pass, &self.dispatches, 4 * word as u64);
-            recorded.set(recorded.get() + 1);
         };
-        let pairs = |pass: &mut wgpu::ComputePass, kernels: &[Bound; 2]| {
+        let pairs = |pass: &mut Pass, kernels: &[Bound; 2]| {
             indirect(pass, &kernels[0], self_header::LIST_ARGS);
             indirect(pass, &kernels[1], self_header::RETEST_ARGS);
         };
@@ -159,6 +155,5 @@ impl Separate {
             direct(pass, &self.plan_detect, 1, 1);
         }
         direct(pass, &self.finish, n, WORKGROUP);
-        recorded.get()
     }
 }
