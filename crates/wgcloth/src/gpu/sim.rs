@@ -18,7 +18,7 @@ use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::pass::Pass;
-use crate::gpu::stages::Stages;
+use crate::gpu::stages::{Recording, Stages};
 use crate::scene::Scene;
 use crate::stage::{SelfContactStages, Stage};
 
@@ -386,28 +386,16 @@ impl GpuSim {
         if !stage.runs(p.has_rigid != 0, self.self_contact_stages()) {
             return 0;
         }
-        let s = &self.stages;
-        match stage {
-            Stage::Collide => s.collide.clear(encoder, p),
-            Stage::Separate => s.separate.clear(encoder, p),
-            Stage::SelfContact => s.self_contact.clear(encoder, p),
-            _ => {}
-        }
+        let record = self.stages.of(stage);
+        record.clear(encoder, p);
         let mut pass = self.pass(encoder, stage, substep);
-        s.begin(&mut pass);
-        match stage {
-            Stage::Rigid => s.rigid.encode(&mut pass, p),
-            Stage::Collide => s.collide.encode(&mut pass, p),
-            Stage::Contact => s.contact.encode(&mut pass, p, &s.params),
-            Stage::Assemble => s.assemble.encode(&mut pass, p),
-            Stage::Pcg => s
-                .pcg
-                .encode(&mut pass, p, self.cg_budget.load(Ordering::Relaxed)),
-            Stage::SelfContact => s.self_contact.encode(&mut pass, p),
-            Stage::Separate => s.separate.encode(&mut pass, p),
-            Stage::Integrate => s.integrate.encode(&mut pass, p),
-            Stage::Measure => s.measure.encode(&mut pass, p),
-        }
+        self.stages.begin(&mut pass);
+        let recording = Recording {
+            params: p,
+            group0: &self.stages.params,
+            cg_iterations: self.cg_budget.load(Ordering::Relaxed),
+        };
+        record.encode(&mut pass, &recording);
         pass.dispatches()
     }
 

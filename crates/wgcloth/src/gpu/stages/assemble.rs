@@ -6,8 +6,8 @@
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Assemble {
     vertex: Bound,
@@ -34,8 +34,11 @@ impl Assemble {
             spring: bind(Entry::AssembleSpring),
         }
     }
+}
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+impl Record for Assemble {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         self.vertex.dispatch(pass, p.n_vertices, WORKGROUP);
         self.spring.dispatch(pass, p.n_springs, WORKGROUP);
     }

@@ -7,6 +7,7 @@ use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 /// Cells along the cloth's longer side from which the face–vertex search
 /// takes a workgroup per rigid vertex (wgsl/collide.wgsl, part (b)): a
@@ -59,15 +60,18 @@ impl Collide {
             triangle_contacts: b.triangle_contacts.clone(),
         }
     }
+}
 
+impl Record for Collide {
     /// Before the pass: face–vertex contacts link into their triangle's
     /// list, as found and in order, so every list starts empty (zero heads).
-    pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
+    fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
         let heads = 2 * 4 * p.n_triangles as u64;
         encoder.clear_buffer(&self.triangle_contacts, 0, Some(heads));
     }
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);
         let supertiles = p.supertiles_x * p.supertiles_y;
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);

@@ -6,9 +6,9 @@
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
 use crate::gpu::mlp::{GpuMlp, NetworkKernel};
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Contact {
     respond_slots: Bound,
@@ -54,10 +54,13 @@ impl Contact {
     pub(crate) fn network_kernel(&self) -> Option<NetworkKernel> {
         self.network.as_ref().map(GpuMlp::kernel)
     }
+}
 
-    /// `params` is the pass's group 0, which the network's own kernels
-    /// replace (they set it back after).
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params, params: &wgpu::BindGroup) {
+impl Record for Contact {
+    /// The network's own kernels replace the pass's group 0; it is set
+    /// back after them.
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let (p, group0) = (r.params, r.group0);
         let (n, r) = (p.n_vertices, p.n_rigid_vertices);
         let Some(net) = &self.network else {
             self.respond_slots.dispatch(pass, n + r, WORKGROUP);
@@ -66,7 +69,7 @@ impl Contact {
         self.reset_batch.dispatch(pass, 1, 1);
         self.gather.dispatch(pass, n + r, WORKGROUP);
         net.record(pass);
-        pass.set_bind_group(0, params);
+        pass.set_bind_group(0, group0);
         // One thread per batch entry, sized on the GPU: no readback.
         let (args, offset) = net.per_contact_dispatch();
         self.respond_batch.dispatch_indirect(pass, args, offset);

@@ -4,8 +4,8 @@
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Integrate {
     integrate: Bound,
@@ -28,8 +28,11 @@ impl Integrate {
             ),
         }
     }
+}
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+impl Record for Integrate {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         self.integrate.dispatch(pass, p.n_vertices, WORKGROUP);
     }
 }

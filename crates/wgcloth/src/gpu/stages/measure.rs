@@ -5,8 +5,8 @@
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Measure {
     measure: Bound,
@@ -29,8 +29,11 @@ impl Measure {
                 .bind_parts(device, &buffers, &[&b.topology]),
         }
     }
+}
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+impl Record for Measure {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         self.measure.dispatch(pass, p.n_vertices, WORKGROUP);
     }
 }

@@ -18,9 +18,31 @@ pub mod separate;
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::kernels::Kernels;
+use crate::gpu::layout::Params;
 use crate::gpu::mlp::GpuMlp;
 use crate::gpu::pass::Pass;
 use crate::scene::Scene;
+use crate::stage::Stage;
+
+/// What recording a stage reads besides its own bindings.
+pub(crate) struct Recording<'a> {
+    pub(crate) params: &'a Params,
+    /// The pass's group 0, the run's constants (the network's kernels
+    /// replace it; the contact stage sets it back).
+    pub(crate) group0: &'a wgpu::BindGroup,
+    /// PCG iterations to record (`gpu::CgBudget`).
+    pub(crate) cg_iterations: u32,
+}
+
+/// A stage of the step on the GPU, which [`Stages::of`] finds by its
+/// [`Stage`]: what it clears before its pass and what it records in it.
+pub(crate) trait Record {
+    /// Before the pass: the buffers it needs cleared.
+    fn clear(&self, _encoder: &mut wgpu::CommandEncoder, _p: &Params) {}
+
+    /// The pass's dispatches.
+    fn encode(&self, pass: &mut Pass, r: &Recording);
+}
 
 /// Every stage of a step, bound to one scene's buffers.
 pub(crate) struct Stages {
@@ -42,6 +64,21 @@ impl Stages {
     /// Starts a pass's work: the run's constants in group 0.
     pub(crate) fn begin(&self, pass: &mut Pass) {
         pass.set_bind_group(0, &self.params);
+    }
+
+    /// The GPU side of `stage`.
+    pub(crate) fn of(&self, stage: Stage) -> &dyn Record {
+        match stage {
+            Stage::Rigid => &self.rigid,
+            Stage::Collide => &self.collide,
+            Stage::Contact => &self.contact,
+            Stage::Assemble => &self.assemble,
+            Stage::SelfContact => &self.self_contact,
+            Stage::Pcg => &self.pcg,
+            Stage::Integrate => &self.integrate,
+            Stage::Measure => &self.measure,
+            Stage::Separate => &self.separate,
+        }
     }
 
     pub(crate) fn new(

@@ -8,9 +8,10 @@
 use crate::gpu::buffers::{Buffers, multigrid_grids};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::{Params, ScalarsAndSizes};
+use crate::gpu::layout::ScalarsAndSizes;
 use crate::gpu::pass::Pass;
 use crate::gpu::stages::multigrid::Multigrid;
+use crate::gpu::stages::{Record, Recording};
 use crate::scene::Scene;
 
 /// The kernels bound with the ping-pong buffers one way round: scalars
@@ -87,14 +88,17 @@ impl Pcg {
             multigrid: Multigrid::new(kernels, device, b, &multigrid_grids(scene)),
         }
     }
+}
 
-    /// `iterations` iterations (at most `cg_max_iters`); once converged, `next` and `conclude`
-    /// carry the scalars and the rest dispatch no workgroups. Iteration
+impl Record for Pcg {
+    /// `r.cg_iterations` iterations (at most `cg_max_iters`); once
+    /// converged, `next` and `conclude` carry the scalars and the rest dispatch no workgroups. Iteration
     /// `it` reads side `it % 2`: `next` ends iteration `it − 1` (side
     /// `(it − 1) % 2`) and starts `it`.
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params, iterations: u32) {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         let n = p.n_vertices;
-        let iters = iterations.min(p.cg_max_iters) as usize;
+        let iters = r.cg_iterations.min(p.cg_max_iters) as usize;
         if let Some(mg) = &self.multigrid {
             mg.encode_setup(pass);
         }

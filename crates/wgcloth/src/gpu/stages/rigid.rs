@@ -4,8 +4,8 @@
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
-use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Rigid {
     place: Bound,
@@ -24,9 +24,12 @@ impl Rigid {
             place: kernels.kernel(Entry::Rigid).bind(device, &buffers),
         }
     }
+}
 
+impl Record for Rigid {
     /// Returns the dispatches recorded.
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         // At least one invocation: it also writes the frame.
         self.place
             .dispatch(pass, p.n_rigid_vertices.max(1), WORKGROUP);

@@ -8,6 +8,7 @@ use crate::gpu::constants::{WORKGROUP, cloth_header};
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct SelfContact {
     cells: Bound,
@@ -47,14 +48,17 @@ impl SelfContact {
             lists: b.cloth_lists.clone(),
         }
     }
+}
 
+impl Record for SelfContact {
     /// Before the pass: the header and each vertex's counts start at 0.
-    pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
+    fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
         let words = cloth_header::WORDS as u64 + 2 * p.n_vertices as u64;
         encoder.clear_buffer(&self.lists, 0, Some(4 * words));
     }
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         let n = p.n_vertices;
         self.cells.dispatch(pass, p.cells_x * p.cells_y, WORKGROUP);
         self.tiles.dispatch(pass, p.tiles_x * p.tiles_y, WORKGROUP);

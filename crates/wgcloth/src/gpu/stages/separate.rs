@@ -9,6 +9,7 @@ use crate::gpu::constants::{WORKGROUP, self_header, separations};
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::Params;
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::{Record, Recording};
 
 pub(crate) struct Separate {
     start: Bound,
@@ -97,14 +98,17 @@ impl Separate {
             dispatches: b.self_dispatches.clone(),
         }
     }
+}
 
+impl Record for Separate {
     /// Before the pass: the header's words start at 0.
-    pub(crate) fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
+    fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
         let at = 4 * (separations::WORDS * p.n_vertices) as u64;
         encoder.clear_buffer(&self.separations, at, Some(4 * self_header::WORDS as u64));
     }
 
-    pub(crate) fn encode(&self, pass: &mut Pass, p: &Params) {
+    fn encode(&self, pass: &mut Pass, r: &Recording) {
+        let p = r.params;
         let n = p.n_vertices;
         let direct = |pass: &mut Pass, kernel: &Bound, invocations, group| {
             kernel.dispatch(pass, invocations, group);
