@@ -348,7 +348,7 @@ fn a_solve_stopping_within_its_tolerance_moves_a_contact_run_further_than_roundi
     assert_eq!((s.nudged.contacts, s.tolerance.contacts), (0.0, 0.0));
 
     // common::sphere's cloth with the sphere eight times as fast, two
-    // substeps a step (gpu_parity's a_step_of_substeps_runs_like_the_cpu).
+    // substeps a step (gpu_runs's a_step_of_substeps_runs_like_the_cpu).
     let mut fast = Config {
         model: ModelKind::Naive,
         ..Default::default()
