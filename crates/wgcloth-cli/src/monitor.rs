@@ -30,7 +30,8 @@ pub struct Sample {
     pub kinetic: f64,
     /// The fastest vertex's speed, m/s.
     pub max_speed: f32,
-    /// The most-strained spring's |l − L| / L (`cpu::springs::max_strain`).
+    /// The most-stretched spring's (l − L) / L, 0 when none is longer than
+    /// at rest (`cpu::springs::max_strain`).
     pub max_strain: f32,
     pub finite: bool,
     /// Cloth triangle pairs that share no vertex and intersect

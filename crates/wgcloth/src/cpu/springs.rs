@@ -46,17 +46,19 @@ pub fn evaluate(cloth: &Cloth, x: &[Vec3], forces: &mut [Vec3], blocks: &mut [Sy
         });
 }
 
-/// The largest |l − L| / L over all springs at positions `x`: how far the
-/// worst spring is from its rest length, as a share of it. A step that
-/// flings a vertex shows here (BENCHMARKS.md "One linear solve a step
-/// from 128² up").
+/// The largest stretch (l − L) / L over all springs at positions `x`: how
+/// far the most-stretched spring is beyond its rest length, as a share of
+/// it (0 when none is). A step that flings a vertex shows here
+/// (BENCHMARKS.md "One linear solve a step from 128² up"). Shortening is
+/// not counted: a fold shortens the bending springs across it, by up to
+/// all of their length where it lies flat.
 pub fn max_strain(cloth: &Cloth, x: &[Vec3]) -> f32 {
     cloth
         .springs
         .par_iter()
         .with_min_len(GRAIN)
         .zip(&cloth.rest_lengths)
-        .map(|(&[i, j], &rest)| ((x[j as usize] - x[i as usize]).length() - rest).abs() / rest)
+        .map(|(&[i, j], &rest)| ((x[j as usize] - x[i as usize]).length() - rest) / rest)
         .reduce(|| 0.0, f32::max)
 }
 
