@@ -12,7 +12,10 @@ use wgcloth::intersections::intersecting_pairs;
 use wgcloth::{Config, Scene};
 
 /// A soft 16² cloth alone, weightless, free and undamped but for its
-/// springs, kept from passing through itself, its solve run to 1e-6.
+/// springs, kept from passing through itself, its solve run to 1e-7: what
+/// the solve leaves of b is momentum lost, and b holds the contacts' h f,
+/// about 8 times the momentum (at 1e-6 the residual alone came to 1.1e-5
+/// of Σ m|v| with `self_contact.mass_ratio` at 1000).
 fn weightless() -> Scene {
     let mut c = Config {
         scene: SceneKind::Hang,
@@ -21,12 +24,11 @@ fn weightless() -> Scene {
     c.cloth.grid = [16, 16];
     c.cloth.pins = Pins::None;
     // Soft, as the folding scenes: the crease, at 3 mm where the rest
-    // spacing is 67 mm, pushes little, so the solve's 1e-6 of b is small
-    // against the momentum.
+    // spacing is 67 mm, pushes little.
     c.cloth.stiffness = 50.0;
     c.cloth.damping_mass = 0.0;
     c.solver.gravity = [0.0; 3];
-    (c.solver.cg_tol, c.solver.cg_iters) = (1e-6, 400);
+    (c.solver.cg_tol, c.solver.cg_iters) = (1e-7, 400);
     c.self_contact.enabled = true;
     Scene::new(&c).unwrap()
 }
