@@ -319,7 +319,10 @@ fn a_flap_of_cloth_holds_on_the_cloth_below_the_friction_angle_and_slides_at_cou
                 "{path}: the flap fell through"
             );
             match slides {
-                false => assert!(drift.abs() < 1e-3, "{path}: slid {drift} m in 1 s below the angle"),
+                false => assert!(
+                    drift.abs() < 1e-3,
+                    "{path}: slid {drift} m in 1 s below the angle"
+                ),
                 // It slides, never faster than Coulomb's rate, but slower:
                 // the friction is μ times the start-of-step normal force,
                 // which swings above the solved one as the flap crosses the
