@@ -44,7 +44,7 @@ fn relative_velocity(c: Contact) -> vec3<f32> {
 
 fn respond(c: Contact) -> Response {
     let v_rel = relative_velocity(c);
-    return response(evaluate(c.normal * c.depth, v_rel), c.normal, v_rel);
+    return response(evaluate(c.normal * c.depth, v_rel), c.normal, v_rel, 0.0);
 }
 
 // The analytic models: every contact slot, both directions, in one pass.
@@ -391,6 +391,6 @@ fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     let s = atomicLoad(&net_batch[1u + entry]);
     let k = contacts[s];
     let v_rel = relative_velocity(k);
-    let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel);
+    let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel, 0.0);
     responses[s] = r;
 }

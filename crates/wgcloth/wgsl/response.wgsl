@@ -145,9 +145,10 @@ fn clamp_eigenvalues(s: mat3x3<f32>) -> mat3x3<f32> {
 }
 
 // The chain rule into the system with the three safety moves of
-// cpu::contact::response: n–t cross terms dropped, the secant floor on
-// sliding friction's damping, and the NSD projection.
-fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>) -> Response {
+// cpu::contact::response: n–t cross terms dropped, the floor on sliding
+// friction's damping (the secant less `inertia`, the mass the contact
+// moves over h), and the NSD projection.
+fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>, inertia: f32) -> Response {
     let nn = outer(n, n);
     let tangent_plane = IDENTITY - nn;
     let normal_stiffness = min(dot(n, fj.d_c * n), 0.0);
@@ -156,8 +157,8 @@ fn response(fj: ForceJacobian, n: vec3<f32>, v_rel: vec3<f32>) -> Response {
     let speed = length(t_dot);
     if speed > 0.0 {
         let t_hat = t_dot / speed;
-        let secant = -dot(fj.force, t_hat) / speed;
-        let deficit = secant + dot(t_hat, damping * t_hat);
+        let floor = -dot(fj.force, t_hat) / speed - inertia;
+        let deficit = floor + dot(t_hat, damping * t_hat);
         if deficit > 0.0 {
             damping -= deficit * outer(t_hat, t_hat);
         }

@@ -241,9 +241,12 @@ fn link(@builtin(global_invocation_id) id: vec3<u32>) {
     var v_rel = vec3<f32>(0.0);
     var gap = vec3<f32>(0.0);
     var most = 1u;
+    var spread = 0.0;
     for (var s = 0u; s < 4u; s++) {
         let i = pair_vertex(pair.key, s);
-        most = max(most, atomicLoad(&cloth_lists[found_at(i)]));
+        let found = atomicLoad(&cloth_lists[found_at(i)]);
+        most = max(most, found);
+        spread += pair.beta[s] * pair.beta[s] * f32(found);
         v_rel += pair.beta[s] * v[i].xyz;
         gap += pair.beta[s] * x[i].xyz;
     }
@@ -261,7 +264,9 @@ fn link(@builtin(global_invocation_id) id: vec3<u32>) {
         n = gap / distance;
         depth = min(distance - params.cloth_thickness, 0.0);
     }
-    let r = response(friction(n * depth, v_rel, coefficients(most)), n, v_rel);
+    // Band::inertia: each vertex's mass shared among the pairs found at it.
+    let inertia = params.vertex_mass / (params.dt * spread);
+    let r = response(friction(n * depth, v_rel, coefficients(most)), n, v_rel, inertia);
     cloth_pairs[k].block = sym_pack(contact_block(r, n));
     cloth_pairs[k].rhs = params.dt * (r.force - sym_mul(sym_unpack(r.damping), v_rel));
     for (var s = 0u; s < 4u; s++) {

@@ -682,11 +682,15 @@ pub struct Response {
 ///    Jacobian along the sliding direction t̂ is zero and a linearised step
 ///    would apply μF_c explicitly, reversing the sliding within the step
 ///    (a 0.2 g vertex under 3.5 N gains 175 m/s in 10 ms). D_c is floored
-///    along t̂ at the secant η = −(f·t̂)/|ṫ|, the damping that takes the
-///    tangential force to zero with the tangential velocity (lagged
-///    friction, as in IPC). In the stick branch the floor is already met.
+///    along t̂ at η = −(f·t̂)/|ṫ| − `inertia`: with `inertia` the mass the
+///    contact moves over h, the least damping with which friction alone
+///    brings the slide to rest at the step's end and not past it. A slide
+///    carrying more momentum than the friction's impulse gets no floor and
+///    keeps μF_c; the whole secant (`inertia` 0, lagged friction as in
+///    IPC) scales it by |ṫ'|/|ṫ| and holds back a slide that speeds up.
+///    In the stick branch the floor is already met.
 /// 3. What remains is projected to the nearest symmetric NSD matrix.
-pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
+pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3, inertia: f32) -> Response {
     let nn = outer(normal, normal);
     let tangent_plane = Mat3::IDENTITY - nn;
     let normal_stiffness = normal.dot(fj.d_c * normal).min(0.0);
@@ -696,8 +700,8 @@ pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
     let speed = t_dot.length();
     if speed > 0.0 {
         let t_hat = t_dot / speed;
-        let secant = -fj.force.dot(t_hat) / speed;
-        let deficit = secant + t_hat.dot(damping * t_hat);
+        let floor = -fj.force.dot(t_hat) / speed - inertia;
+        let deficit = floor + t_hat.dot(damping * t_hat);
         if deficit > 0.0 {
             damping -= deficit * outer(t_hat, t_hat);
         }
@@ -711,7 +715,9 @@ pub fn response(fj: &ForceJacobian, normal: Vec3, v_rel: Vec3) -> Response {
 
 /// Evaluates the model for every contact at velocities `v`, in blocks of
 /// the network's batch width (`nn::mlp::LANES`); `geometry` gives a
-/// contact's triangle and point.
+/// contact's triangle and point. Each contact's sliding friction keeps the
+/// whole secant floor (`response`'s `inertia` 0): a cloth vertex's share
+/// of its contacts with the body is not counted.
 pub fn respond(
     model: &Model,
     contacts: &[Contact],
@@ -731,7 +737,7 @@ pub fn respond(
             let forces = model.evaluate_block(&block, |i| geometry(&contacts[i]));
             for (((r, c), fj), (_, v_rel)) in out.iter_mut().zip(contacts).zip(&forces).zip(&block)
             {
-                *r = response(fj, c.normal, *v_rel);
+                *r = response(fj, c.normal, *v_rel, 0.0);
             }
         });
 }

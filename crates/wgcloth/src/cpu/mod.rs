@@ -352,6 +352,7 @@ impl CpuSim {
                         thickness: keep.thickness,
                         h,
                         limit: keep.mass_ratio * cloth.vertex_mass,
+                        vertex_mass: cloth.vertex_mass,
                     };
                     self.self_terms =
                         self_contact::respond(&found.pairs, &found.counts, x, v, &band);

@@ -333,6 +333,8 @@ pub struct Band {
     pub h: f32,
     /// `self_contact.mass_ratio` times the vertex mass, kg.
     pub limit: f32,
+    /// A vertex's mass, kg.
+    pub vertex_mass: f32,
 }
 
 impl Band {
@@ -352,6 +354,18 @@ impl Band {
             kt: k.kt.min(share / h),
             mu: k.mu,
         }
+    }
+
+    /// The mass pair `p` moves along its slide, over h (kg/s), for the
+    /// friction floor of `contact::response`: 1 / (h Σ β_k² n_k / m), each
+    /// vertex's mass m shared among the n_k pairs found at it (`counts`),
+    /// so that its pairs together never stop it past rest. A pinned vertex
+    /// counts as free, which only raises the floor.
+    pub fn inertia(&self, p: &Pair, counts: &[u32]) -> f32 {
+        let spread: f32 = (p.vertices.iter().zip(p.beta))
+            .map(|(&i, b)| b * b * counts[i as usize] as f32)
+            .sum();
+        self.vertex_mass / (self.h * spread)
     }
 }
 
@@ -374,7 +388,8 @@ pub fn respond(
             let (n, depth) = p.normal_depth(x, band.thickness);
             let most = p.vertices.iter().map(|&i| counts[i as usize]).max();
             let k = band.coefficients(most.unwrap_or(1));
-            let r = response(&friction(n * depth, v_rel, &k), n, v_rel);
+            let fj = friction(n * depth, v_rel, &k);
+            let r = response(&fj, n, v_rel, band.inertia(p, counts));
             PairTerm {
                 block: -(h * r.damping + h * h * r.stiffness),
                 rhs: h * (r.force - r.damping * v_rel),
@@ -483,6 +498,7 @@ mod tests {
         thickness: THICKNESS,
         h: 0.01,
         limit: f32::INFINITY,
+        vertex_mass: 1e-3,
     };
 
     /// A 3×3-vertex sheet and, `gap` above it, a second one turned by
