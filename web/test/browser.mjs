@@ -56,6 +56,10 @@ try {
   check(s.steps >= STEPS, `only ${s.steps} steps`);
   check(s.finite === true, 'the state is not finite');
   check(s.model === 'friction-net', `model ${s.model}`);
+  // The choices come from the library's models, each one.
+  const offered = await page.$$eval('#model option', (os) => os.map((o) => o.value));
+  check(offered[0] === 'friction-net' && offered.includes('naive-net'), `offered ${offered}`);
+  check(await page.$eval('#model', (e) => e.value) === 'friction-net', 'friction-net not selected');
   check(typeof s.adapter === 'string' && s.adapter.length > 0, 'no adapter named');
   check(s.deepest < DEEPEST, `a vertex ${s.deepest} m inside the sphere`);
   const canvas = await page.$('#canvas');

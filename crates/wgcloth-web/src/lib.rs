@@ -20,12 +20,8 @@ use wgcloth::gpu::{CgBudget, GpuSim, Kernels, Readback};
 use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
 use wgcloth::{Config, Scene};
 
-/// The models the page offers, by their command-line names.
-const MODELS: [ModelKind; 3] = [
-    ModelKind::Naive,
-    ModelKind::Friction,
-    ModelKind::FrictionNet,
-];
+/// The model the page runs unless its query names another.
+const DEFAULT_MODEL: ModelKind = ModelKind::FrictionNet;
 /// Grid sides the page accepts: large enough to fold, small enough for a
 /// default-limits device and a software adapter.
 const GRIDS: std::ops::RangeInclusive<u32> = 8..=128;
@@ -144,6 +140,16 @@ pub fn toggle_pause() -> bool {
 }
 
 /// Puts the cloth back at rest and the body at its start.
+/// The models the page offers (every one), by their command-line names,
+/// the default first.
+#[wasm_bindgen]
+pub fn models() -> Vec<String> {
+    let rest = ModelKind::ALL.into_iter().filter(|&m| m != DEFAULT_MODEL);
+    (std::iter::once(DEFAULT_MODEL).chain(rest))
+        .map(|m| m.name().to_string())
+        .collect()
+}
+
 #[wasm_bindgen]
 pub fn reset() {
     CONTROL.with_borrow_mut(|c| c.reset = true);
@@ -170,11 +176,11 @@ fn choices() -> Result<(ModelKind, u32), String> {
     let query = web_sys::UrlSearchParams::new_with_str(&search)
         .map_err(|_| "cannot parse the page's query")?;
     let model = match query.get("model") {
-        None => ModelKind::FrictionNet,
-        Some(name) => *MODELS.iter().find(|m| m.name() == name).ok_or_else(|| {
-            let names: Vec<&str> = MODELS.iter().map(|m| m.name()).collect();
-            format!("model={name}: expected one of {}", names.join(", "))
-        })?,
+        None => DEFAULT_MODEL,
+        Some(name) => *ModelKind::ALL
+            .iter()
+            .find(|m| m.name() == name)
+            .ok_or_else(|| format!("model={name}: expected one of {}", models().join(", ")))?,
     };
     let grid = match query.get("grid") {
         None => 32,

@@ -124,6 +124,15 @@ impl ModelKind {
         }
     }
 
+    /// For a network model, the analytic model whose force it learned.
+    pub fn analytic(self) -> Option<ModelKind> {
+        match self {
+            ModelKind::FrictionNet => Some(ModelKind::Friction),
+            ModelKind::NaiveNet => Some(ModelKind::Naive),
+            ModelKind::Naive | ModelKind::Friction => None,
+        }
+    }
+
     /// The shipped weights a network model reads unless told otherwise.
     pub fn default_weights(self) -> Option<&'static str> {
         self.shipped_weights().map(|s| s.path)

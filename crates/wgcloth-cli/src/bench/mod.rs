@@ -146,22 +146,31 @@ pub const SELF_CONTACT: Variant = Variant {
 /// model and the analytic one solved to the goal with multigrid, and the
 /// default model with Jacobi; last the default run with the cloth kept
 /// from passing through itself.
-pub const VARIANTS: [Variant; 9] = [
-    Variant::of(ModelKind::Naive),
-    Variant::of(ModelKind::Friction),
-    Variant::of(ModelKind::NaiveNet),
-    Variant::of(ModelKind::FrictionNet),
-    Variant {
-        model: ModelKind::FrictionNet,
-        network: Some(weights::FRICTION_THESIS),
-        solve: Solve::Thesis,
-        self_contact: false,
-    },
-    HEADLINE,
-    Variant::converged(ModelKind::Friction, Preconditioner::Multigrid),
-    Variant::converged(ModelKind::FrictionNet, Preconditioner::Jacobi),
-    SELF_CONTACT,
-];
+pub const VARIANTS: [Variant; ModelKind::ALL.len() + 5] = {
+    let rest = [
+        Variant {
+            model: ModelKind::FrictionNet,
+            network: Some(weights::FRICTION_THESIS),
+            solve: Solve::Thesis,
+            self_contact: false,
+        },
+        HEADLINE,
+        Variant::converged(ModelKind::Friction, Preconditioner::Multigrid),
+        Variant::converged(ModelKind::FrictionNet, Preconditioner::Jacobi),
+        SELF_CONTACT,
+    ];
+    let models = ModelKind::ALL.len();
+    let mut all = [HEADLINE; ModelKind::ALL.len() + 5];
+    let mut k = 0;
+    while k < all.len() {
+        all[k] = match k < models {
+            true => Variant::of(ModelKind::ALL[k]),
+            false => rest[k - models],
+        };
+        k += 1;
+    }
+    all
+};
 
 /// Steps before the timed ones: the sphere reaches the cloth and pushes it
 /// (about 0.8 s into the default motion).
@@ -594,11 +603,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         }
         let of = |m: ModelKind| seconds.iter().find(|(v, _)| v.model == m).map(|(_, s)| *s);
         for &(v, s) in &seconds {
-            let analytic = match v.model {
-                ModelKind::FrictionNet => of(ModelKind::Friction),
-                ModelKind::NaiveNet => of(ModelKind::Naive),
-                _ => None,
-            };
+            let analytic = v.model.analytic().and_then(of);
             periods.push(PeriodRow {
                 backend: name(backend).into(),
                 label: v.label(),

@@ -13,31 +13,34 @@ use wgcloth::config::ModelKind;
 use wgcloth::error::{Error, Result};
 use wgcloth::stage::Stage;
 
-/// One colour per entry of [`VARIANTS`].
-pub const VARIANT_COLORS: [Rgb<u8>; VARIANTS.len()] = [
-    Rgb([150, 150, 150]),
-    Rgb([40, 90, 200]),
-    Rgb([230, 150, 30]),
-    Rgb([200, 40, 40]),
-    Rgb([120, 60, 170]),
-    Rgb([20, 150, 80]),
-    Rgb([90, 200, 220]),
-    Rgb([240, 110, 170]),
-    Rgb([110, 80, 40]),
-];
+/// The colour of entry k of [`VARIANTS`].
+pub fn variant_color(k: usize) -> Rgb<u8> {
+    hue_color(k)
+}
 
-/// One colour per entry of [`Stage::ALL`].
-pub const STAGE_COLORS: [Rgb<u8>; Stage::ALL.len()] = [
-    Rgb([140, 86, 75]),
-    Rgb([31, 119, 180]),
-    Rgb([214, 39, 40]),
-    Rgb([255, 127, 14]),
-    Rgb([44, 160, 44]),
-    Rgb([148, 103, 189]),
-    Rgb([127, 127, 127]),
-    Rgb([23, 190, 207]),
-    Rgb([188, 189, 34]),
-];
+/// The colour of stage k of [`Stage::ALL`].
+pub fn stage_color(k: usize) -> Rgb<u8> {
+    hue_color(VARIANTS.len() + k)
+}
+
+/// Hues a golden angle apart: every variant and stage has its own colour,
+/// and a new one needs none chosen by hand.
+fn hue_color(k: usize) -> Rgb<u8> {
+    let hue = (k as f64 * 137.508 + 210.0) % 360.0 / 60.0;
+    let (value, saturation) = (0.82, 0.7);
+    let chroma = value * saturation;
+    let second = chroma * (1.0 - (hue % 2.0 - 1.0).abs());
+    let (r, g, b) = match hue as u32 {
+        0 => (chroma, second, 0.0),
+        1 => (second, chroma, 0.0),
+        2 => (0.0, chroma, second),
+        3 => (0.0, second, chroma),
+        4 => (second, 0.0, chroma),
+        _ => (chroma, 0.0, second),
+    };
+    let byte = |c: f64| ((c + value - chroma) * 255.0).round() as u8;
+    Rgb([byte(r), byte(g), byte(b)])
+}
 
 /// The part of a step no stage accounts for.
 pub const UNSTAGED: Rgb<u8> = Rgb([225, 225, 225]);
@@ -56,11 +59,11 @@ pub fn write(report: &BenchReport, path: &Path) -> Result<()> {
     figure(report)?.save(path)
 }
 
-fn variant_color(row: &StepRow) -> Rgb<u8> {
+fn row_color(row: &StepRow) -> Rgb<u8> {
     VARIANTS
         .iter()
         .position(|v| v.label() == row.label)
-        .map_or(INK, |k| VARIANT_COLORS[k])
+        .map_or(INK, variant_color)
 }
 
 /// The log-log panel between x = left and right.
@@ -129,17 +132,18 @@ fn step_lines(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) -
             points.sort_by_key(|r| r.particles);
             let at = |r: &StepRow| (x.at(r.particles as f64), y.at(r.report.ms_per_step));
             for pair in points.windows(2) {
-                c.line(at(pair[0]), at(pair[1]), variant_color(pair[0]), 2, dash);
+                c.line(at(pair[0]), at(pair[1]), row_color(pair[0]), 2, dash);
             }
             for r in points {
                 let (px, py) = at(r);
-                c.fill((px - 3.0, py - 3.0), (px + 4.0, py + 4.0), variant_color(r));
+                c.fill((px - 3.0, py - 3.0), (px + 4.0, py + 4.0), row_color(r));
             }
         }
     }
     // Legend, top left inside the panel.
     let (lx, mut ly) = (left + 10.0, top + 8.0);
-    for (v, color) in VARIANTS.iter().zip(VARIANT_COLORS) {
+    for (k, v) in VARIANTS.iter().enumerate() {
+        let color = variant_color(k);
         c.fill((lx, ly + 2.0), (lx + 20.0, ly + 6.0), color);
         c.text(lx + 26.0, ly, &v.label(), INK);
         ly += 12.0;
@@ -191,7 +195,8 @@ fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
             bottom - (bottom - top) * share
         };
         let mut below = bottom;
-        for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS) {
+        for (k, stage) in Stage::ALL.iter().enumerate() {
+            let color = stage_color(k);
             if let Some(ms) = row.report.stage_ms.get(stage.name()) {
                 // At least a pixel, so every timed stage shows.
                 let above = y_at(*ms).min(below - 1.0);
@@ -215,7 +220,8 @@ fn stage_bars(c: &mut Canvas, report: &BenchReport, (left, right): (f64, f64)) {
     }
     c.text(left + 40.0, bottom + 44.0, "grid (N x N) and backend", INK);
     let (lx, mut ly) = (right + 24.0, top + 8.0);
-    for (stage, color) in Stage::ALL.iter().zip(STAGE_COLORS).rev() {
+    for (k, stage) in Stage::ALL.iter().enumerate().rev() {
+        let color = stage_color(k);
         c.fill((lx, ly), (lx + 14.0, ly + 8.0), color);
         c.text(lx + 20.0, ly, stage.name(), INK);
         ly += 14.0;
