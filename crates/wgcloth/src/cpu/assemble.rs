@@ -4,17 +4,85 @@
 //! Springs carry Rayleigh damping D = −αM + βK, whose force D v cancels
 //! from the right-hand side; contacts add their own K_c and D_c.
 //! Mirrors wgsl/assemble.wgsl: per-vertex gathers over the adjacency, then
-//! the contacts.
+//! the contacts. The system's matrix, [`BlockMatrix`], is defined here:
+//! the solve and its preconditioners read it.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cpu::collide::Contact;
 use crate::cpu::contact::Response;
-use crate::cpu::pcg::BlockMatrix;
+use crate::cpu::self_contact::Couplings;
 use crate::math::Sym3;
 use crate::parallel::GRAIN;
 use crate::scene::Cloth;
+use crate::scene::cloth::Adjacency;
+
+/// A = M − hD − h²K in the cloth's sparsity: one diagonal block per vertex
+/// and one symmetric off-diagonal block per spring, A_ij = A_ji = `off[s]`
+/// (the face contacts' couplings lie on a spring's pair), and the
+/// cloth–cloth contacts' couplings, which do not.
+#[derive(Clone, Debug, Default)]
+pub struct BlockMatrix {
+    /// A_ii, one block per vertex.
+    pub diag: Vec<Sym3>,
+    /// A_ij = A_ji, one block per spring (i, j), in spring order.
+    pub off: Vec<Sym3>,
+    /// The cloth–cloth contacts' off-diagonal blocks (none without
+    /// self-contact forces); the preconditioners see only their diagonal.
+    pub couplings: Couplings,
+}
+
+impl BlockMatrix {
+    /// The zero matrix of a cloth with `vertices` vertices and `springs`
+    /// springs.
+    pub fn new(vertices: usize, springs: usize) -> BlockMatrix {
+        BlockMatrix {
+            diag: vec![Sym3::ZERO; vertices],
+            off: vec![Sym3::ZERO; springs],
+            couplings: Couplings::default(),
+        }
+    }
+
+    /// Row i of A x, gathered over the vertex's springs.
+    fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
+        let mut acc = self.diag[i] * x[i];
+        for k in adj.range(i) {
+            acc += self.off[adj.spring[k] as usize] * x[adj.other[k] as usize];
+        }
+        acc + self.couplings.row(i, x)
+    }
+
+    /// y = A x.
+    pub fn multiply(&self, adj: &Adjacency, x: &[Vec3], y: &mut [Vec3]) {
+        y.par_iter_mut()
+            .with_min_len(GRAIN)
+            .enumerate()
+            .for_each(|(i, yi)| *yi = self.row(adj, x, i));
+    }
+
+    /// y = S A x with pinned rows zeroed, returning xᵀy (one pass).
+    pub fn multiply_filtered_dot(
+        &self,
+        adj: &Adjacency,
+        pinned: &[bool],
+        x: &[Vec3],
+        y: &mut [Vec3],
+    ) -> f64 {
+        y.par_iter_mut()
+            .with_min_len(GRAIN)
+            .enumerate()
+            .map(|(i, yi)| {
+                *yi = if pinned[i] {
+                    Vec3::ZERO
+                } else {
+                    self.row(adj, x, i)
+                };
+                yi.dot(x[i]) as f64
+            })
+            .sum()
+    }
+}
 
 /// Scalars of one step.
 #[derive(Clone, Copy, Debug)]

@@ -11,6 +11,7 @@ pub mod integrate;
 pub mod measure;
 pub mod multigrid;
 pub mod pcg;
+pub mod precondition;
 pub mod rigid;
 pub mod self_contact;
 pub mod separate;

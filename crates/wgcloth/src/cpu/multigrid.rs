@@ -16,8 +16,10 @@ use std::ops::Range;
 use glam::{Mat3, Vec3, Vec4};
 use rayon::prelude::*;
 
+use crate::config::Preconditioner;
 use crate::config::Smoother;
-use crate::cpu::pcg::BlockMatrix;
+use crate::cpu::assemble::BlockMatrix;
+use crate::cpu::precondition::Precondition;
 use crate::math::{RowSum, Sym3};
 use crate::multigrid::{
     COARSE_SWEEPS, Level, PATCH, PATCH_COLOURS, PATCH_UNKNOWNS, PatchMatrix, STENCIL,
@@ -59,6 +61,22 @@ pub struct Multigrid {
     /// those of a run of nodes are one run of A's blocks, which the
     /// cloth's read-ahead asks for at once.
     spring_starts: Vec<u32>,
+}
+
+impl Precondition for Multigrid {
+    fn fits(&self, cloth: &Cloth, kind: Preconditioner, smoother: Smoother) -> bool {
+        kind == Preconditioner::Multigrid
+            && self.levels[0] == Level::of(cloth)
+            && self.smoother == smoother
+    }
+
+    fn setup(&mut self, a: &BlockMatrix, cloth: &Cloth) {
+        Multigrid::setup(self, a, cloth);
+    }
+
+    fn apply(&mut self, a: &BlockMatrix, cloth: &Cloth, r: &[Vec3], z: &mut [Vec3]) -> f64 {
+        Multigrid::apply(self, a, cloth, r, z)
+    }
 }
 
 /// Which way a patch sweep goes.

@@ -1,86 +1,20 @@
-//! Stage "pcg": the system matrix and the preconditioned conjugate
-//! gradient solve of thesis eq. 1, with pinned vertices removed by
-//! filtering (Baraff & Witkin's modified PCG). The preconditioner is the
-//! thesis's Jacobi or a multigrid V-cycle (`cpu::multigrid`). Mirrors
-//! wgsl/pcg.wgsl.
+//! Stage "pcg": the preconditioned conjugate gradient solve of thesis
+//! eq. 1 (its matrix: `cpu::assemble::BlockMatrix`), with pinned vertices removed by
+//! filtering (Baraff & Witkin's modified PCG). The preconditioner is any
+//! [`Precondition`] (`cpu::precondition`): the thesis's [`Jacobi`] or a
+//! multigrid V-cycle (`cpu::multigrid`), as `solver.preconditioner` names
+//! it. Mirrors wgsl/pcg.wgsl.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub use crate::config::{Preconditioner, Smoother};
+pub use crate::cpu::assemble::BlockMatrix;
 use crate::cpu::multigrid::Multigrid;
-use crate::cpu::self_contact::Couplings;
-use crate::math::Sym3;
-use crate::multigrid::Level;
+use crate::cpu::precondition::jacobi_z;
+pub use crate::cpu::precondition::{Jacobi, Precondition};
 use crate::parallel::GRAIN;
 use crate::scene::Cloth;
-use crate::scene::cloth::Adjacency;
-
-/// A = M − hD − h²K in the cloth's sparsity: one diagonal block per vertex
-/// and one symmetric off-diagonal block per spring, A_ij = A_ji = `off[s]`
-/// (the face contacts' couplings lie on a spring's pair), and the
-/// cloth–cloth contacts' couplings, which do not.
-#[derive(Clone, Debug, Default)]
-pub struct BlockMatrix {
-    /// A_ii, one block per vertex.
-    pub diag: Vec<Sym3>,
-    /// A_ij = A_ji, one block per spring (i, j), in spring order.
-    pub off: Vec<Sym3>,
-    /// The cloth–cloth contacts' off-diagonal blocks (none without
-    /// self-contact forces); the preconditioners see only their diagonal.
-    pub couplings: Couplings,
-}
-
-impl BlockMatrix {
-    /// The zero matrix of a cloth with `vertices` vertices and `springs`
-    /// springs.
-    pub fn new(vertices: usize, springs: usize) -> BlockMatrix {
-        BlockMatrix {
-            diag: vec![Sym3::ZERO; vertices],
-            off: vec![Sym3::ZERO; springs],
-            couplings: Couplings::default(),
-        }
-    }
-
-    /// Row i of A x, gathered over the vertex's springs.
-    fn row(&self, adj: &Adjacency, x: &[Vec3], i: usize) -> Vec3 {
-        let mut acc = self.diag[i] * x[i];
-        for k in adj.range(i) {
-            acc += self.off[adj.spring[k] as usize] * x[adj.other[k] as usize];
-        }
-        acc + self.couplings.row(i, x)
-    }
-
-    /// y = A x.
-    pub fn multiply(&self, adj: &Adjacency, x: &[Vec3], y: &mut [Vec3]) {
-        y.par_iter_mut()
-            .with_min_len(GRAIN)
-            .enumerate()
-            .for_each(|(i, yi)| *yi = self.row(adj, x, i));
-    }
-
-    /// y = S A x with pinned rows zeroed, returning xᵀy (one pass).
-    pub fn multiply_filtered_dot(
-        &self,
-        adj: &Adjacency,
-        pinned: &[bool],
-        x: &[Vec3],
-        y: &mut [Vec3],
-    ) -> f64 {
-        y.par_iter_mut()
-            .with_min_len(GRAIN)
-            .enumerate()
-            .map(|(i, yi)| {
-                *yi = if pinned[i] {
-                    Vec3::ZERO
-                } else {
-                    self.row(adj, x, i)
-                };
-                yi.dot(x[i]) as f64
-            })
-            .sum()
-    }
-}
 
 /// How a PCG solve ended.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -107,15 +41,26 @@ pub struct SolveSettings {
     pub smoother: Smoother,
 }
 
-/// Work vectors and the multigrid hierarchy, kept between steps.
-#[derive(Clone, Debug, Default)]
+/// Where `solver.preconditioner` names a preconditioner: a new one is an
+/// arm here and an implementation of [`Precondition`].
+impl dyn Precondition {
+    /// The preconditioner `settings` ask for, for `cloth`.
+    pub fn of(cloth: &Cloth, settings: &SolveSettings) -> Box<dyn Precondition> {
+        match settings.preconditioner {
+            Preconditioner::Multigrid => Box::new(Multigrid::new(cloth, settings.smoother)),
+            Preconditioner::Jacobi => Box::new(Jacobi::default()),
+        }
+    }
+}
+
+/// Work vectors and the preconditioner, kept between steps.
+#[derive(Debug, Default)]
 pub struct PcgScratch {
     r: Vec<Vec3>,
     z: Vec<Vec3>,
     p: Vec<Vec3>,
     q: Vec<Vec3>,
-    inv_diag: Vec<Vec3>,
-    multigrid: Option<Multigrid>,
+    preconditioner: Option<Box<dyn Precondition>>,
 }
 
 /// Solves A x = b for the free vertices of `cloth`; `x` holds the initial
@@ -144,36 +89,24 @@ pub fn solve(
     rayon::scope(|_| {
         let (adj, pinned) = (&cloth.adjacency, &cloth.pinned[..]);
         let n = b.len();
-        for v in [&mut s.r, &mut s.z, &mut s.p, &mut s.q, &mut s.inv_diag] {
+        let PcgScratch {
+            r,
+            z,
+            p,
+            q,
+            preconditioner,
+        } = s;
+        for v in [&mut *r, &mut *z, &mut *p, &mut *q] {
             v.resize(n, Vec3::ZERO);
         }
-        match settings.preconditioner {
-            Preconditioner::Multigrid => {
-                // A hierarchy built for another cloth or smoother is rebuilt.
-                let fits = |mg: &Multigrid| {
-                    mg.levels()[0] == Level::of(cloth) && mg.smoother() == settings.smoother
-                };
-                if !s.multigrid.as_ref().is_some_and(fits) {
-                    s.multigrid = Some(Multigrid::new(cloth, settings.smoother));
-                }
-                if let Some(mg) = &mut s.multigrid {
-                    mg.setup(a, cloth);
-                }
-            }
-            // The diagonal; zero on pinned rows, which is the filter S.
-            Preconditioner::Jacobi => s
-                .inv_diag
-                .par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .for_each(|(i, m)| {
-                    *m = if pinned[i] {
-                        Vec3::ZERO
-                    } else {
-                        a.diag[i].diagonal().recip()
-                    };
-                }),
+        // One built for another cloth or other settings is rebuilt.
+        let (kind, smoother) = (settings.preconditioner, settings.smoother);
+        if !(preconditioner.as_ref()).is_some_and(|pc| pc.fits(cloth, kind, smoother)) {
+            *preconditioner = None;
         }
+        let pc = preconditioner.get_or_insert_with(|| <dyn Precondition>::of(cloth, &settings));
+        pc.setup(a, cloth);
+        let fused = pc.diagonal().is_some();
         let bb = b
             .par_iter()
             .with_min_len(GRAIN)
@@ -182,56 +115,53 @@ pub fn solve(
             .map(|(_, bi)| bi.length_squared() as f64)
             .sum::<f64>();
         // r = S (b − A x), z = P⁻¹ r, p = z.
-        a.multiply(adj, x, &mut s.q);
-        let mut rr =
-            s.r.par_iter_mut()
-                .with_min_len(GRAIN)
-                .enumerate()
-                .map(|(i, r)| {
-                    *r = if pinned[i] { Vec3::ZERO } else { b[i] - s.q[i] };
-                    r.length_squared() as f64
-                })
-                .sum::<f64>();
-        let mut delta = precondition(a, cloth, settings.preconditioner, s);
-        s.p.copy_from_slice(&s.z);
-        let jacobi = settings.preconditioner == Preconditioner::Jacobi;
+        a.multiply(adj, x, q);
+        let mut rr = r
+            .par_iter_mut()
+            .with_min_len(GRAIN)
+            .enumerate()
+            .map(|(i, r)| {
+                *r = if pinned[i] { Vec3::ZERO } else { b[i] - q[i] };
+                r.length_squared() as f64
+            })
+            .sum::<f64>();
+        let mut delta = pc.apply(a, cloth, r, z);
+        p.copy_from_slice(z);
 
         let mut out = PcgOutcome::default();
         let threshold = (settings.tol as f64).powi(2) * bb;
         while out.iterations < settings.max_iters && rr > threshold && delta > 0.0 {
-            let pq = a.multiply_filtered_dot(adj, pinned, &s.p, &mut s.q);
+            let pq = a.multiply_filtered_dot(adj, pinned, p, q);
             if !(pq > 0.0 && pq.is_finite()) {
                 out.breakdown = true;
                 break;
             }
             let alpha = (delta / pq) as f32;
-            // x += α p and r −= α q with rᵀr; Jacobi's z = P⁻¹ r and rᵀz
-            // in the same pass.
+            // x += α p and r −= α q with rᵀr; a diagonal P's z = P⁻¹ r and
+            // rᵀz in the same pass.
+            let diagonal = pc.diagonal();
             let (rr_new, rz) = x
                 .par_iter_mut()
                 .with_min_len(GRAIN)
-                .zip(s.r.par_iter_mut())
-                .zip(s.z.par_iter_mut())
+                .zip(r.par_iter_mut())
+                .zip(z.par_iter_mut())
                 .enumerate()
                 .map(|(i, ((x, r), z))| {
-                    *x += alpha * s.p[i];
-                    *r -= alpha * s.q[i];
-                    let rz = match jacobi {
-                        true => jacobi_z(*r, s.inv_diag[i], z),
-                        false => 0.0,
-                    };
+                    *x += alpha * p[i];
+                    *r -= alpha * q[i];
+                    let rz = diagonal.map_or(0.0, |d| jacobi_z(*r, d[i], z));
                     (r.length_squared() as f64, rz)
                 })
                 .reduce(|| (0.0, 0.0), |(a, b), (c, d)| (a + c, b + d));
             rr = rr_new;
-            let delta_new = match jacobi {
+            let delta_new = match fused {
                 true => rz,
-                false => precondition(a, cloth, settings.preconditioner, s),
+                false => pc.apply(a, cloth, r, z),
             };
             let beta = (delta_new / delta) as f32;
-            s.p.par_iter_mut()
+            p.par_iter_mut()
                 .with_min_len(GRAIN)
-                .zip(&s.z)
+                .zip(&*z)
                 .for_each(|(p, z)| *p = *z + beta * *p);
             delta = delta_new;
             out.iterations += 1;
@@ -247,32 +177,4 @@ pub fn solve(
         };
         out
     })
-}
-
-/// z = P⁻¹ r, returning rᵀz.
-fn precondition(
-    a: &BlockMatrix,
-    cloth: &Cloth,
-    preconditioner: Preconditioner,
-    s: &mut PcgScratch,
-) -> f64 {
-    match (preconditioner, &mut s.multigrid) {
-        (Preconditioner::Multigrid, Some(mg)) => mg.apply(a, cloth, &s.r, &mut s.z),
-        _ => {
-            s.z.par_iter_mut()
-                .with_min_len(GRAIN)
-                .zip(&s.r)
-                .zip(&s.inv_diag)
-                .map(|((z, r), m)| jacobi_z(*r, *m, z))
-                .sum()
-        }
-    }
-}
-
-/// Jacobi's z = P⁻¹ r at one vertex (`inv_diag` is P⁻¹'s diagonal),
-/// returning its rᵀz.
-#[inline]
-fn jacobi_z(r: Vec3, inv_diag: Vec3, z: &mut Vec3) -> f64 {
-    *z = r * inv_diag;
-    r.dot(*z) as f64
 }

@@ -12,6 +12,7 @@ pub mod lines;
 pub mod measure;
 pub mod multigrid;
 pub mod pcg;
+pub mod precondition;
 pub mod rigid;
 pub mod self_contact;
 pub mod separate;

@@ -9,6 +9,7 @@ use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels, LevelKind, Levels};
 use crate::gpu::layout::{Grid, ScalarsAndSizes};
 use crate::gpu::pass::Pass;
+use crate::gpu::stages::precondition::Precondition;
 use crate::multigrid::{
     NO_PATCHES, PATCH_COLOURS, patch_grid, patch_threads, tail_from, tail_nodes,
 };
@@ -120,10 +121,12 @@ impl Multigrid {
             grids: grids.to_vec(),
         })
     }
+}
 
+impl Precondition for Multigrid {
     /// Every coarse level's operator from this step's A, finest first, then
     /// every level's patch inverses.
-    pub(crate) fn encode_setup(&self, pass: &mut Pass) {
+    fn encode_setup(&self, pass: &mut Pass) {
         for (l, galerkin) in self.galerkin.iter().enumerate() {
             galerkin.dispatch(pass, self.grids[l + 1].nodes() as u32, WORKGROUP);
         }
@@ -138,7 +141,7 @@ impl Multigrid {
     /// One V-cycle on the PCG residual, leaving z and partial rᵀz: sized
     /// on the host, or from `scalars`' per-level sizes (zero once the solve
     /// is over).
-    pub(crate) fn encode_cycle(&self, pass: &mut Pass, scalars: Option<&wgpu::Buffer>) {
+    fn encode_apply(&self, pass: &mut Pass, scalars: Option<&wgpu::Buffer>) {
         // A kernel over level l's nodes, or over its patch sweep's threads.
         let dispatch = |pass: &mut Pass, kernel: &Bound, level: usize, sweep: bool| match scalars {
             Some(args) => {

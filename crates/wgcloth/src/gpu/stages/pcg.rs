@@ -1,7 +1,9 @@
 //! Stage "pcg" (wgsl/pcg.wgsl; CPU twin cpu/pcg.rs): preconditioned CG on
 //! A v' = b with pinned rows filtered, its scalars and convergence test on
-//! the GPU. An iteration is two dispatches with Jacobi, and the V-cycle's
-//! besides with multigrid; each iteration's are sized by the GPU (`next`
+//! the GPU, preconditioned by any `Precondition` (Jacobi, or the
+//! multigrid V-cycle of `stages::multigrid`). An iteration is two
+//! dispatches with Jacobi, and the V-cycle's besides with multigrid; each
+//! iteration's are sized by the GPU (`next`
 //! to one workgroup, which carries the scalars, after convergence), so the
 //! iterations recorded after convergence do almost no work.
 
@@ -11,6 +13,7 @@ use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::ScalarsAndSizes;
 use crate::gpu::pass::Pass;
 use crate::gpu::stages::multigrid::Multigrid;
+use crate::gpu::stages::precondition::{Jacobi, Precondition};
 use crate::gpu::stages::{Record, Recording};
 use crate::scene::Scene;
 
@@ -40,8 +43,7 @@ pub(crate) struct Pcg {
     sides: [Side; 2],
     /// The scalars, which hold each iteration's dispatch sizes.
     scalars: [wgpu::Buffer; 2],
-    /// The V-cycle, when multigrid preconditions.
-    multigrid: Option<Multigrid>,
+    preconditioner: Box<dyn Precondition>,
 }
 
 impl Pcg {
@@ -85,7 +87,11 @@ impl Pcg {
         Pcg {
             sides: [side(0), side(1)],
             scalars: b.scalars.clone(),
-            multigrid: Multigrid::new(kernels, device, b, &multigrid_grids(scene)),
+            // Multigrid's levels, or none where Jacobi preconditions.
+            preconditioner: match Multigrid::new(kernels, device, b, &multigrid_grids(scene)) {
+                Some(multigrid) => Box::new(multigrid),
+                None => Box::new(Jacobi),
+            },
         }
     }
 }
@@ -99,33 +105,27 @@ impl Record for Pcg {
         let p = r.params;
         let n = p.n_vertices;
         let iters = r.cg_iterations.min(p.cg_max_iters) as usize;
-        if let Some(mg) = &self.multigrid {
-            mg.encode_setup(pass);
-        }
+        let pc = &self.preconditioner;
+        pc.encode_setup(pass);
         let coupled = p.cloth_thickness > 0.0;
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
         if coupled {
             self.sides[0].couple_start.dispatch(pass, n, WORKGROUP);
             self.sides[0].couple_init.dispatch(pass, n, WORKGROUP);
         }
-        if let Some(mg) = &self.multigrid {
-            mg.encode_cycle(pass, None);
-        }
+        pc.encode_apply(pass, None);
         // Writes scalars[0], which iteration 0 reads, and the dispatch sizes
         // into scalars[1] too.
         self.sides[1].init_scalars.dispatch(pass, 1, 1);
         // Iteration `it`'s x, r and z, sized by the scalars it reads.
         let update = |pass: &mut Pass, it: usize| {
             let (side, args) = (&self.sides[it % 2], &self.scalars[it % 2]);
-            match &self.multigrid {
-                Some(mg) => {
-                    side.advance
-                        .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
-                    mg.encode_cycle(pass, Some(args));
-                }
-                None => {
-                    side.update
-                        .dispatch_indirect(pass, args, ScalarsAndSizes::groups_offset(0));
+            let at = ScalarsAndSizes::groups_offset(0);
+            match pc.fused() {
+                true => side.update.dispatch_indirect(pass, args, at),
+                false => {
+                    side.advance.dispatch_indirect(pass, args, at);
+                    pc.encode_apply(pass, Some(args));
                 }
             }
         };
