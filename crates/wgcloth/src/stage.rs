@@ -45,10 +45,12 @@ stages! {
     Pcg => "pcg",
     /// x' = x + h v'.
     Integrate => "integrate",
-    /// The deepest penetration after the step.
+    /// The deepest penetration into the body after the solve, then the
+    /// push-out of the vertices inside it.
     Measure => "measure",
-    /// Each vertex's step held back where the cloth would otherwise pass
-    /// through itself (issue 23), when `self_contact` is on.
+    /// The failsafe for what the self-contact forces miss: impulses that
+    /// keep momentum and obey Coulomb, then impact zones (issue 65), when
+    /// `self_contact` is on.
     Separate => "separate",
 }
 

@@ -1,11 +1,13 @@
 //! Text kept outside the code says what the code does: the README's
 //! "Embed it" code is the crate docs' example, `examples/embed.rs`, word for
-//! word, so what a reader copies is what CI runs; the fuzzer's config
+//! word, so what a reader copies is what CI runs; its "How a step works"
+//! lists the stages of `Stage::ALL` in their order; the fuzzer's config
 //! dictionary names every table, key, model and solver choice the config
 //! reads.
 
 use wgcloth::Config;
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Smoother};
+use wgcloth::stage::Stage;
 
 #[test]
 fn the_readme_embeds_the_example_ci_runs() {
@@ -23,6 +25,25 @@ fn the_readme_embeds_the_example_ci_runs() {
     assert_eq!(
         code, example,
         "README's Embed it code differs from examples/embed.rs"
+    );
+}
+
+#[test]
+fn the_readme_describes_every_stage_in_the_order_a_step_runs_them() {
+    let readme = include_str!("../../../README.md");
+    let section = (readme.split("## How a step works").nth(1))
+        .and_then(|rest| rest.split("\n## ").next())
+        .expect("the README has a \"How a step works\" section");
+    // Its numbered items, "1. `rigid` — ...", by their stage names.
+    let listed: Vec<&str> = (section.lines())
+        .filter_map(|l| l.split_once(". `")?.1.split_once('`'))
+        .filter(|(_, rest)| rest.starts_with(" —"))
+        .map(|(name, _)| name)
+        .collect();
+    let stages: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+    assert_eq!(
+        listed, stages,
+        "README's How a step works against Stage::ALL"
     );
 }
 
