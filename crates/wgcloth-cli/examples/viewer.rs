@@ -5,8 +5,8 @@
 //! `cargo run --release --features viewer --example viewer [-- --grid N] [--frames K]`
 //!
 //! Drag with the left button to orbit, scroll to zoom. Space pauses, N
-//! steps once while paused, M switches the collision model (friction,
-//! friction-net, naive, naive-net), W toggles the wireframe and F the
+//! steps once while paused, M switches the collision model (each of
+//! `ModelKind::ALL` in turn, from friction-net), W toggles the wireframe and F the
 //! force segments; Esc quits. `--frames K` quits after K frames (for
 //! smoke tests). Without a display it says so and exits with code 2.
 
@@ -23,13 +23,6 @@ use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
-
-const MODELS: [ModelKind; 4] = [
-    ModelKind::Friction,
-    ModelKind::FrictionNet,
-    ModelKind::Naive,
-    ModelKind::NaiveNet,
-];
 
 /// The window and the device it draws with.
 struct Gfx {
@@ -85,6 +78,7 @@ struct App {
     gfx: Option<Gfx>,
     running: Option<Running>,
     orbit: Option<Orbit>,
+    /// The collision model running: `ModelKind::ALL[model]`.
     model: usize,
     paused: bool,
     step_once: bool,
@@ -143,7 +137,7 @@ impl App {
     fn start(&mut self) -> Result<(), String> {
         let gfx = self.gfx.as_ref().expect("window open");
         let config = Config {
-            model: MODELS[self.model],
+            model: ModelKind::ALL[self.model],
             ..self.config.clone()
         };
         let scene = Scene::new(&config).map_err(|e| e.to_string())?;
@@ -213,7 +207,7 @@ impl App {
                 "w" => self.style.wireframe = !self.style.wireframe,
                 "f" => self.style.forces = !self.style.forces,
                 "m" => {
-                    self.model = (self.model + 1) % MODELS.len();
+                    self.model = (self.model + 1) % ModelKind::ALL.len();
                     self.start()?;
                 }
                 _ => {}
@@ -347,7 +341,9 @@ fn main() -> ExitCode {
         gfx: None,
         running: None,
         orbit: None,
-        model: 1,
+        model: (ModelKind::ALL.iter())
+            .position(|&m| m == ModelKind::FrictionNet)
+            .unwrap_or(0),
         paused: false,
         step_once: false,
         style: Style {
