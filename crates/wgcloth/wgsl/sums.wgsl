@@ -14,8 +14,8 @@ var<workgroup> scratch: array<vec4<f32>, WORKGROUP>;
 // SUM_LANES lanes each sum a stride of the values, then one sums theirs:
 // two rounds, not a tree's log₂ WORKGROUP. lavapipe runs each round's code
 // for every 8 lanes of the workgroup, active or not, so rounds cost more
-// than additions there (BENCHMARKS.md, "What an iteration costs on
-// lavapipe"); on a hardware GPU the two are alike.
+// than additions there (BENCHMARKS.md, "Lavapipe's solver"); on a
+// hardware GPU the two are alike.
 const SUM_LANES: u32 = 16u;
 
 fn workgroup_sums(lane: Lane, value: vec4<f32>) -> vec4<f32> {
