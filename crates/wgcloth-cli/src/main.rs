@@ -81,6 +81,9 @@ struct BenchArgs {
     /// breakdown, as a PNG.
     #[arg(long, value_name = "FILE.png")]
     plot: Option<PathBuf>,
+    /// Write the tables as Markdown (what BENCHMARKS.md quotes).
+    #[arg(long, value_name = "FILE.md")]
+    markdown: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -498,7 +501,7 @@ fn run(args: &RunArgs) -> Result<()> {
 
 fn bench(args: &BenchArgs) -> Result<()> {
     // Fail before minutes of measuring, not after.
-    for path in args.report.iter().chain(&args.plot) {
+    for path in args.report.iter().chain(&args.plot).chain(&args.markdown) {
         writable(path)?;
     }
     if let Some(plot) = &args.plot {
@@ -536,6 +539,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.plot {
         wgcloth_cli::bench::plot::write(&report, path)?;
         println!("plot: {}", path.display());
+    }
+    if let Some(path) = &args.markdown {
+        std::fs::write(path, report.markdown()).map_err(|e| Error::io(path, e))?;
+        println!("markdown: {}", path.display());
     }
     Ok(())
 }

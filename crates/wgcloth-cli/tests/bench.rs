@@ -380,6 +380,26 @@ fn a_tiny_bench_has_every_row_and_consistent_figures() {
     for v in VARIANTS {
         assert!(table.contains(&v.label()), "{table}");
     }
+    // The Markdown tables hold the same rows, each as wide as its head.
+    let markdown = report.markdown();
+    for block in markdown.split("\n\n").filter(|b| b.starts_with('|')) {
+        let widths: Vec<usize> = block.lines().map(|l| l.matches(" | ").count()).collect();
+        assert!(widths.iter().all(|&w| w == widths[0]), "{block}");
+    }
+    for v in VARIANTS {
+        assert!(
+            markdown.contains(&format!("| {} |", v.label())),
+            "{markdown}"
+        );
+    }
+    assert_eq!(
+        markdown
+            .lines()
+            .filter(|l| l.starts_with("| cpu |"))
+            .count(),
+        table.lines().filter(|l| l.starts_with("cpu ")).count(),
+        "{markdown}\n{table}"
+    );
 
     // Every series of the log-log panel and every stage of the breakdown
     // is drawn from the rows: taking a series' rows, or a stage's times,

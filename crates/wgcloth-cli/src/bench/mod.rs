@@ -362,14 +362,6 @@ impl StepRow {
     }
 }
 
-/// A row's ms/step in a column `width` wide, or the step it diverged at.
-fn ms_or_diverged(ms: f64, diverged_at: Option<u64>, width: usize) -> String {
-    match diverged_at {
-        Some(step) => format!("{:>width$}", format!("div@{step}")),
-        None => format!("{ms:>width$.3}"),
-    }
-}
-
 /// Wall time of one sphere period (at 32² unless told otherwise), from a
 /// fresh simulator.
 #[derive(Clone, Debug, Serialize)]
@@ -1027,14 +1019,88 @@ fn timed(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     Ok(median(&mut ms))
 }
 
-/// Appends a table, its header and a line per row, where it has rows.
-fn section<T>(out: &mut String, rows: &[T], header: String, line: impl Fn(&T) -> String) {
-    if rows.is_empty() {
-        return;
+/// How a column's cells line up in the terminal (Markdown aligns them too).
+#[derive(Clone, Copy)]
+enum Align {
+    Left,
+    Right,
+}
+
+/// One table of the bench's output: its title, column heads and cells,
+/// rendered for the terminal or as Markdown from the same cells.
+struct Table {
+    title: String,
+    columns: Vec<(&'static str, Align)>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    /// A table of `rows`, each made into cells by `cells`; none where there
+    /// are no rows.
+    fn of<T>(
+        title: String,
+        columns: &[(&'static str, Align)],
+        rows: &[T],
+        cells: impl Fn(&T) -> Vec<String>,
+    ) -> Option<Table> {
+        (!rows.is_empty()).then(|| Table {
+            title,
+            columns: columns.to_vec(),
+            rows: rows.iter().map(cells).collect(),
+        })
     }
-    *out += &header;
-    for row in rows {
-        *out += &line(row);
+
+    /// Padded columns two spaces apart, under the title.
+    fn text(&self) -> String {
+        let width = |k: usize| {
+            (self.rows.iter().map(|r| r[k].chars().count()))
+                .chain([self.columns[k].0.chars().count()])
+                .max()
+                .unwrap_or(0)
+        };
+        let widths: Vec<usize> = (0..self.columns.len()).map(width).collect();
+        let line = |cells: Vec<&str>| {
+            let padded: Vec<String> = (cells.iter().zip(&self.columns).zip(&widths))
+                .map(|((cell, (_, align)), &w)| match align {
+                    Align::Left => format!("{cell:<w$}"),
+                    Align::Right => format!("{cell:>w$}"),
+                })
+                .collect();
+            padded.join("  ").trim_end().to_string() + "\n"
+        };
+        let mut out = format!("\n{}\n", self.title);
+        out += &line(self.columns.iter().map(|c| c.0).collect());
+        for row in &self.rows {
+            out += &line(row.iter().map(String::as_str).collect());
+        }
+        out
+    }
+
+    /// A Markdown table under the title in bold.
+    fn markdown(&self) -> String {
+        let line = |cells: Vec<&str>| format!("| {} |\n", cells.join(" | "));
+        let mut out = format!("\n**{}**\n\n", self.title);
+        out += &line(self.columns.iter().map(|c| c.0).collect());
+        out += &line(
+            (self.columns.iter())
+                .map(|(_, align)| match align {
+                    Align::Left => "---",
+                    Align::Right => "---:",
+                })
+                .collect(),
+        );
+        for row in &self.rows {
+            out += &line(row.iter().map(String::as_str).collect());
+        }
+        out
+    }
+}
+
+/// A step time, or the step its run diverged at.
+fn ms_cell(ms: f64, diverged_at: Option<u64>, digits: usize) -> String {
+    match diverged_at {
+        Some(step) => format!("div@{step}"),
+        None => format!("{ms:.digits$}"),
     }
 }
 
@@ -1042,217 +1108,253 @@ impl BenchReport {
     /// The terminal tables (those a run measured).
     pub fn table(&self) -> String {
         let mut out = format!("cpu: {}\ngpu: {}\n", self.cpu, self.gpu);
-        let stages: Vec<&str> = Stage::ALL
+        for t in self.tables() {
+            out += &t.text();
+        }
+        out
+    }
+
+    /// The same tables in Markdown (`bench --markdown`), for BENCHMARKS.md.
+    pub fn markdown(&self) -> String {
+        let mut out = format!("CPU: {}; GPU: {}.\n", self.cpu, self.gpu);
+        for t in self.tables() {
+            out += &t.markdown();
+        }
+        out
+    }
+
+    fn tables(&self) -> Vec<Table> {
+        use Align::{Left, Right};
+        let stages: Vec<&'static str> = Stage::ALL
             .iter()
             .map(|s| s.name())
             .filter(|s| self.rows.iter().any(|r| r.report.stage_ms.contains_key(*s)))
             .collect();
-        let mut header = format!(
-            "\n{:<8}{:<32}{:>6}{:>11}{:>10}{:>6}{:>7}",
-            "backend", "model", "grid", "ms/step", "contacts", "cg", "staged"
-        );
-        for s in &stages {
-            header += &format!("{:>11}", s);
-        }
-        section(&mut out, &self.rows, header + "\n", |row| {
-            let r = &row.report;
-            let mut line = format!(
-                "{:<8}{:<32}{:>6}{}{:>10.1}{:>6.1}{:>6.0}%",
-                r.backend,
-                row.label,
-                r.grid[0],
-                ms_or_diverged(r.ms_per_step, row.diverged_at(), 11),
-                r.contacts_mean,
-                r.cg_iterations_mean,
-                100.0 * row.stage_coverage
-            );
-            for s in &stages {
-                match r.stage_ms.get(*s) {
-                    Some(ms) => line += &format!("{ms:>11.3}"),
-                    None => line += &format!("{:>11}", "-"),
-                }
-            }
-            line + "\n"
-        });
-        section(
-            &mut out,
-            &self.converged,
-            format!(
-                "\nconverged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|\n{:<8}{:<32}{:>6}{:>7}{:>11}{:>8}{:>6}{:>11}{:>7}{:>7}{:>10}\n",
-                "backend",
-                "model",
-                "grid",
-                "solves",
-                "ms/step",
-                "iters",
-                "most",
-                "worst",
-                "above",
-                "again",
-                "× thesis"
+        let mut step_columns = vec![
+            ("backend", Left),
+            ("model", Left),
+            ("grid", Right),
+            ("ms/step", Right),
+            ("contacts", Right),
+            ("cg", Right),
+            ("staged", Right),
+        ];
+        step_columns.extend(stages.iter().map(|&s| (s, Right)));
+        let ratio = |r: Option<f64>| r.map(|r| format!("{r:.2}")).unwrap_or_default();
+        [
+            Table::of(
+                "ms/step (median), contacts and CG iterations (means), each stage's median ms".into(),
+                &step_columns,
+                &self.rows,
+                |row| {
+                    let r = &row.report;
+                    let mut cells = vec![
+                        r.backend.clone(),
+                        row.label.clone(),
+                        r.grid[0].to_string(),
+                        ms_cell(r.ms_per_step, row.diverged_at(), 3),
+                        format!("{:.1}", r.contacts_mean),
+                        format!("{:.1}", r.cg_iterations_mean),
+                        format!("{:.0}%", 100.0 * row.stage_coverage),
+                    ];
+                    cells.extend(stages.iter().map(|s| {
+                        (r.stage_ms.get(*s)).map_or("-".into(), |ms| format!("{ms:.3}"))
+                    }));
+                    cells
+                },
             ),
-            |c| {
-                format!(
-                    "{:<8}{:<32}{:>6}{:>7}{}{:>8.1}{:>6}{:>11.2e}{:>7}{:>7}{:>10}\n",
-                    c.backend,
-                    c.label,
-                    c.grid,
-                    c.substeps,
-                    ms_or_diverged(c.ms_per_step, c.diverged_at, 11),
-                    c.iterations_mean,
-                    c.iterations_max,
-                    c.residual_max,
-                    c.steps_above_goal,
-                    c.steps_resolved,
-                    c.times_thesis_step
-                        .map(|r| format!("{r:.2}"))
-                        .unwrap_or_default()
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.scaling,
-            "\nstep growth, ms/step ∝ particles^exponent\n".into(),
-            |g| {
-                format!(
-                    "{:<8}{:<32}{:>4}² → {:>4}²{:>8.2}\n",
-                    g.backend, g.label, g.from_grid, g.to_grid, g.exponent
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.bandwidth,
-            "\ncopy bandwidth\n".into(),
-            |b| format!("{:<8}{:>8.1} GB/s  {}\n", b.backend, b.gb_per_s, b.method),
-        );
-        section(
-            &mut out,
-            &self.arithmetic,
-            "\nmultiply-add rate\n".into(),
-            |a| {
-                format!(
-                    "{:<8}{:>8.1} G/s  {}\n",
-                    a.backend, a.g_multiply_adds_per_s, a.method
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.cg_traffic,
-            format!(
-                "\nPCG iteration against its memory-traffic floor (friction rows)\n{:<8}{:>6}{:>12}{:>12}{:>13}{:>9}\n",
-                "backend", "grid", "MB/iter", "floor ms", "measured ms", "× floor"
+            Table::of(
+                format!("converged step: every solve to |S r| ≤ {RESIDUAL_GOAL:.0e} |S b|"),
+                &[
+                    ("backend", Left),
+                    ("model", Left),
+                    ("grid", Right),
+                    ("solves", Right),
+                    ("ms/step", Right),
+                    ("iters", Right),
+                    ("most", Right),
+                    ("worst", Right),
+                    ("above", Right),
+                    ("again", Right),
+                    ("× thesis", Right),
+                ],
+                &self.converged,
+                |c| {
+                    vec![
+                        c.backend.clone(),
+                        c.label.clone(),
+                        c.grid.to_string(),
+                        c.substeps.to_string(),
+                        ms_cell(c.ms_per_step, c.diverged_at, 3),
+                        format!("{:.1}", c.iterations_mean),
+                        c.iterations_max.to_string(),
+                        format!("{:.2e}", c.residual_max),
+                        c.steps_above_goal.to_string(),
+                        c.steps_resolved.to_string(),
+                        ratio(c.times_thesis_step),
+                    ]
+                },
             ),
-            |t| {
-                format!(
-                    "{:<8}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.1}\n",
-                    t.backend,
-                    t.grid,
-                    t.bytes_per_iteration as f64 * 1e-6,
-                    t.floor_ms,
-                    t.measured_ms,
-                    t.times_floor
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.iterations,
-            format!(
-                "\nCPU solver iteration against its memory-traffic floor (hanging cloth, after one step)\n{:<28}{:>6}{:>12}{:>12}{:>13}{:>9}{:>11}\n",
-                "preconditioner",
-                "grid",
-                "MB/iter",
-                "floor ms",
-                "measured ms",
-                "× floor",
-                "setup ms"
+            Table::of(
+                "step growth, ms/step ∝ particles^exponent".into(),
+                &[
+                    ("backend", Left),
+                    ("model", Left),
+                    ("grids", Right),
+                    ("exponent", Right),
+                ],
+                &self.scaling,
+                |g| {
+                    vec![
+                        g.backend.clone(),
+                        g.label.clone(),
+                        format!("{}² → {}²", g.from_grid, g.to_grid),
+                        format!("{:.2}", g.exponent),
+                    ]
+                },
             ),
-            |t| {
-                format!(
-                    "{:<28}{:>6}{:>12.2}{:>12.4}{:>13.4}{:>9.2}{:>11.3}\n",
-                    run::solver_name(t.preconditioner, t.smoother),
-                    t.grid,
-                    t.bytes_per_iteration as f64 * 1e-6,
-                    t.floor_ms,
-                    t.measured_ms,
-                    t.times_floor,
-                    t.setup_ms
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.stage_traffic,
-            format!(
-                "\neach other stage against its floor, memory or arithmetic (friction-net rows)\n{:<8}{:>6}{:>11}{:>10}{:>10}{:>12}{:>12}{:>13}{:>9}\n",
-                "backend",
-                "grid",
-                "stage",
-                "MB",
-                "M madds",
-                "floor ms",
-                "bound",
-                "measured ms",
-                "× floor"
+            Table::of(
+                "copy bandwidth".into(),
+                &[("backend", Left), ("GB/s", Right), ("method", Left)],
+                &self.bandwidth,
+                |b| vec![b.backend.clone(), format!("{:.1}", b.gb_per_s), b.method.clone()],
             ),
-            |t| {
-                format!(
-                    "{:<8}{:>6}{:>11}{:>10.3}{:>10.2}{:>12.4}{:>12}{:>13.4}{:>9.1}\n",
-                    t.backend,
-                    t.grid,
-                    t.stage,
-                    t.bytes as f64 * 1e-6,
-                    t.multiply_adds * 1e-6,
-                    t.floor_ms,
-                    t.bound,
-                    t.measured_ms,
-                    t.times_floor
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.periods,
-            format!(
-                "\nsphere period ({} steps at {}², fresh simulator)\n{:<8}{:<32}{:>10}{:>14}\n",
-                self.period_steps, self.period_grid, "backend", "model", "seconds", "× analytic"
+            Table::of(
+                "multiply-add rate".into(),
+                &[("backend", Left), ("G/s", Right), ("method", Left)],
+                &self.arithmetic,
+                |a| {
+                    vec![
+                        a.backend.clone(),
+                        format!("{:.1}", a.g_multiply_adds_per_s),
+                        a.method.clone(),
+                    ]
+                },
             ),
-            |p| {
-                format!(
-                    "{:<8}{:<32}{:>10.3}{:>14}\n",
-                    p.backend,
-                    p.label,
-                    p.seconds,
-                    p.ratio_to_analytic
-                        .map(|r| format!("{r:.2}"))
-                        .unwrap_or_default()
-                )
-            },
-        );
-        section(
-            &mut out,
-            &self.networks,
-            format!(
-                "\nnetwork and input Jacobian over a batch\n{:<54}{:<5}{:<13}{:>10}{:>12}{:>13}{:>9}\n",
-                "network", "", "kernel", "contacts", "ms", "contacts/s", "GFLOP/s"
+            Table::of(
+                "PCG iteration against its memory-traffic floor (friction rows)".into(),
+                &[
+                    ("backend", Left),
+                    ("grid", Right),
+                    ("MB/iter", Right),
+                    ("floor ms", Right),
+                    ("measured ms", Right),
+                    ("× floor", Right),
+                ],
+                &self.cg_traffic,
+                |t| {
+                    vec![
+                        t.backend.clone(),
+                        t.grid.to_string(),
+                        format!("{:.2}", t.bytes_per_iteration as f64 * 1e-6),
+                        format!("{:.4}", t.floor_ms),
+                        format!("{:.4}", t.measured_ms),
+                        format!("{:.1}", t.times_floor),
+                    ]
+                },
             ),
-            |n| {
+            Table::of(
+                "CPU solver iteration against its memory-traffic floor (hanging cloth, after one step)"
+                    .into(),
+                &[
+                    ("preconditioner", Left),
+                    ("grid", Right),
+                    ("MB/iter", Right),
+                    ("floor ms", Right),
+                    ("measured ms", Right),
+                    ("× floor", Right),
+                    ("setup ms", Right),
+                ],
+                &self.iterations,
+                |t| {
+                    vec![
+                        run::solver_name(t.preconditioner, t.smoother),
+                        t.grid.to_string(),
+                        format!("{:.2}", t.bytes_per_iteration as f64 * 1e-6),
+                        format!("{:.4}", t.floor_ms),
+                        format!("{:.4}", t.measured_ms),
+                        format!("{:.2}", t.times_floor),
+                        format!("{:.3}", t.setup_ms),
+                    ]
+                },
+            ),
+            Table::of(
+                "each other stage against its floor, memory or arithmetic (friction-net rows)".into(),
+                &[
+                    ("backend", Left),
+                    ("grid", Right),
+                    ("stage", Right),
+                    ("MB", Right),
+                    ("M madds", Right),
+                    ("floor ms", Right),
+                    ("bound", Right),
+                    ("measured ms", Right),
+                    ("× floor", Right),
+                ],
+                &self.stage_traffic,
+                |t| {
+                    vec![
+                        t.backend.clone(),
+                        t.grid.to_string(),
+                        t.stage.to_string(),
+                        format!("{:.3}", t.bytes as f64 * 1e-6),
+                        format!("{:.2}", t.multiply_adds * 1e-6),
+                        format!("{:.4}", t.floor_ms),
+                        t.bound.to_string(),
+                        format!("{:.4}", t.measured_ms),
+                        format!("{:.1}", t.times_floor),
+                    ]
+                },
+            ),
+            Table::of(
                 format!(
-                    "{:<54}{:<5}{:<13}{:>10}{:>12.3}{:>13.0}{:>9.2}\n",
-                    n.network,
-                    n.backend,
-                    n.kernel,
-                    n.contacts,
-                    n.ms,
-                    n.contacts_per_s,
-                    n.gflop_per_s
-                )
-            },
-        );
-        out
+                    "sphere period ({} steps at {}², fresh simulator)",
+                    self.period_steps, self.period_grid
+                ),
+                &[
+                    ("backend", Left),
+                    ("model", Left),
+                    ("seconds", Right),
+                    ("× analytic", Right),
+                ],
+                &self.periods,
+                |p| {
+                    vec![
+                        p.backend.clone(),
+                        p.label.clone(),
+                        format!("{:.3}", p.seconds),
+                        ratio(p.ratio_to_analytic),
+                    ]
+                },
+            ),
+            Table::of(
+                "network and input Jacobian over a batch".into(),
+                &[
+                    ("network", Left),
+                    ("backend", Left),
+                    ("kernel", Left),
+                    ("contacts", Right),
+                    ("ms", Right),
+                    ("contacts/s", Right),
+                    ("GFLOP/s", Right),
+                ],
+                &self.networks,
+                |n| {
+                    vec![
+                        n.network.to_string(),
+                        n.backend.clone(),
+                        n.kernel.to_string(),
+                        n.contacts.to_string(),
+                        format!("{:.3}", n.ms),
+                        format!("{:.0}", n.contacts_per_s),
+                        format!("{:.2}", n.gflop_per_s),
+                    ]
+                },
+            ),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 }
 
