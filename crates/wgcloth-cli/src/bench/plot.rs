@@ -23,11 +23,12 @@ pub fn stage_color(k: usize) -> Rgb<u8> {
     hue_color(VARIANTS.len() + k)
 }
 
-/// Hues a golden angle apart: every variant and stage has its own colour,
-/// and a new one needs none chosen by hand.
+/// Hues a golden angle apart, at three lightnesses in turn so that the
+/// hues that come round close together differ in it: every variant and
+/// stage has its own colour, and a new one needs none chosen by hand.
 fn hue_color(k: usize) -> Rgb<u8> {
     let hue = (k as f64 * 137.508 + 210.0) % 360.0 / 60.0;
-    let (value, saturation) = (0.82, 0.7);
+    let (value, saturation) = [(0.85, 0.75), (0.6, 0.9), (0.95, 0.45)][k % 3];
     let chroma = value * saturation;
     let second = chroma * (1.0 - (hue % 2.0 - 1.0).abs());
     let (r, g, b) = match hue as u32 {
