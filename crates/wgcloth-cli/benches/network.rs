@@ -126,7 +126,7 @@ fn step64(c: &mut Criterion) {
                     .expect("fits the adapter");
                 group.bench_function(v.label(), |b| {
                     b.iter(|| {
-                        sim.upload_state(&start.x, &start.v, start.step as u32);
+                        sim.upload_state(&start);
                         sim.step();
                         ctx.finish().expect("device healthy");
                     })

@@ -9,6 +9,7 @@
 
 use std::collections::VecDeque;
 
+use wgcloth::cpu::State;
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::context::WATCHDOG;
 use wgcloth::gpu::layout::StepState;
@@ -25,14 +26,16 @@ struct Slot {
     staging: Staging,
     x: wgpu::Buffer,
     v: wgpu::Buffer,
+    /// The loads the cloth's contacts carried into the step.
+    loads: wgpu::Buffer,
     /// The statistics before the step (its clock among them).
     stats: wgpu::Buffer,
 }
 
 impl Slot {
     /// Its copy of `GpuSim::step_start`, in the same order.
-    fn kept(&self) -> [&wgpu::Buffer; 3] {
-        [&self.x, &self.v, &self.stats]
+    fn kept(&self) -> [&wgpu::Buffer; 4] {
+        [&self.x, &self.v, &self.loads, &self.stats]
     }
 }
 
@@ -85,6 +88,7 @@ impl InFlight {
                 staging: Staging::new(device, "step statistics", TICKS_AT + ticks),
                 x: buffer("kept positions", vectors, kept),
                 v: buffer("kept velocities", vectors, kept),
+                loads: buffer("kept loads", sim.loads().size(), kept),
                 stats: buffer("kept statistics", sim.statistics().size(), kept),
             })
             .collect();
@@ -209,13 +213,15 @@ impl InFlight {
         Ok(())
     }
 
-    /// The positions and velocities `finished`'s step started from.
-    pub fn start_of(
-        &self,
-        sim: &GpuSim,
-        finished: &Finished,
-    ) -> Result<(Vec<glam::Vec3>, Vec<glam::Vec3>)> {
+    /// The state `finished`'s step started from, `dt` a step.
+    pub fn start_of(&self, sim: &GpuSim, finished: &Finished, dt: f32) -> Result<State> {
         let slot = &self.slots[finished.slot];
-        Ok((sim.read_vec3(&slot.x)?, sim.read_vec3(&slot.v)?))
+        Ok(State {
+            x: sim.read_vec3(&slot.x)?,
+            v: sim.read_vec3(&slot.v)?,
+            time: finished.step as f64 * dt as f64,
+            step: finished.step,
+            loads: sim.read_loads(&slot.loads)?,
+        })
     }
 }

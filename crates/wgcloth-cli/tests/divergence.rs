@@ -13,7 +13,7 @@ use std::process::Command;
 
 use glam::Vec3;
 use wgcloth::config::{ModelKind, SceneKind};
-use wgcloth::cpu::CpuSim;
+use wgcloth::cpu::{CpuSim, State};
 use wgcloth::gpu::{GpuSim, Kernels};
 use wgcloth::health::{self, FailedStep, NOT_FINITE, TOO_FAST};
 use wgcloth::math::Sym3;
@@ -159,14 +159,15 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     let Some(ctx) = gpu() else { return };
     let kernels = std::sync::Arc::new(Kernels::new(&ctx.device).expect("kernels"));
     let sim = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).expect("fits");
-    sim.upload_state(&x0, &v0, 1);
+    let start = State::at(x0.clone(), v0.clone(), 1, scene.config.solver.dt);
+    sim.upload_state(&start);
     sim.step();
     ctx.finish().expect("device healthy");
     let state = sim.read_state().expect("state");
     assert_eq!(state.health & NOT_FINITE, NOT_FINITE, "{state:?}");
     // Both solves broke down; counted as the CPU counts: one step.
     assert_eq!(state.cg_breakdowns, 1, "{state:?}");
-    sim.upload_state(&x0, &v0, 1);
+    sim.upload_state(&start);
     let (flags, breakdown) = run::gpu_failing_solve(&ctx, &sim, scene.substeps).expect("runs");
     let (diag, _, b) = sim.read_system().expect("system");
     let (x, v) = (
@@ -185,11 +186,8 @@ fn a_non_finite_velocity_is_named_at_its_vertex_on_both_paths() {
     });
     assert_eq!(gpu_d.vertex, bad as u32, "{gpu_d:?}");
     // Replacing the state clears the flag.
-    sim.upload_state(
-        &x0,
-        &cpu.state.v.iter().map(|_| Vec3::ZERO).collect::<Vec<_>>(),
-        0,
-    );
+    let still = vec![Vec3::ZERO; x0.len()];
+    sim.upload_state(&State::at(x0.clone(), still, 0, scene.config.solver.dt));
     ctx.finish().expect("device healthy");
     assert_eq!(sim.read_state().unwrap().health, 0);
 }

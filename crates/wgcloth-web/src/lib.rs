@@ -15,6 +15,7 @@ use std::rc::Rc;
 
 use wasm_bindgen::prelude::*;
 use wgcloth::config::ModelKind;
+use wgcloth::cpu::State;
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::{CgBudget, GpuSim, Kernels, Readback};
 use wgcloth::render::{Camera, Pipelines, Source, Style, depth_target};
@@ -310,9 +311,7 @@ impl App {
     fn frame(&mut self) {
         let (paused, reset) = CONTROL.with_borrow_mut(|c| (c.paused, std::mem::take(&mut c.reset)));
         if reset {
-            let rest = &self.scene.cloth.rest_positions;
-            self.sim
-                .upload_state(rest, &vec![glam::Vec3::ZERO; rest.len()], 0);
+            self.sim.upload_state(&State::initial(&self.scene));
         }
         let mut encoder = self.device.create_command_encoder(&Default::default());
         if !paused {

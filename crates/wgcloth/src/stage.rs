@@ -43,6 +43,10 @@ stages! {
     SelfContact => "self_contact",
     /// Preconditioned CG (multigrid or Jacobi).
     Pcg => "pcg",
+    /// The normal force each vertex's cloth–cloth contacts carried in the
+    /// solve, which bounds the next step's friction, when stage
+    /// "self_contact" runs.
+    Load => "load",
     /// x' = x + h v'.
     Integrate => "integrate",
     /// The deepest penetration into the body after the solve, then the
@@ -62,12 +66,12 @@ impl Stage {
 
     /// Whether a step of a scene runs this stage: the rigid-body stages
     /// only with a body, [`Stage::Separate`] only with self-contact on,
-    /// [`Stage::SelfContact`] only with its forces too.
+    /// [`Stage::SelfContact`] and [`Stage::Load`] only with its forces too.
     pub const fn runs(self, has_body: bool, self_contact: SelfContactStages) -> bool {
         match self {
             Stage::Rigid | Stage::Collide | Stage::Contact | Stage::Measure => has_body,
             Stage::Separate => self_contact.separate,
-            Stage::SelfContact => self_contact.forces,
+            Stage::SelfContact | Stage::Load => self_contact.forces,
             Stage::Assemble | Stage::Pcg | Stage::Integrate => true,
         }
     }

@@ -101,7 +101,7 @@ fn a_coarse_cloth_against_a_fine_body_assembles_and_runs_as_the_cpu() {
     let scene = Scene::new(&config).unwrap();
     let mut cpu = cpu_after(&scene, 35);
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.upload_state(&cpu.state);
     gpu.step();
     cpu.step();
     let mut per_triangle = std::collections::HashMap::new();

@@ -96,7 +96,7 @@ fn a_folded_cloth_driven_into_itself_keeps_its_momentum_on_the_gpu() {
     let start = folded(&scene);
     let (p0, scale) = (momentum(&scene, &start.v), momentum_scale(&scene, &start.v));
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&start.x, &start.v, 0);
+    gpu.upload_state(&start);
     let mut worst = 0.0f64;
     for step in 1..=STEPS {
         gpu.step();

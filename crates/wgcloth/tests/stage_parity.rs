@@ -21,7 +21,7 @@ use wgcloth::bvh::Bvh;
 use wgcloth::config::{ModelKind, Preconditioner, Smoother};
 use wgcloth::cpu::impact;
 use wgcloth::cpu::pcg::{self, PcgScratch, SolveSettings};
-use wgcloth::cpu::{CpuSim, PERTURBATION, StepStats, integrate, self_contact, separate};
+use wgcloth::cpu::{CpuSim, PERTURBATION, State, StepStats, integrate, self_contact, separate};
 use wgcloth::gpu::context::computes_as_the_cpu;
 use wgcloth::gpu::layout::{StepState, VectorLayout};
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels, SolvedSteps, context};
@@ -37,7 +37,7 @@ fn assembly_matches_the_cpu_on_the_same_state() {
     let scene = hang(12);
     let mut cpu = cpu_after(&scene, 7);
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.upload_state(&cpu.state);
     let start = cpu.state.clone();
     gpu.step();
     cpu.step();
@@ -94,7 +94,7 @@ fn contacts_responses_and_system_match_the_cpu_on_the_same_state() {
         }
         let mut cpu = cpu_after(&scene, IN_CONTACT);
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-        gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+        gpu.upload_state(&cpu.state);
         let speed = max_norm(&cpu.state.v);
         gpu.step();
         cpu.step();
@@ -209,7 +209,7 @@ fn face_vertex_contacts_match_the_cpu_across_super_tiles() {
     let scene = sphere(130, ModelKind::Friction);
     let mut cpu = cpu_after(&scene, IN_CONTACT);
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.upload_state(&cpu.state);
     gpu.step();
     cpu.step();
     let (_, fv) = gpu.read_contacts().unwrap();
@@ -258,7 +258,7 @@ fn vertices_deep_inside_are_measured_and_pushed_out_as_on_the_cpu() {
         cpu.state.v[i] = Vec3::ZERO;
     }
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.upload_state(&cpu.state);
     gpu.step();
     let stats = cpu.step();
     let deepest = f32::from_bits(gpu.read_state().unwrap().max_penetration_bits);
@@ -315,7 +315,7 @@ fn rays_through_mesh_vertices_and_edges_find_the_same_vertices_inside_on_the_gpu
     let x: Vec<Vec3> = (0..n).map(|i| points[i * points.len() / n]).collect();
     let v = vec![Vec3::new(0.0, 0.0, -1.0); n];
     let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-    gpu.upload_state(&x, &v, 0);
+    gpu.upload_state(&State::at(x.clone(), v.clone(), 0, scene.config.solver.dt));
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     gpu.record_stage(&mut encoder, Stage::Rigid);
     gpu.record_stage(&mut encoder, Stage::Measure);
@@ -577,7 +577,7 @@ fn the_body_is_placed_from_the_step_count_as_on_the_cpu_far_into_a_run() {
     // Step 100 000 (1000 s), where an f32 sum of h was 0.66 s off, and a
     // step a quarter period later, where the sphere moves fastest.
     for clock in [100_000u32, 100_050] {
-        gpu.upload_state(&x, &v, clock);
+        gpu.upload_state(&State::at(x.clone(), v.clone(), clock as u64, h));
         gpu.step();
         let placed = gpu.read_vec3(gpu.body().0).unwrap();
         let t = ((clock + 1) as f64 * h as f64) as f32;
@@ -693,7 +693,7 @@ fn the_gpu_finds_and_changes_what_the_cpu_does_on_a_pleated_cloth() {
         let done = within.keep_apart(start, &mut x, &mut solved, &mut bvh);
 
         let before = gpu.read_state().unwrap();
-        gpu.upload_state(start, &v, cpu.state.step as u32);
+        gpu.upload_state(&State::at(start.to_vec(), v.clone(), cpu.state.step, h));
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         for stage in [
             Stage::Rigid,
@@ -907,7 +907,7 @@ fn both_vector_layouts_step_bit_for_bit() {
         let start = folded_state(&scene, 4);
         let runs = layouts.each_ref().map(|kernels| {
             let gpu = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
-            gpu.upload_state(&start.state.x, &start.state.v, start.state.step as u32);
+            gpu.upload_state(&start.state);
             for _ in 0..3 {
                 gpu.step();
             }
@@ -1050,7 +1050,7 @@ fn staged(
     mut cpu: CpuSim,
 ) -> (CpuSim, GpuSim, StepStats) {
     let gpu = GpuSim::new(&ctx.device, &ctx.queue, scene).unwrap();
-    gpu.upload_state(&cpu.state.x, &cpu.state.v, cpu.state.step as u32);
+    gpu.upload_state(&cpu.state);
     let mut stats = StepStats::default();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     for stage in [

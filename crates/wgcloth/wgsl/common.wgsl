@@ -93,11 +93,28 @@ struct ClothPair {
     rhs: vec3<f32>,
     applied: u32,
     block: PackedSym3,
-    pad: vec2<u32>,
+    // Eq. 8's normal force F_c at the step's start.
+    pushes: f32,
+    pad: u32,
 }
 
 fn pair_vertex(key: vec4<u32>, k: u32) -> u32 {
     return key[k] & ~select(0u, EDGE_PAIR, k == 0u);
+}
+
+// Where the contact lists (`cloth_lists`, gpu::constants::cloth_header)
+// hold vertex i's contacts found, its contacts listed, and its list's
+// entry k (4 · contact + the vertex's slot in it).
+fn found_at(i: u32) -> u32 {
+    return CLOTH_HEADER + i;
+}
+
+fn listed_at(i: u32) -> u32 {
+    return CLOTH_HEADER + params.n_vertices + i;
+}
+
+fn entry_at(i: u32, k: u32) -> u32 {
+    return CLOTH_HEADER + 2u * params.n_vertices + params.cloth_per_vertex * i + k;
 }
 
 // A symmetric 3×3 block as the kernels compute with it: a = (xx, yy, zz,

@@ -369,10 +369,9 @@ fn next(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
 // Row i of C p (cpu::self_contact::Couplings::row): over vertex i's
 // contacts, in key order, β_k B Σ_{l ≠ k} β_l p_l.
 fn coupled(i: u32) -> vec3<f32> {
-    let n = params.n_vertices;
     var acc = vec3<f32>(0.0);
-    for (var a = 0u; a < cloth_lists[CLOTH_HEADER + n + i]; a++) {
-        let e = cloth_lists[CLOTH_HEADER + 2u * n + params.cloth_per_vertex * i + a];
+    for (var a = 0u; a < cloth_lists[listed_at(i)]; a++) {
+        let e = cloth_lists[entry_at(i, a)];
         let pair = cloth_pairs[e / 4u];
         let slot = e % 4u;
         var others = vec3<f32>(0.0);

@@ -27,21 +27,26 @@ struct Coefficients {
     mu: f32,
 }
 
-// Friction model (thesis eqs. 8–9), unscaled g; see cpu::contact::friction.
-fn friction(c: vec3<f32>, v: vec3<f32>, k: Coefficients) -> ForceJacobian {
-    let none = ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+// Eq. 8's normal force F_c, 0 on the surface (cpu::contact::normal_force).
+fn normal_force(c: vec3<f32>, v: vec3<f32>, k: Coefficients) -> f32 {
     let r = length(c);
     if r == 0.0 {
-        return none;
+        return 0.0;
     }
+    return max(k.kn * r + k.kd * dot(v, c / r), 0.0);
+}
+
+// Friction model (thesis eqs. 8–9), unscaled g; see cpu::contact::friction.
+fn friction(c: vec3<f32>, v: vec3<f32>, k: Coefficients) -> ForceJacobian {
+    let f_c = normal_force(c, v, k);
+    if f_c == 0.0 {
+        return ForceJacobian(vec3<f32>(0.0), ZERO3, ZERO3);
+    }
+    let r = length(c);
     let c_hat = c / r;
     let n = -c_hat;
     let p = IDENTITY - outer(c_hat, c_hat);
     let approach = dot(v, c_hat);
-    let f_c = k.kn * r + k.kd * approach;
-    if f_c <= 0.0 {
-        return none;
-    }
     let dfc_dc = k.kn * c_hat + k.kd * (p * v) / r;
     let dfc_dv = k.kd * c_hat;
     var force = f_c * n;

@@ -14,13 +14,17 @@
 //    to the list (up to params.cloth_capacity), each of its vertices'
 //    counts raised.
 // 3. `link`, per contact: dropped (counted) if one of its vertices is in
-//    more than params.cloth_per_vertex contacts; else its eqs. 8–9 force
-//    and blocks (response.wgsl, as the body's contacts), and it joins each
-//    vertex's list.
-// 4. `gather`, per vertex: its list sorted by the contacts' keys (so the
-//    sums do not depend on thread timing), the diagonal blocks β² B added
-//    to A and β rhs to b. The off-diagonal blocks are applied in the solve
-//    (pcg.wgsl `couple`).
+//    more than params.cloth_per_vertex contacts; else its eq. 8 normal
+//    force, and it joins each vertex's list.
+// 4. `sort`, per vertex: its list sorted by the contacts' keys (so the
+//    sums do not depend on thread timing) and its friction bound's scale:
+//    the load it carried in the last solve (load.wgsl) over its contacts'
+//    normal forces now.
+// 5. `respond`, per contact: its eqs. 8–9 force and blocks (response.wgsl,
+//    as the body's contacts), the friction bound scaled.
+// 6. `gather`, per vertex: the diagonal blocks β² B added to A and β rhs
+//    to b. The off-diagonal blocks are applied in the solve (pcg.wgsl
+//    `couple`).
 
 @group(1) @binding(2) var<storage, read> x: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> v: array<vec4<f32>>;
@@ -32,18 +36,9 @@
 // A solver vector (`b_at`, `b_set`: gpu::shaders::SOLVER_VECTORS).
 @group(1) @binding(17) var<storage, read_write> b: array<VectorEntry>;
 @group(1) @binding(12) var<storage, read_write> state: StepState;
-
-fn found_at(i: u32) -> u32 {
-    return CLOTH_HEADER + i;
-}
-
-fn listed_at(i: u32) -> u32 {
-    return CLOTH_HEADER + params.n_vertices + i;
-}
-
-fn entry_at(i: u32, k: u32) -> u32 {
-    return CLOTH_HEADER + 2u * params.n_vertices + params.cloth_per_vertex * i + k;
-}
+// Per vertex, the normal load it carried in the last solve (load.wgsl)
+// and this step's friction bound scale.
+@group(1) @binding(18) var<storage, read_write> cloth_loads: array<vec2<f32>>;
 
 // Vertex i in the flat rest grid (cpu::self_contact::rest_point).
 fn rest_point(i: u32) -> vec3<f32> {
@@ -139,7 +134,7 @@ fn note(key: vec4<u32>, beta: vec4<f32>) {
         return;
     }
     let none = PackedSym3(vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
-    cloth_pairs[k] = ClothPair(key, beta, vec3<f32>(0.0), 1u, none, vec2<u32>(0u));
+    cloth_pairs[k] = ClothPair(key, beta, vec3<f32>(0.0), 1u, none, 0.0, 0u);
     for (var s = 0u; s < 4u; s++) {
         atomicAdd(&cloth_lists[found_at(pair_vertex(key, s))], 1u);
     }
@@ -229,8 +224,43 @@ fn coefficients(most: u32) -> Coefficients {
     return Coefficients(min(params.kn, share / (h * h)), min(params.kd, share / h), min(params.kt, share / h), params.mu);
 }
 
-// Contact k: dropped at a crowded vertex, else its force and blocks
-// (cpu::self_contact::respond) and a place in each vertex's list.
+// The state of contact k at the step's start: v_rel, the gap from the
+// surface to the penetrating point (Pair::gap), the most contacts found at
+// one of its vertices and Σ β² of each vertex's count (Band::inertia).
+struct Start {
+    v_rel: vec3<f32>,
+    gap: vec3<f32>,
+    most: u32,
+    spread: f32,
+}
+
+fn start_of(pair: ClothPair) -> Start {
+    var s = Start(vec3<f32>(0.0), vec3<f32>(0.0), 1u, 0.0);
+    for (var k = 0u; k < 4u; k++) {
+        let i = pair_vertex(pair.key, k);
+        let found = atomicLoad(&cloth_lists[found_at(i)]);
+        s.most = max(s.most, found);
+        s.spread += pair.beta[k] * pair.beta[k] * f32(found);
+        s.v_rel += pair.beta[k] * v[i].xyz;
+        s.gap += pair.beta[k] * x[i].xyz;
+    }
+    return s;
+}
+
+// Pair::normal_depth: n, and c = d̃ n with d̃ at most 0, so the band's edge
+// never pulls; no force where the gap rounds to nothing.
+fn normal_of(gap: vec3<f32>) -> vec3<f32> {
+    let distance = length(gap);
+    return select(vec3<f32>(0.0), gap / distance, distance > 0.0);
+}
+
+fn depth_of(gap: vec3<f32>) -> f32 {
+    let distance = length(gap);
+    return select(0.0, min(distance - params.cloth_thickness, 0.0), distance > 0.0);
+}
+
+// Contact k: dropped at a crowded vertex, else its normal force and a
+// place in each vertex's list.
 @compute @workgroup_size(WORKGROUP)
 fn link(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
@@ -238,41 +268,18 @@ fn link(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let pair = cloth_pairs[k];
-    var v_rel = vec3<f32>(0.0);
-    var gap = vec3<f32>(0.0);
-    var most = 1u;
-    var spread = 0.0;
-    for (var s = 0u; s < 4u; s++) {
-        let i = pair_vertex(pair.key, s);
-        let found = atomicLoad(&cloth_lists[found_at(i)]);
-        most = max(most, found);
-        spread += pair.beta[s] * pair.beta[s] * f32(found);
-        v_rel += pair.beta[s] * v[i].xyz;
-        gap += pair.beta[s] * x[i].xyz;
-    }
-    if most > params.cloth_per_vertex {
+    let s = start_of(pair);
+    if s.most > params.cloth_per_vertex {
         cloth_pairs[k].applied = 0u;
         atomicAdd(&cloth_lists[CLOTH_DROPPED], 1u);
         return;
     }
-    // Pair::normal_depth: d̃ at most 0, so the band's edge never pulls; no
-    // force where the gap rounds to nothing.
-    let distance = length(gap);
-    var n = vec3<f32>(0.0);
-    var depth = 0.0;
-    if distance > 0.0 {
-        n = gap / distance;
-        depth = min(distance - params.cloth_thickness, 0.0);
-    }
-    // Band::inertia: each vertex's mass shared among the pairs found at it.
-    let inertia = params.vertex_mass / (params.dt * spread);
-    let r = response(friction(n * depth, v_rel, coefficients(most)), n, v_rel, inertia);
-    cloth_pairs[k].block = sym_pack(contact_block(r, n));
-    cloth_pairs[k].rhs = params.dt * (r.force - sym_mul(sym_unpack(r.damping), v_rel));
-    for (var s = 0u; s < 4u; s++) {
-        let i = pair_vertex(pair.key, s);
+    let c = normal_of(s.gap) * depth_of(s.gap);
+    cloth_pairs[k].pushes = normal_force(c, s.v_rel, coefficients(s.most));
+    for (var t = 0u; t < 4u; t++) {
+        let i = pair_vertex(pair.key, t);
         let at = atomicAdd(&cloth_lists[listed_at(i)], 1u);
-        atomicStore(&cloth_lists[entry_at(i, at)], 4u * k + s);
+        atomicStore(&cloth_lists[entry_at(i, at)], 4u * k + t);
     }
 }
 
@@ -289,8 +296,73 @@ fn entry_key(e: u32) -> vec4<u32> {
     return cloth_pairs[e / 4u].key;
 }
 
-// Vertex i's list sorted by key; β² B into its diagonal block, β rhs
-// into b (cpu::self_contact::add_to_system); the run's statistics.
+// Vertex i's list sorted by key; its friction bound's scale
+// (self_contact::bound_scales): the load it carried in the last solve over
+// Σ |β| F_c of its contacts now, 1 where either is 0.
+@compute @workgroup_size(WORKGROUP)
+fn sort(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.n_vertices {
+        return;
+    }
+    let listed = atomicLoad(&cloth_lists[listed_at(i)]);
+    for (var a = 1u; a < listed; a++) {
+        let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
+        let key = entry_key(e);
+        var j = a;
+        while j > 0u {
+            let before = atomicLoad(&cloth_lists[entry_at(i, j - 1u)]);
+            if !key_below(key, entry_key(before)) {
+                break;
+            }
+            atomicStore(&cloth_lists[entry_at(i, j)], before);
+            j--;
+        }
+        atomicStore(&cloth_lists[entry_at(i, j)], e);
+    }
+    var pushed = 0.0;
+    for (var a = 0u; a < listed; a++) {
+        let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
+        let pair = cloth_pairs[e / 4u];
+        pushed += abs(pair.beta[e % 4u]) * pair.pushes;
+    }
+    let carried = cloth_loads[i].x;
+    cloth_loads[i].y = select(1.0, carried / pushed, pushed > 0.0 && carried > 0.0);
+}
+
+// Contact k's eqs. 8–9 force and blocks (cpu::self_contact::respond), its
+// friction bound scaled by its vertices' scales weighted by β²
+// (Pair::bound_scale).
+@compute @workgroup_size(WORKGROUP)
+fn respond(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = id.x;
+    if k >= min(atomicLoad(&cloth_lists[CLOTH_COUNT]), params.cloth_capacity) {
+        return;
+    }
+    let pair = cloth_pairs[k];
+    if pair.applied == 0u {
+        return;
+    }
+    let s = start_of(pair);
+    var scaled = 0.0;
+    var weight = 0.0;
+    for (var t = 0u; t < 4u; t++) {
+        let b2 = pair.beta[t] * pair.beta[t];
+        scaled += b2 * cloth_loads[pair_vertex(pair.key, t)].y;
+        weight += b2;
+    }
+    var k_c = coefficients(s.most);
+    k_c.mu *= scaled / weight;
+    let n = normal_of(s.gap);
+    // Band::inertia: each vertex's mass shared among the pairs found at it.
+    let inertia = params.vertex_mass / (params.dt * s.spread);
+    let r = response(friction(n * depth_of(s.gap), s.v_rel, k_c), n, s.v_rel, inertia);
+    cloth_pairs[k].block = sym_pack(contact_block(r, n));
+    cloth_pairs[k].rhs = params.dt * (r.force - sym_mul(sym_unpack(r.damping), s.v_rel));
+}
+
+// β² B of vertex i's contacts into its diagonal block, β rhs into b, in
+// key order (cpu::self_contact::add_to_system); the run's statistics.
 @compute @workgroup_size(WORKGROUP)
 fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -307,20 +379,6 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let listed = atomicLoad(&cloth_lists[listed_at(i)]);
     if listed == 0u {
         return;
-    }
-    for (var a = 1u; a < listed; a++) {
-        let e = atomicLoad(&cloth_lists[entry_at(i, a)]);
-        let key = entry_key(e);
-        var j = a;
-        while j > 0u {
-            let before = atomicLoad(&cloth_lists[entry_at(i, j - 1u)]);
-            if !key_below(key, entry_key(before)) {
-                break;
-            }
-            atomicStore(&cloth_lists[entry_at(i, j)], before);
-            j--;
-        }
-        atomicStore(&cloth_lists[entry_at(i, j)], e);
     }
     var diag = sym_unpack(matrix_at(i));
     var rhs = b_at(i);

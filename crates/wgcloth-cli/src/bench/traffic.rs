@@ -200,9 +200,11 @@ impl Layout {
     ///   written, and where a layout stores spring terms (the CPU's) each
     ///   written once and read twice;
     /// - self_contact: the positions read, two counts written per vertex,
-    ///   its diagonal block and b read and written, each triangle's and
-    ///   spring's vertex indices read (the contacts found and the walks
-    ///   not counted);
+    ///   its carried load read and its bound's scale written, its diagonal
+    ///   block and b read and written, each triangle's and spring's vertex
+    ///   indices read (the contacts found and the walks not counted);
+    /// - load: per vertex its count read and its load written (its
+    ///   contacts not counted, as self_contact's are not);
     /// - separate: the step's start and end positions read, a least
     ///   separation and a flag word written per vertex, each triangle's and
     ///   spring's vertex indices read (the walks over the tiles and the
@@ -221,9 +223,10 @@ impl Layout {
                     + s * (12 + 16 + self.off_block + 3 * self.spring_term)
             }
             Stage::SelfContact => {
-                n * (v + 2 * self.solver_vector + 8 + 2 * self.diag_block) + t * 12 + s * 8
+                n * (v + 2 * self.solver_vector + 16 + 2 * self.diag_block) + t * 12 + s * 8
             }
             Stage::Pcg => return None,
+            Stage::Load => n * 8,
             Stage::Separate => n * (2 * v + 8) + t * 12 + s * 8,
             Stage::Integrate => n * (3 * v + self.flag),
             Stage::Measure => n * v,

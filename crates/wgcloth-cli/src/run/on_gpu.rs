@@ -117,8 +117,8 @@ pub(super) fn run_gpu(
                 // Run the step again from the state it started from, to
                 // name what failed in its own system.
                 while flight.next(ctx, &sim, true)?.is_some() {}
-                let (x0, v0) = flight.start_of(&sim, &f)?;
-                sim.upload_state(&x0, &v0, f.step as u32);
+                let start = flight.start_of(&sim, &f, config.solver.dt)?;
+                sim.upload_state(&start);
                 sim.set_cg_budget(f.budget);
                 let (flags, breakdown) = gpu_failing_solve(ctx, &sim, scene.substeps)?;
                 let (diag, _, b) = sim.read_system()?;
@@ -133,12 +133,7 @@ pub(super) fn run_gpu(
                     v: &v,
                     max_speed: config.solver.max_speed,
                 }));
-                last_good = Some(State {
-                    x: x0,
-                    v: v0,
-                    time: f.step as f64 * dt,
-                    step: f.step,
-                });
+                last_good = Some(start);
                 break;
             }
             if let Some(c) = checkpoint.as_deref_mut() {
@@ -161,12 +156,12 @@ pub(super) fn run_gpu(
         if let Some(c) = checkpoint.as_deref_mut()
             && c.taken.elapsed() >= CHECKPOINT_INTERVAL
         {
-            let (x, v) = (sim.read_positions()?, sim.read_velocities()?);
             c.state = State {
-                x,
-                v,
+                x: sim.read_positions()?,
+                v: sim.read_velocities()?,
                 time: submitted as f64 * dt,
                 step: submitted,
+                loads: sim.read_loads(sim.loads())?,
             };
             c.taken = Instant::now();
         }

@@ -59,6 +59,17 @@ pub fn naive(c: Vec3, stiffness: f32) -> ForceJacobian {
     }
 }
 
+/// Eq. 8's normal force F_c = max(0, −k_n d̃ + k_d ḋ) at c (|c| = −d̃) and
+/// relative velocity v: what friction's bound μ F_c is taken of; 0 on
+/// the surface.
+pub fn normal_force(c: Vec3, v: Vec3, k: &Coefficients) -> f32 {
+    let r = c.length();
+    if r == 0.0 {
+        return 0.0;
+    }
+    (k.kn * r + k.kd * v.dot(c / r)).max(0.0)
+}
+
 /// The friction model of thesis eqs. 8–9 (after Xu et al.), unscaled: g
 /// with f = s g. From c: |c| = −d̃, n = −c/|c|. With ḋ = −(v_rel·n) the
 /// approach speed and ṫ = v_rel − (v_rel·n) n the tangential velocity,
@@ -68,18 +79,17 @@ pub fn naive(c: Vec3, stiffness: f32) -> ForceJacobian {
 /// Slip: Coulomb friction −μ F_c t̂. Jacobians are exact in each branch,
 /// including the turning of n with c.
 pub fn friction(c: Vec3, v: Vec3, k: &Coefficients) -> ForceJacobian {
-    let r = c.length();
-    if r == 0.0 {
-        return ForceJacobian::ZERO; // d̃ = 0: on the surface, no force.
+    let f_c = normal_force(c, v, k);
+    if f_c == 0.0 {
+        // On the surface (d̃ = 0), or separating faster than the spring
+        // pushes.
+        return ForceJacobian::ZERO;
     }
+    let r = c.length();
     let c_hat = c / r;
     let n = -c_hat;
     let p = Mat3::IDENTITY - outer(c_hat, c_hat); // projector onto the tangent plane
     let approach = v.dot(c_hat); // ḋ = −v·n
-    let f_c = k.kn * r + k.kd * approach;
-    if f_c <= 0.0 {
-        return ForceJacobian::ZERO; // separating faster than the spring pushes
-    }
     // ∂F_c/∂c = k_n ĉᵀ + k_d vᵀP / r; ∂F_c/∂v = k_d ĉᵀ (rows, stored as vectors).
     let dfc_dc = k.kn * c_hat + k.kd * (p * v) / r;
     let dfc_dv = k.kd * c_hat;

@@ -8,6 +8,7 @@ pub mod collide;
 pub mod contact;
 pub mod impact;
 pub mod integrate;
+pub mod load;
 pub mod measure;
 pub mod multigrid;
 pub mod pcg;
@@ -96,6 +97,10 @@ pub struct State {
     pub time: f64,
     /// Steps taken so far.
     pub step: u64,
+    /// Per vertex, the normal force (N) its cloth–cloth contacts carried
+    /// in the last step's solve (stage "load"), which bounds the next
+    /// step's friction; 0 where it had none.
+    pub loads: Vec<f32>,
 }
 
 impl State {
@@ -106,6 +111,19 @@ impl State {
             v: vec![Vec3::ZERO; scene.cloth.vertex_count()],
             time: 0.0,
             step: 0,
+            loads: vec![0.0; scene.cloth.vertex_count()],
+        }
+    }
+
+    /// Positions `x` and velocities `v` after `step` steps of `dt`,
+    /// carrying no contact load.
+    pub fn at(x: Vec<Vec3>, v: Vec<Vec3>, step: u64, dt: f32) -> State {
+        State {
+            loads: vec![0.0; x.len()],
+            x,
+            v,
+            time: step as f64 * dt as f64,
+            step,
         }
     }
 
@@ -274,7 +292,7 @@ impl CpuSim {
     fn run_stage_on_pool(&mut self, stage: Stage, stats: &mut StepStats) {
         let cloth = &self.scene.cloth;
         let h = self.params.dt;
-        let State { x, v, .. } = &mut self.state;
+        let State { x, v, loads, .. } = &mut self.state;
         let body = &self.scene.rigid;
         match stage {
             Stage::Rigid => {
@@ -356,7 +374,7 @@ impl CpuSim {
                         vertex_mass: cloth.vertex_mass,
                     };
                     self.self_terms =
-                        self_contact::respond(&found.pairs, &found.counts, x, v, &band);
+                        self_contact::respond(&found.pairs, &found.counts, loads, x, v, &band);
                     self.self_pairs = found.pairs;
                     self_contact::add_to_system(
                         &self.self_pairs,
@@ -387,6 +405,9 @@ impl CpuSim {
                     settings,
                     &mut self.scratch,
                 );
+            }
+            Stage::Load => {
+                load::carry(&self.self_pairs, &self.self_terms, (x, v), h, loads);
             }
             Stage::Integrate => {
                 if self.scene.config.self_contact.enabled {

@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use crate::bvh::{Aabb, Bvh};
 use crate::cpu::collide::{Tolerances, point_triangle};
-use crate::cpu::contact::{Coefficients, friction, response};
+use crate::cpu::contact::{Coefficients, friction, normal_force, response};
 use crate::cpu::separate::{self, Candidate, EDGE_PAIR, candidates};
 use crate::math::{Sym3, closest_between_segments, closest_on_triangle, segment_parameters};
 use crate::parallel::GRAIN;
@@ -73,6 +73,16 @@ impl Pair {
         (0..4).fold(Vec3::ZERO, |acc, k| {
             acc + self.beta[k] * y[self.vertices[k] as usize]
         })
+    }
+
+    /// The pair's friction bound scale: its vertices' ([`bound_scales`])
+    /// weighted by β².
+    pub fn bound_scale(&self, scales: &[f32]) -> f32 {
+        let (scaled, weight) = (self.vertices.iter().zip(self.beta))
+            .fold((0.0, 0.0), |(s, w), (&i, b)| {
+                (s + b * b * scales[i as usize], w + b * b)
+            });
+        scaled / weight
     }
 
     /// The contact normal n and d̃ = distance − ε at positions `x` (d̃ at
@@ -371,30 +381,68 @@ impl Band {
 
 /// The eqs. 8–9 force of each pair at positions `x` and velocities `v`
 /// and its terms of the system, made safe for PCG by `contact::response`;
-/// `counts` are the pairs found at each vertex ([`Found::counts`]).
+/// `counts` are the pairs found at each vertex ([`Found::counts`]),
+/// `carried` the normal load each vertex's pairs carried in the last
+/// step's solve (stage "load"), which sets the friction's bound
+/// ([`bound_scales`]).
 pub fn respond(
     pairs: &[Pair],
     counts: &[u32],
+    carried: &[f32],
     x: &[Vec3],
     v: &[Vec3],
     band: &Band,
 ) -> Vec<PairTerm> {
     let h = band.h;
+    let at_start = |p: &Pair| {
+        let (n, depth) = p.normal_depth(x, band.thickness);
+        let most = p.vertices.iter().map(|&i| counts[i as usize]).max();
+        (n, n * depth, p.gap(v), band.coefficients(most.unwrap_or(1)))
+    };
+    let pushes: Vec<f32> = (pairs.par_iter().with_min_len(GRAIN))
+        .map(|p| {
+            let (_, c, v_rel, k) = at_start(p);
+            normal_force(c, v_rel, &k)
+        })
+        .collect();
+    let scales = bound_scales(pairs, &pushes, carried);
     pairs
         .par_iter()
         .with_min_len(GRAIN)
         .map(|p| {
-            let v_rel = p.gap(v);
-            let (n, depth) = p.normal_depth(x, band.thickness);
-            let most = p.vertices.iter().map(|&i| counts[i as usize]).max();
-            let k = band.coefficients(most.unwrap_or(1));
-            let fj = friction(n * depth, v_rel, &k);
-            let r = response(&fj, n, v_rel, band.inertia(p, counts));
+            let (n, c, v_rel, mut k) = at_start(p);
+            k.mu *= p.bound_scale(&scales);
+            let r = response(&friction(c, v_rel, &k), n, v_rel, band.inertia(p, counts));
             PairTerm {
                 block: -(h * r.damping + h * h * r.stiffness),
                 rhs: h * (r.force - r.damping * v_rel),
                 force: r.force,
             }
+        })
+        .collect()
+}
+
+/// Per vertex, what its pairs' friction bounds μ F_c are scaled by: the
+/// normal load it carried in the last step's solve over the load its
+/// pairs push with at this step's start (Σ |β| F_c of `pushes`, in key
+/// order), 1 where either is 0 (a first touch). The bound is the normal
+/// force of the solve, lagged a step, as IPC lags its contact forces:
+/// taken at the step's start alone, it jumps by a whole pair's share when
+/// a vertex gains or loses one at the same depth, and since a vertex
+/// between n and n + 1 pairs gains 1/n and loses 1/(n + 1) of its load,
+/// a sliding layer's friction averages several percent above μ times its
+/// weight (DESIGN "The cloth against itself").
+pub fn bound_scales(pairs: &[Pair], pushes: &[f32], carried: &[f32]) -> Vec<f32> {
+    let mut pushed = vec![0.0f32; carried.len()];
+    for (p, f) in pairs.iter().zip(pushes) {
+        for (&i, b) in p.vertices.iter().zip(p.beta) {
+            pushed[i as usize] += b.abs() * f;
+        }
+    }
+    (pushed.iter().zip(carried))
+        .map(|(&start, &solved)| match start > 0.0 && solved > 0.0 {
+            true => solved / start,
+            false => 1.0,
         })
         .collect()
 }
@@ -542,6 +590,11 @@ mod tests {
     /// Velocities along `along`, of a different size at each vertex.
     fn swirl(n: usize, along: Vec3) -> Vec<Vec3> {
         (0..n).map(|i| along * (i as f32 * 0.37).sin()).collect()
+    }
+
+    /// No load carried from a last step.
+    fn unloaded(x: &[Vec3]) -> Vec<f32> {
+        vec![0.0; x.len()]
     }
 
     /// Counts of one pair at each vertex: the coefficients as configured.
@@ -698,12 +751,19 @@ mod tests {
                         .iter()
                         .find(|q| q.key() == p.key())
                         .expect("pair kept");
-                    respond(&[*q], &alone(&moved), &moved, &still, &band)[0]
-                        .force
-                        .dot(normal)
+                    respond(
+                        &[*q],
+                        &alone(&moved),
+                        &unloaded(&moved),
+                        &moved,
+                        &still,
+                        &band,
+                    )[0]
+                    .force
+                    .dot(normal)
                 };
                 let slope = (force_along(1.0) - force_along(-1.0)) / (2.0 * delta);
-                let term = respond(&[*p], &alone(&x), &x, &still, &band)[0];
+                let term = respond(&[*p], &alone(&x), &unloaded(&x), &x, &still, &band)[0];
                 // B = −h² K_c at rest; nᵀ K_c n = −k_n.
                 let k_nn = -normal.dot(term.block * normal) / (0.01 * 0.01);
                 for k in 0..4 {
@@ -727,7 +787,7 @@ mod tests {
         let (x, t, rest) = two_layers(2e-3, 0.4);
         let v = swirl(x.len(), Vec3::new(0.3, -0.1, 0.05));
         let pairs = find(&x, &t, &rest);
-        let terms = respond(&pairs, &alone(&x), &x, &v, &BAND);
+        let terms = respond(&pairs, &alone(&x), &unloaded(&x), &x, &v, &BAND);
         let n = x.len();
         let couplings = Couplings::new(n, &pairs, &terms);
         let mut diag = vec![Sym3::ZERO; n];
@@ -768,8 +828,8 @@ mod tests {
         let found = find_all(&x, &t, &rest);
         let limit = 1e-4;
         let band = Band { limit, ..BAND };
-        let terms = respond(&found.pairs, &found.counts, &x, &v, &band);
-        let raw = respond(&found.pairs, &found.counts, &x, &v, &BAND);
+        let terms = respond(&found.pairs, &found.counts, &unloaded(&x), &x, &v, &band);
+        let raw = respond(&found.pairs, &found.counts, &unloaded(&x), &x, &v, &BAND);
         // The largest eigenvalue of a symmetric positive semidefinite block.
         let largest = |b: Mat3| {
             let y = (0..64).fold(Vec3::new(0.6, 0.7, 0.4), |y, _| (b * y).normalize_or_zero());

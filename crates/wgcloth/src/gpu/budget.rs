@@ -114,7 +114,7 @@ impl CgBudget {
 #[cfg(not(target_arch = "wasm32"))]
 pub struct SolvedSteps {
     budget: CgBudget,
-    start: [wgpu::Buffer; 3],
+    start: [wgpu::Buffer; 4],
     resolved: u32,
 }
 

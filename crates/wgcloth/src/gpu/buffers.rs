@@ -103,6 +103,9 @@ pub(crate) struct Buffers {
     pub(crate) cloth_lists: wgpu::Buffer,
     /// Stage "self_contact": the cloth–cloth contacts.
     pub(crate) cloth_pairs: wgpu::Buffer,
+    /// Stage "load": per vertex, the normal load its cloth–cloth contacts
+    /// carried in the last solve, and this step's friction bound scale.
+    pub(crate) cloth_loads: wgpu::Buffer,
     /// Where the step started (self-contact only).
     pub(crate) x_start: wgpu::Buffer,
     /// The network batch's size, then its contact slots.
@@ -387,6 +390,7 @@ pub(crate) struct Sizes {
     pub(crate) self_pairs: u64,
     pub(crate) cloth_lists: u64,
     pub(crate) cloth_pairs: u64,
+    pub(crate) cloth_loads: u64,
     pub(crate) x_start: u64,
     pub(crate) net_batch: u64,
     pub(crate) net_inputs: u64,
@@ -454,6 +458,10 @@ impl Sizes {
                 false => 0,
             },
             cloth_pairs: size(p.cloth_capacity as u64, size_of::<ClothPair>()),
+            cloth_loads: match p.cloth_thickness > 0.0 {
+                true => size(n, 8),
+                false => 0,
+            },
             x_start: size(self_n, 16),
             net_batch: size(1 + batch, 4),
             net_inputs: size(batch * p.net_width as u64, 4),
@@ -479,6 +487,7 @@ impl Sizes {
             ("self-contact pairs", self.self_pairs),
             ("cloth-cloth contact lists", self.cloth_lists),
             ("cloth-cloth contacts", self.cloth_pairs),
+            ("cloth-cloth loads", self.cloth_loads),
             ("step start", self.x_start),
             ("network batch", self.net_batch),
             ("network inputs", self.net_inputs),
@@ -682,6 +691,7 @@ impl Buffers {
             self_pairs: zeroed("self-contact pairs", sizes.self_pairs),
             cloth_lists: zeroed("cloth-cloth contact lists", sizes.cloth_lists),
             cloth_pairs: zeroed("cloth-cloth contacts", sizes.cloth_pairs),
+            cloth_loads: zeroed("cloth-cloth loads", sizes.cloth_loads),
             x_start: zeroed("step start", sizes.x_start),
             net_batch: zeroed("network batch", sizes.net_batch),
             net_inputs: zeroed("network inputs", sizes.net_inputs),

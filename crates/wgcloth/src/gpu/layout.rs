@@ -291,8 +291,11 @@ pub struct ClothPair {
     pub applied: u32,
     /// B = −(h D_c + h² K_c).
     pub block: Sym3,
+    /// Eq. 8's normal force F_c at the step's start (N), which the
+    /// friction bound's scale is taken of (`self_contact::bound_scales`).
+    pub pushes: f32,
     /// Pads the struct to a multiple of 16 bytes.
-    pub pad: [u32; 2],
+    pub pad: u32,
 }
 
 #[repr(C)]

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use bytemuck::Pod;
 use glam::Vec3;
 
+use crate::cpu::State;
 use crate::error::{Error, Result};
 use crate::gpu::buffers::{Buffers, Sizes, check_limits, fit_pair_list, params_for, vec4s};
 #[cfg(not(target_arch = "wasm32"))]
@@ -249,12 +250,24 @@ impl GpuSim {
         &self.buffers.state
     }
 
-    /// What a step starts from: [`Self::positions`], [`Self::velocities`]
-    /// and [`Self::statistics`] (with the clock). Copied back, they make the
-    /// next step repeat one, as the run loop's rewind and
-    /// [`SolvedSteps`](crate::gpu::budget::SolvedSteps) do.
-    pub fn step_start(&self) -> [&wgpu::Buffer; 3] {
-        [self.positions(), self.velocities(), self.statistics()]
+    /// What a step starts from: [`Self::positions`], [`Self::velocities`],
+    /// [`Self::loads`] and [`Self::statistics`] (with the clock). Copied
+    /// back, they make the next step repeat one, as the run loop's rewind
+    /// and [`SolvedSteps`](crate::gpu::budget::SolvedSteps) do.
+    pub fn step_start(&self) -> [&wgpu::Buffer; 4] {
+        [
+            self.positions(),
+            self.velocities(),
+            self.loads(),
+            self.statistics(),
+        ]
+    }
+
+    /// Per vertex, two `f32`: the normal force its cloth–cloth contacts
+    /// carried in the last step's solve (`cpu::State::loads`), then the
+    /// friction bound scale the step took from it.
+    pub fn loads(&self) -> &wgpu::Buffer {
+        &self.buffers.cloth_loads
     }
 
     /// Where each recorded step leaves its passes' timestamps (two `u64`
@@ -399,14 +412,24 @@ impl GpuSim {
         pass.dispatches()
     }
 
-    /// Replaces the cloth state (e.g. with a CPU state, to compare a stage)
-    /// and sets the clock to `step` steps of `solver.dt`.
-    pub fn upload_state(&self, x: &[Vec3], v: &[Vec3], step: u32) {
+    /// Replaces the cloth state with `state` (e.g. a CPU state, to compare
+    /// a stage): positions, velocities, the loads its cloth–cloth contacts
+    /// carried (none where `state.loads` is empty), and the clock at
+    /// `state.step` steps of `solver.dt`.
+    pub fn upload_state(&self, state: &State) {
+        let (x, v) = (&state.x, &state.v);
         self.queue
             .write_buffer(&self.buffers.x, 0, bytemuck::cast_slice(&vec4s(x, 1.0)));
         self.queue
             .write_buffer(&self.buffers.v, 0, bytemuck::cast_slice(&vec4s(v, 0.0)));
-        let clock = step * self.params.substeps;
+        if self.params.cloth_thickness > 0.0 {
+            let loads: Vec<[f32; 2]> = (0..x.len())
+                .map(|i| [state.loads.get(i).copied().unwrap_or(0.0), 1.0])
+                .collect();
+            self.queue
+                .write_buffer(&self.buffers.cloth_loads, 0, bytemuck::cast_slice(&loads));
+        }
+        let clock = state.step as u32 * self.params.substeps;
         self.queue
             .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&clock));
         // A new state starts healthy.
@@ -449,6 +472,19 @@ impl GpuSim {
     /// Cloth velocities, read back (blocks until the GPU is done).
     pub fn read_velocities(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.v)
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// The loads of [`Self::loads`] or a copy of it (`cpu::State::loads`;
+    /// zeros without self-contact forces), read back (blocks until the GPU
+    /// is done).
+    pub fn read_loads(&self, buffer: &wgpu::Buffer) -> Result<Vec<f32>> {
+        let n = self.params.n_vertices as usize;
+        if self.params.cloth_thickness <= 0.0 {
+            return Ok(vec![0.0; n]);
+        }
+        let raw: Vec<[f32; 2]> = self.read(buffer)?;
+        Ok(raw[..n].iter().map(|l| l[0]).collect())
     }
 
     #[cfg(not(target_arch = "wasm32"))]

@@ -9,6 +9,7 @@ pub mod collide;
 pub mod contact;
 pub mod integrate;
 pub mod lines;
+pub mod load;
 pub mod measure;
 pub mod multigrid;
 pub mod pcg;
@@ -55,6 +56,7 @@ pub(crate) struct Stages {
     pub(crate) assemble: assemble::Assemble,
     pub(crate) self_contact: self_contact::SelfContact,
     pub(crate) pcg: pcg::Pcg,
+    pub(crate) load: load::Load,
     pub(crate) separate: separate::Separate,
     pub(crate) integrate: integrate::Integrate,
     pub(crate) measure: measure::Measure,
@@ -76,6 +78,7 @@ impl Stages {
             Stage::Assemble => &self.assemble,
             Stage::SelfContact => &self.self_contact,
             Stage::Pcg => &self.pcg,
+            Stage::Load => &self.load,
             Stage::Integrate => &self.integrate,
             Stage::Measure => &self.measure,
             Stage::Separate => &self.separate,
@@ -97,6 +100,7 @@ impl Stages {
             assemble: assemble::Assemble::new(kernels, device, b),
             self_contact: self_contact::SelfContact::new(kernels, device, b),
             pcg: pcg::Pcg::new(kernels, device, b, scene),
+            load: load::Load::new(kernels, device, b),
             separate: separate::Separate::new(kernels, device, b),
             integrate: integrate::Integrate::new(kernels, device, b),
             measure: measure::Measure::new(kernels, device, b),

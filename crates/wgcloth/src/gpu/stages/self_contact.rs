@@ -18,6 +18,8 @@ pub(crate) struct SelfContact {
     supertiles: Bound,
     walks: Bound,
     link: Bound,
+    sort: Bound,
+    respond: Bound,
     gather: Bound,
     lists: wgpu::Buffer,
 }
@@ -32,6 +34,7 @@ impl SelfContact {
             ("cloth_pairs", &b.cloth_pairs),
             ("b", &b.b),
             ("state", &b.state),
+            ("cloth_loads", &b.cloth_loads),
         ];
         let bind = |entry| {
             kernels
@@ -44,6 +47,8 @@ impl SelfContact {
             supertiles: bind(Entry::CollideSupertiles),
             walks: bind(Entry::SelfContactWalks),
             link: bind(Entry::SelfContactLink),
+            sort: bind(Entry::SelfContactSort),
+            respond: bind(Entry::SelfContactRespond),
             gather: bind(Entry::SelfContactGather),
             lists: b.cloth_lists.clone(),
         }
@@ -66,6 +71,8 @@ impl Record for SelfContact {
         self.supertiles.dispatch(pass, supertiles, WORKGROUP);
         self.walks.dispatch(pass, n, WORKGROUP);
         self.link.dispatch(pass, p.cloth_capacity, WORKGROUP);
+        self.sort.dispatch(pass, n, WORKGROUP);
+        self.respond.dispatch(pass, p.cloth_capacity, WORKGROUP);
         self.gather.dispatch(pass, n, WORKGROUP);
     }
 }
