@@ -207,5 +207,6 @@ pub fn run(chosen: &Chosen, scene: Scene, steps: Steps, mut obs: Observers) -> R
 fn keep(to: &mut State, from: &State) {
     to.x.copy_from_slice(&from.x);
     to.v.copy_from_slice(&from.v);
+    to.loads.copy_from_slice(&from.loads);
     (to.time, to.step) = (from.time, from.step);
 }
