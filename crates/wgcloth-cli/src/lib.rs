@@ -9,3 +9,4 @@ pub mod loss_plot;
 pub mod monitor;
 pub mod plot;
 pub mod run;
+pub mod sweep;

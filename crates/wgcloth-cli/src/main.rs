@@ -61,6 +61,10 @@ struct BenchArgs {
     /// memory-traffic floor, 128² to 1024² (a minute or two).
     #[arg(long, conflicts_with = "quick")]
     iterations: bool,
+    /// Only the batched-worlds rows: 1 to 1,024 worlds of the default run
+    /// at 32² as one batch and as separate simulators (CPU).
+    #[arg(long, conflicts_with_all = ["quick", "iterations"])]
+    worlds: bool,
     /// Only the GPU's rows, with 512² and 1024² on a hardware GPU (what
     /// scripts/bench-gpu.sh runs); an error where there is no adapter.
     #[arg(long, conflicts_with = "iterations")]
@@ -210,6 +214,15 @@ struct RunArgs {
     /// vertex, resident memory and GPU allocator bytes (for soaks).
     #[arg(long, value_name = "FILE.csv")]
     monitor: Option<PathBuf>,
+    /// Run N worlds of the scene as one batch, a summary line each and one
+    /// for the batch (CPU path; each world its own --sweep values).
+    #[arg(long, value_name = "N")]
+    worlds: Option<usize>,
+    /// With or instead of --worlds: each world's configuration values, a
+    /// TOML file of [[world]] tables or a CSV file with dotted keys
+    /// (`contact.mu`) as its header and a row a world.
+    #[arg(long, value_name = "FILE.toml|FILE.csv")]
+    sweep: Option<PathBuf>,
     /// With --monitor: a row every K steps (and one of the start).
     #[arg(long, value_name = "K", default_value_t = 1000)]
     monitor_every: u64,
@@ -359,6 +372,9 @@ fn progress_bar(steps: u64) -> ProgressBar {
 
 fn run(args: &RunArgs) -> Result<()> {
     let config = args.scene.config()?;
+    if args.worlds.is_some() || args.sweep.is_some() {
+        return run_worlds(args, config);
+    }
     for path in args
         .report
         .iter()
@@ -499,6 +515,84 @@ fn run(args: &RunArgs) -> Result<()> {
     check_diverged(&report)
 }
 
+/// `run --worlds N` / `--sweep FILE`: a batch of worlds on the CPU path.
+fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
+    let one_world = [
+        (args.out.is_some(), "--out"),
+        (args.monitor.is_some(), "--monitor"),
+        (args.last_good.is_some(), "--last-good"),
+        (args.vectors.is_some(), "--vectors"),
+        (args.no_subgroups, "--no-subgroups"),
+    ];
+    if let Some((_, flag)) = one_world.iter().find(|(given, _)| *given) {
+        return Err(Error::config(
+            *flag,
+            "takes a run of one world; leave out --worlds and --sweep",
+        ));
+    }
+    match args.backend {
+        Backend::Gpu => {
+            return Err(Error::config(
+                "--backend",
+                "batched worlds run on the CPU path so far; use --backend cpu or auto",
+            ));
+        }
+        Backend::Auto => eprintln!("notice: batched worlds run on the CPU reference path"),
+        Backend::Cpu => {}
+    }
+    if let Some(path) = &args.report {
+        writable(path)?;
+    }
+    let configs = match &args.sweep {
+        Some(path) => wgcloth_cli::sweep::read(path, &config)?,
+        None => Vec::new(),
+    };
+    let count = match (args.worlds, configs.len()) {
+        (Some(0), _) => return Err(Error::config("--worlds", "must be at least 1")),
+        (Some(n), 0) => n,
+        (None, m) => m,
+        (Some(n), m) if n == m => n,
+        (Some(n), m) => {
+            return Err(Error::config(
+                "--worlds",
+                format!("is {n} but the sweep names {m} worlds; give one or make them agree"),
+            ));
+        }
+    };
+    let set: Vec<String> = (configs.iter())
+        .map(|(values, _)| wgcloth_cli::sweep::describe(values))
+        .collect();
+    let scenes = match configs.is_empty() {
+        true => vec![Scene::new(&config)?; count],
+        false => (configs.iter().map(|(_, c)| c).enumerate())
+            .map(|(k, c)| {
+                Scene::new(c).map_err(|e| Error::config("--sweep", format!("world {}: {e}", k + 1)))
+            })
+            .collect::<Result<Vec<_>>>()?,
+    };
+    let steps = config.solver.steps;
+    let bar = progress_bar(steps);
+    let report = run::run_worlds(scenes, &set, steps, |k| bar.set_position(k))?;
+    bar.finish_and_clear();
+    println!("{}", report.summary());
+    if let Some(path) = &args.report {
+        write_json(path, &report)?;
+        println!("report       {}", path.display());
+    }
+    match report
+        .worlds
+        .iter()
+        .find_map(|w| Some((w.world, w.divergence.as_ref()?)))
+    {
+        Some((w, (step, vertex, why))) => Err(Error::Diverged {
+            step: *step,
+            vertex: *vertex as u32,
+            reason: format!("world {w}: {why}; the other worlds ran to the end"),
+        }),
+        None => Ok(()),
+    }
+}
+
 fn bench(args: &BenchArgs) -> Result<()> {
     // Fail before minutes of measuring, not after.
     for path in args.report.iter().chain(&args.plot).chain(&args.markdown) {
@@ -507,9 +601,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         wgcloth_cli::plot::check_png(plot)?;
     }
-    let options = match (args.quick, args.iterations) {
-        (true, _) => wgcloth_cli::bench::BenchOptions::quick(),
-        (_, true) => wgcloth_cli::bench::BenchOptions::iterations(),
+    let options = match (args.quick, args.iterations, args.worlds) {
+        (true, _, _) => wgcloth_cli::bench::BenchOptions::quick(),
+        (_, true, _) => wgcloth_cli::bench::BenchOptions::iterations(),
+        (_, _, true) => wgcloth_cli::bench::BenchOptions::worlds(),
         _ => wgcloth_cli::bench::BenchOptions::full(),
     };
     let options = match (args.gpu_only, args.cpu_only) {

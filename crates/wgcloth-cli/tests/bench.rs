@@ -30,6 +30,8 @@ fn tiny() -> BenchOptions {
         backends: Backends::Both,
         // The converged rows' solves a step (the scene's own is 1 here).
         substeps: 2,
+        worlds: vec![1, 3],
+        worlds_steps: 2,
     }
 }
 
@@ -64,6 +66,7 @@ fn a_gpu_only_bench_has_no_cpu_row() {
     assert!(report.periods.iter().all(|p| p.backend == "gpu") && !report.periods.is_empty());
     assert!(report.networks.iter().all(|n| n.backend == "gpu"));
     assert!(report.iterations.is_empty());
+    assert!(report.worlds.is_empty());
 }
 
 /// `--cpu-only`: the CPU's rows (steps, periods, networks, solver
@@ -78,6 +81,16 @@ fn a_cpu_only_bench_has_no_gpu_row() {
     assert!(report.periods.iter().all(|p| p.backend == "cpu") && !report.periods.is_empty());
     assert!(report.networks.iter().all(|n| n.backend == "cpu") && !report.networks.is_empty());
     assert!(!report.iterations.is_empty());
+    // A row for each batch size asked, each timed in both ways.
+    let worlds: Vec<usize> = report.worlds.iter().map(|w| w.worlds).collect();
+    assert_eq!(worlds, opts.worlds);
+    for w in &report.worlds {
+        assert!(w.batched > 0.0 && w.separate > 0.0, "{w:?}");
+        assert!(
+            (w.ratio - w.batched / w.separate).abs() < 1e-9 * w.ratio,
+            "{w:?}"
+        );
+    }
     assert!(report.bandwidth.iter().all(|b| b.backend == "cpu"));
     assert!(report.stage_traffic.iter().all(|t| t.backend == "cpu"));
     assert!(report.gpu.contains("CPU rows alone"), "{}", report.gpu);

@@ -1014,3 +1014,65 @@ fn train_flags_out_of_range_are_rejected_by_name_and_write_nothing() {
         assert!(!weights.exists(), "train {flag} {value} wrote weights");
     }
 }
+
+// ---------------------------------------------------------------- worlds
+
+#[test]
+fn a_sweep_key_that_names_no_field_is_named_with_its_world() {
+    let dir = TempDir::new("sweep-key");
+    let sweep = dir.file("sweep.csv", "contact.mu,contact.mux\n0.3,1\n0.5,2\n");
+    let out = run_tiny(&["--sweep", s(&sweep)]);
+    expect_error("sweep key", &out, &["sweep.csv", "world 1", "mux"], &[]);
+}
+
+#[test]
+fn a_sweep_value_of_the_wrong_type_is_named() {
+    let dir = TempDir::new("sweep-type");
+    let sweep = dir.file("sweep.toml", "[[world]]\ncontact.mu = \"high\"\n");
+    let out = run_tiny(&["--sweep", s(&sweep)]);
+    expect_error("sweep type", &out, &["sweep.toml", "contact.mu"], &[]);
+}
+
+#[test]
+fn a_sweep_of_no_world_or_another_format_is_rejected() {
+    let dir = TempDir::new("sweep-empty");
+    let empty = dir.file("empty.csv", "contact.mu\n");
+    expect_error(
+        "empty",
+        &run_tiny(&["--sweep", s(&empty)]),
+        &["empty.csv", "no world"],
+        &[],
+    );
+    let text = dir.file("sweep.txt", "contact.mu\n0.3\n");
+    let out = run_tiny(&["--sweep", s(&text)]);
+    expect_error("format", &out, &["sweep.txt", ".toml", ".csv"], &[]);
+    let stray = dir.file("stray.toml", "[contact]\nmu = 0.3\n");
+    let out = run_tiny(&["--sweep", s(&stray)]);
+    expect_error(
+        "stray table",
+        &out,
+        &["stray.toml", "`contact`", "[[world]]"],
+        &[],
+    );
+}
+
+#[test]
+fn worlds_that_disagree_with_the_sweep_or_number_none_are_rejected() {
+    let dir = TempDir::new("worlds-count");
+    let sweep = dir.file("sweep.csv", "contact.mu\n0.3\n0.5\n");
+    let out = run_tiny(&["--worlds", "3", "--sweep", s(&sweep)]);
+    expect_error("3 vs 2", &out, &["--worlds", "3", "2"], &[]);
+    expect_error("none", &run_tiny(&["--worlds", "0"]), &["--worlds"], &[]);
+}
+
+#[test]
+fn worlds_refuse_the_flags_of_a_single_world_and_the_gpu() {
+    let dir = TempDir::new("worlds-flags");
+    let frames = dir.path("frames");
+    let out = run_tiny(&["--worlds", "2", "--out", s(&frames)]);
+    expect_error("--out", &out, &["--out", "one world"], &[]);
+    assert!(!frames.exists(), "nothing is written");
+    let mut args = vec!["run", "--backend", "gpu", "--worlds", "2"];
+    args.extend_from_slice(TINY);
+    expect_error("gpu", &wgcloth(&args), &["--backend", "CPU"], &[]);
+}

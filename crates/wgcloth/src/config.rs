@@ -492,6 +492,14 @@ impl Default for SolverConfig {
     }
 }
 
+/// Where a TOML configuration went wrong: its line, the dotted key, what.
+#[cfg(feature = "toml")]
+struct TomlError {
+    line: Option<usize>,
+    key: Option<String>,
+    message: String,
+}
+
 /// A run's whole configuration; the defaults are the thesis scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -572,20 +580,53 @@ impl Config {
     /// the file and line. Needs the crate's `toml` feature.
     #[cfg(feature = "toml")]
     pub fn from_toml(text: &str, path: &Path) -> Result<Config> {
+        Self::parse_toml(text).map_err(|e| {
+            let line = e.line.map(|l| format!("line {l}: ")).unwrap_or_default();
+            let key = e.key.map(|k| format!("`{k}`: ")).unwrap_or_default();
+            Error::file(path, format!("{line}{key}{}", e.message))
+        })
+    }
+
+    /// This configuration with `overrides` set over it: a TOML table laid
+    /// out as a configuration file is (`contact.mu = 0.3`), whose tables
+    /// merge into this one's. A key that names no field, or a value of the
+    /// wrong type, is an error naming the key. Needs the crate's `toml`
+    /// feature.
+    #[cfg(feature = "toml")]
+    pub fn with_overrides(&self, overrides: &toml::Table) -> Result<Config> {
+        fn merge(into: &mut toml::Table, from: &toml::Table) {
+            for (key, value) in from {
+                match (into.get_mut(key), value) {
+                    (Some(toml::Value::Table(t)), toml::Value::Table(f)) => merge(t, f),
+                    _ => {
+                        into.insert(key.clone(), value.clone());
+                    }
+                }
+            }
+        }
+        let unwritable = |e: &dyn std::fmt::Display| Error::config("configuration", e.to_string());
+        let mut table = toml::Table::try_from(self).map_err(|e| unwritable(&e))?;
+        merge(&mut table, overrides);
+        let text = toml::to_string(&table).map_err(|e| unwritable(&e))?;
+        Self::parse_toml(&text)
+            .map_err(|e| Error::config(e.key.as_deref().unwrap_or("configuration"), e.message))
+    }
+
+    #[cfg(feature = "toml")]
+    fn parse_toml(text: &str) -> std::result::Result<Config, TomlError> {
         toml::from_str(text).map_err(|mut e| {
-            let line = e
-                .span()
-                .map(|s| format!("line {}: ", text[..s.start].matches('\n').count() + 1))
-                .unwrap_or_default();
+            let line = (e.span()).map(|s| text[..s.start].matches('\n').count() + 1);
             // Without the input, the error's display names the dotted key.
             e.set_input(None);
             let shown = e.to_string();
-            let key = shown
-                .lines()
+            let key = (shown.lines())
                 .find_map(|l| l.strip_prefix("in `")?.strip_suffix('`'))
-                .map(|k| format!("`{k}`: "))
-                .unwrap_or_default();
-            Error::file(path, format!("{line}{key}{}", e.message().trim()))
+                .map(str::to_string);
+            TomlError {
+                line,
+                key,
+                message: e.message().trim().to_string(),
+            }
         })
     }
 

@@ -12,6 +12,7 @@
 
 pub mod plot;
 pub mod traffic;
+pub mod worlds;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -203,6 +204,10 @@ pub struct BenchOptions {
     /// Solves a step of the converged rows (`solver.substeps`; 0: the
     /// scene's own, `Scene::substeps`). The thesis's rows take one.
     pub substeps: u32,
+    /// Worlds of the batched-worlds rows (the default run at
+    /// `period_grid`), and the steps each row times.
+    pub worlds: Vec<usize>,
+    pub worlds_steps: u64,
 }
 
 /// Which backends a bench measures.
@@ -239,6 +244,8 @@ impl BenchOptions {
             iteration_grids: vec![128, 256, 512],
             backends: Backends::Both,
             substeps: 0,
+            worlds: vec![1, 16, 64, 256, 1024],
+            worlds_steps: 5,
         }
     }
 
@@ -273,6 +280,8 @@ impl BenchOptions {
             batch_sizes: vec![1_000, 16_000],
             repeats: 1,
             iteration_grids: vec![128],
+            worlds: vec![1, 16, 64],
+            worlds_steps: 3,
             ..BenchOptions::full()
         }
     }
@@ -288,6 +297,21 @@ impl BenchOptions {
             period_steps: 0,
             batch_sizes: Vec::new(),
             iteration_grids: vec![128, 256, 512, 1024],
+            worlds: Vec::new(),
+            ..BenchOptions::full()
+        }
+    }
+
+    /// The batched-worlds rows alone (`bench --worlds`), 1 to 1,024 worlds
+    /// on the CPU: no step, period, network or solver-iteration rows.
+    pub fn worlds() -> BenchOptions {
+        BenchOptions {
+            grids: Vec::new(),
+            hardware_gpu_grids: Vec::new(),
+            period_steps: 0,
+            batch_sizes: Vec::new(),
+            iteration_grids: Vec::new(),
+            backends: Backends::Cpu,
             ..BenchOptions::full()
         }
     }
@@ -498,6 +522,8 @@ pub struct BenchReport {
     pub stage_traffic: Vec<StageTrafficRow>,
     pub networks: Vec<NetworkRow>,
     pub periods: Vec<PeriodRow>,
+    /// Batched worlds against separate simulators (CPU).
+    pub worlds: Vec<worlds::WorldsRow>,
 }
 
 /// The backends of `which`: the CPU's unless GPU rows alone, the GPU's
@@ -608,6 +634,10 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     let gpu = chosen.iter().find_map(Chosen::context);
     let networks = network_rows(opts, gpu, &mut progress)?;
     let iterations = solver_iterations(opts, &bandwidth[0], &mut progress)?;
+    let worlds = match opts.backends {
+        Backends::Gpu => Vec::new(),
+        _ => worlds::rows(opts, &mut progress)?,
+    };
     Ok(BenchReport {
         quick: opts.quick,
         period_grid: opts.period_grid,
@@ -627,6 +657,7 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
         rows,
         networks,
         periods,
+        worlds,
     })
 }
 
@@ -1351,6 +1382,31 @@ impl BenchReport {
                     ]
                 },
             ),
+            Table::of(
+                "batched worlds against separate simulators (default run, every solve to 1e-3)"
+                    .into(),
+                &[
+                    ("backend", Left),
+                    ("worlds", Right),
+                    ("grid", Right),
+                    ("steps", Right),
+                    ("batched world-steps/s", Right),
+                    ("separate world-steps/s", Right),
+                    ("× separate", Right),
+                ],
+                &self.worlds,
+                |w| {
+                    vec![
+                        w.backend.clone(),
+                        w.worlds.to_string(),
+                        w.grid.to_string(),
+                        w.steps.to_string(),
+                        format!("{:.1}", w.batched),
+                        format!("{:.1}", w.separate),
+                        format!("{:.2}", w.ratio),
+                    ]
+                },
+            ),
         ]
         .into_iter()
         .flatten()
@@ -1437,6 +1493,7 @@ mod tests {
             rows,
             networks: Vec::new(),
             periods: Vec::new(),
+            worlds: Vec::new(),
         };
         let table = report.table();
         assert!(table.contains("div@2"), "{table}");

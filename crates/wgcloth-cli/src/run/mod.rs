@@ -16,6 +16,7 @@ mod on_cpu;
 mod on_gpu;
 mod report;
 mod validate;
+mod worlds;
 
 pub use on_cpu::cpu_failing_solve;
 use on_cpu::run_cpu;
@@ -25,6 +26,7 @@ pub use report::{
     DeviceFault, RESIDUAL_GOAL, Report, SelfContactReport, check_diverged, median, solver_name,
 };
 pub use validate::{Validation, validate};
+pub use worlds::{BatchReport, WorldReport, run_worlds};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {

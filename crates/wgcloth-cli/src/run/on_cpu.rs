@@ -2,10 +2,7 @@
 
 use std::time::Instant;
 
-use super::report::{
-    Report, Residuals, SelfContactReport, Timings, describe_network, peak_resident_bytes,
-    smoother_of,
-};
+use super::report::{Report, Tally, Timings, describe_network, peak_resident_bytes, smoother_of};
 use super::{Observers, Steps, keep};
 use wgcloth::cpu::{self, CpuSim, integrate};
 use wgcloth::error::Result;
@@ -27,10 +24,7 @@ pub(super) fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Res
         }
     }
     let mut timings = Timings::default();
-    let (mut cg_iters, mut contacts, mut breakdowns) = (0u64, 0u64, 0u64);
-    let mut residuals = Residuals::default();
-    let mut max_penetration = 0.0f32;
-    let mut separated = SelfContactReport::default();
+    let mut tally = Tally::default();
     let mut divergence = None;
     let mut last_good = sim.state.clone();
     let max_speed = config.solver.max_speed;
@@ -48,21 +42,7 @@ pub(super) fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Res
                     .map(|stage| (stage.name(), s.stage_seconds[stage.index()] * 1e3)),
             );
         }
-        cg_iters += s.pcg.iterations as u64;
-        contacts += s.contacts as u64;
-        breakdowns += s.pcg.breakdown as u64;
-        residuals.push(s.pcg.relative_residual, s.pcg.iterations);
-        max_penetration = max_penetration.max(s.max_penetration);
-        let sep = &s.separation;
-        separated.pairs_max = separated.pairs_max.max(sep.pairs as u64);
-        separated.changed_total += sep.changed as u64;
-        separated.pushed_total += sep.pushed as u64;
-        separated.zoned_total += sep.zoned as u64;
-        separated.stopped_total += sep.stopped as u64;
-        separated.held_total += sep.held as u64;
-        separated.last_resort_steps += u64::from(self_contact.separate && !sep.settled);
-        separated.contacts_max = separated.contacts_max.max(s.self_contacts as u64);
-        separated.contacts_dropped += s.self_contacts_dropped as u64;
+        tally.push(&s, self_contact);
         let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
         if health::failed(flags, s.pcg.breakdown) {
             keep(&mut sim.state, &last_good);
@@ -113,27 +93,24 @@ pub(super) fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Res
         gpu_subgroup_sums: None,
         gpu_vectors: None,
         peak_resident_bytes: peak_resident_bytes(),
-        max_penetration,
+        max_penetration: tally.max_penetration,
         finite: sim.is_finite(),
         last_good: divergence.is_some().then_some(last_good),
         divergence,
         device_fault: None,
         preconditioner: config.solver.preconditioner,
         smoother: smoother_of(&config),
-        cg_iterations_mean: cg_iters as f64 / done,
-        cg_iterations_max: residuals.most_iterations,
-        cg_residual_max: residuals.max,
-        cg_residual_median: residuals.median(),
-        cg_steps_above_goal: residuals.above_goal,
+        cg_iterations_mean: tally.cg_iters as f64 / done,
+        cg_iterations_max: tally.residuals.most_iterations,
+        cg_residual_max: tally.residuals.max,
+        cg_residual_median: tally.residuals.median(),
+        cg_steps_above_goal: tally.residuals.above_goal,
         cg_steps_resolved: 0,
-        cg_breakdowns: breakdowns,
-        contacts_mean: contacts as f64 / done,
+        cg_breakdowns: tally.breakdowns,
+        contacts_mean: tally.contacts as f64 / done,
         energy_final: sim.energy().total(),
-        self_contact: self_contact.separate.then_some(SelfContactReport {
-            failsafe_share: separated.changed_total as f64
-                / (done * sim.scene.cloth.vertex_count() as f64),
-            ..separated
-        }),
+        self_contact: (self_contact.separate)
+            .then(|| tally.self_contact(done, sim.scene.cloth.vertex_count())),
     })
 }
 

@@ -6,11 +6,12 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use wgcloth::config::{Config, ModelKind, Preconditioner, SceneKind, Smoother};
-use wgcloth::cpu::State;
+use wgcloth::cpu::{State, StepStats};
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::mlp::NetworkKernel;
 use wgcloth::health::Divergence;
 use wgcloth::scene::Scene;
+use wgcloth::stage::SelfContactStages;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -138,6 +139,48 @@ pub fn solver_name(preconditioner: Preconditioner, smoother: Option<Smoother>) -
     match smoother {
         Some(smoother) => format!("{} ({})", preconditioner.name(), smoother.name()),
         None => preconditioner.name().to_string(),
+    }
+}
+
+/// What a CPU run's steps add up to, step by step.
+#[derive(Default)]
+pub(super) struct Tally {
+    pub(super) cg_iters: u64,
+    pub(super) contacts: u64,
+    pub(super) breakdowns: u64,
+    pub(super) residuals: Residuals,
+    pub(super) max_penetration: f32,
+    pub(super) separated: SelfContactReport,
+}
+
+impl Tally {
+    /// Adds a step's statistics; `self_contact`: which of its stages ran.
+    pub(super) fn push(&mut self, s: &StepStats, self_contact: SelfContactStages) {
+        self.cg_iters += s.pcg.iterations as u64;
+        self.contacts += s.contacts as u64;
+        self.breakdowns += s.pcg.breakdown as u64;
+        self.residuals
+            .push(s.pcg.relative_residual, s.pcg.iterations);
+        self.max_penetration = self.max_penetration.max(s.max_penetration);
+        let (sep, t) = (&s.separation, &mut self.separated);
+        t.pairs_max = t.pairs_max.max(sep.pairs as u64);
+        t.changed_total += sep.changed as u64;
+        t.pushed_total += sep.pushed as u64;
+        t.zoned_total += sep.zoned as u64;
+        t.stopped_total += sep.stopped as u64;
+        t.held_total += sep.held as u64;
+        t.last_resort_steps += u64::from(self_contact.separate && !sep.settled);
+        t.contacts_max = t.contacts_max.max(s.self_contacts as u64);
+        t.contacts_dropped += s.self_contacts_dropped as u64;
+    }
+
+    /// What stage "separate" did over `steps` steps of `vertices`, with
+    /// self-contact on.
+    pub(super) fn self_contact(&self, steps: f64, vertices: usize) -> SelfContactReport {
+        SelfContactReport {
+            failsafe_share: self.separated.changed_total as f64 / (steps * vertices as f64),
+            ..self.separated.clone()
+        }
     }
 }
 

@@ -17,6 +17,7 @@ pub mod rigid;
 pub mod self_contact;
 pub mod separate;
 pub mod springs;
+pub mod worlds;
 
 #[cfg(not(target_arch = "wasm32"))]
 use std::time::Instant;

@@ -1,0 +1,94 @@
+//! `wgcloth run --worlds N` and `--sweep FILE` (issue 67): each world of a
+//! batch ends where the same configuration run alone ends, whichever
+//! sweep format set its values.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Runs `wgcloth run` with `args` on the CPU path; its `--report` JSON.
+fn report(dir: &Path, name: &str, args: &[&str]) -> serde_json::Value {
+    let path = dir.join(format!("{name}.json"));
+    let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
+        .args([
+            "run",
+            "--backend",
+            "cpu",
+            "--scene",
+            "sphere",
+            "--model",
+            "friction",
+        ])
+        .args(["--grid", "8", "--steps", "25", "--report"])
+        .arg(&path)
+        .args(args)
+        .output()
+        .expect("the wgcloth binary starts");
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&path).expect("report written"))
+        .expect("report is JSON")
+}
+
+fn temp_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("wgcloth-worlds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+#[test]
+fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
+    let dir = temp_dir();
+    // μ, the springs' stiffness and the sphere's amplitude per world.
+    let worlds = [(0.2, 3000.0, 0.25), (0.8, 5000.0, 0.3), (0.5, 8000.0, 0.2)];
+    let mut csv = String::from("contact.mu,cloth.stiffness,rigid.motion.amplitude\n");
+    let mut toml = String::new();
+    for (mu, e, a) in worlds {
+        csv += &format!("{mu},{e},{a}\n");
+        toml += &format!(
+            "[[world]]\ncontact.mu = {mu}\ncloth.stiffness = {e}\nrigid.motion.amplitude = {a}\n"
+        );
+    }
+    let csv_path = dir.join("sweep.csv");
+    let toml_path = dir.join("sweep.toml");
+    std::fs::write(&csv_path, csv).unwrap();
+    std::fs::write(&toml_path, toml).unwrap();
+    let from_csv = report(&dir, "csv", &["--sweep", csv_path.to_str().unwrap()]);
+    let from_toml = report(&dir, "toml", &["--sweep", toml_path.to_str().unwrap()]);
+    assert_eq!(
+        from_csv["worlds"], from_toml["worlds"],
+        "CSV and TOML sweeps"
+    );
+    let batch = from_csv["worlds"].as_array().expect("worlds");
+    assert_eq!(batch.len(), worlds.len());
+    for (k, (mu, e, a)) in worlds.into_iter().enumerate() {
+        let config = dir.join(format!("world{k}.toml"));
+        std::fs::write(
+            &config,
+            format!(
+                "[contact]\nmu = {mu}\n[cloth]\nstiffness = {e}\n[rigid.motion]\namplitude = {a}\n"
+            ),
+        )
+        .unwrap();
+        let alone = report(
+            &dir,
+            &format!("alone{k}"),
+            &["--config", config.to_str().unwrap()],
+        );
+        let world = &batch[k];
+        assert_eq!(world["steps"], 25);
+        for key in [
+            "energy_final",
+            "cg_iterations_mean",
+            "max_penetration",
+            "contacts_mean",
+        ] {
+            assert_eq!(world[key], alone[key], "world {k}: {key}");
+        }
+    }
+    // The worlds differ: the sweep reached them.
+    assert_ne!(batch[0]["energy_final"], batch[1]["energy_final"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
