@@ -21,11 +21,15 @@ use crate::domain::{
 use wgcloth::config::{Config, ModelKind, MotionKind};
 use wgcloth::cpu::CpuSim;
 use wgcloth::cpu::contact::local_frame;
+use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::error::{Error, Result};
 use wgcloth::nn::weights::{self, NetKind};
 use wgcloth::scene::Scene;
 
 pub const FORMAT: &str = "wgcloth-contacts/1";
+
+/// Randomised runs `gen-data` steps together as one batch of worlds.
+const RUNS_A_BATCH: usize = 8;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Dataset {
@@ -63,45 +67,54 @@ fn recorded_inputs(kind: NetKind, sim: &CpuSim) -> Vec<Vec<f32>> {
         .collect()
 }
 
-/// Contacts recorded from `runs` thesis-scene runs whose sphere start, path
-/// direction, amplitude, period and coefficients are drawn at random (with
-/// the naive model for naive data, as the thesis recorded).
-pub fn record_contacts(
-    kind: NetKind,
-    runs: u32,
-    grid: u32,
-    rng: &mut Rng,
-) -> Result<Vec<Vec<f32>>> {
-    let mut out = Vec::new();
-    for _ in 0..runs {
-        let mut config = Config {
-            model: match kind {
-                NetKind::Friction | NetKind::FrictionContact => ModelKind::Friction,
-                NetKind::Naive => ModelKind::Naive,
-            },
-            ..Default::default()
-        };
-        config.cloth.grid = [grid, grid];
-        let r = &mut config.rigid;
-        r.radius = rng.range((0.12, 0.28));
-        r.position = [rng.range((-0.2, 0.2)), rng.range((-0.3, 0.1)), -0.1];
-        let m = &mut r.motion;
-        m.kind = MotionKind::Sinusoid;
-        m.axis = [rng.range((-0.3, 0.3)), rng.range((-0.3, 0.3)), 1.0];
-        m.amplitude = rng.range((0.2, 0.35));
-        m.period = rng.range((1.2, 3.0));
-        let k = &mut config.contact;
-        (k.kn, k.kd, k.kt, k.mu) = (
-            rng.range((300.0, 1000.0)),
-            rng.range((0.5, 4.0)),
-            rng.range((20.0, 400.0)),
-            rng.range((0.1, 0.9)),
-        );
-        let steps = (m.period / config.solver.dt).round() as u64;
-        let mut sim = CpuSim::new(Scene::new(&config)?);
-        for _ in 0..steps {
-            sim.step();
-            out.extend(recorded_inputs(kind, &sim));
+/// A thesis-scene run whose sphere start, path direction, amplitude,
+/// period and coefficients are drawn from `rng` (with the naive model for
+/// naive data, as the thesis recorded) on an N×N cloth: its configuration
+/// and its steps, one sphere period.
+pub fn random_run(kind: NetKind, grid: u32, rng: &mut Rng) -> (Config, u64) {
+    let mut config = Config {
+        model: match kind {
+            NetKind::Friction | NetKind::FrictionContact => ModelKind::Friction,
+            NetKind::Naive => ModelKind::Naive,
+        },
+        ..Default::default()
+    };
+    config.cloth.grid = [grid, grid];
+    let r = &mut config.rigid;
+    r.radius = rng.range((0.12, 0.28));
+    r.position = [rng.range((-0.2, 0.2)), rng.range((-0.3, 0.1)), -0.1];
+    let m = &mut r.motion;
+    m.kind = MotionKind::Sinusoid;
+    m.axis = [rng.range((-0.3, 0.3)), rng.range((-0.3, 0.3)), 1.0];
+    m.amplitude = rng.range((0.2, 0.35));
+    m.period = rng.range((1.2, 3.0));
+    let k = &mut config.contact;
+    (k.kn, k.kd, k.kt, k.mu) = (
+        rng.range((300.0, 1000.0)),
+        rng.range((0.5, 4.0)),
+        rng.range((20.0, 400.0)),
+        rng.range((0.1, 0.9)),
+    );
+    let steps = (m.period / config.solver.dt).round() as u64;
+    (config, steps)
+}
+
+/// The contacts of each of `runs` (configurations and steps), recorded
+/// after every step, the runs stepped as one batch of worlds
+/// (`cpu::worlds`).
+pub fn record_contacts(kind: NetKind, runs: &[(Config, u64)]) -> Result<Vec<Vec<Vec<f32>>>> {
+    let scenes = (runs.iter())
+        .map(|(config, _)| Scene::new(config))
+        .collect::<Result<Vec<_>>>()?;
+    let mut batch = CpuWorlds::new(scenes);
+    let mut out = vec![Vec::new(); runs.len()];
+    let longest = runs.iter().map(|(_, steps)| *steps).max().unwrap_or(0);
+    for step in 0..longest {
+        let stepped = batch.step_where(|k| step < runs[k].1);
+        for ((records, sim), s) in out.iter_mut().zip(batch.worlds()).zip(&stepped) {
+            if s.is_some() {
+                records.extend(recorded_inputs(kind, sim));
+            }
         }
     }
     Ok(out)
@@ -276,18 +289,34 @@ pub fn generate(
     let mut data = Dataset::new(kind);
     let mut contacts = Vec::new();
     let mut run = 0;
-    while contacts.len() < recorded {
-        contacts.extend(record_contacts(kind, 1, 16, &mut rng)?);
-        run += 1;
-        progress(
-            "simulating",
-            (contacts.len() as f32 / recorded as f32).min(1.0),
-        );
-        if run > 1000 {
-            return Err(Error::config(
-                "--recorded",
-                "the runs produced too few contacts",
-            ));
+    'runs: while contacts.len() < recorded {
+        // Runs drawn as one after another draws them, stepped as a batch;
+        // the draws of runs left over are given back, so the data do not
+        // depend on the batch's size.
+        let draws: Vec<(Rng, (Config, u64))> = (0..RUNS_A_BATCH)
+            .map(|_| {
+                let run = random_run(kind, 16, &mut rng);
+                (rng.clone(), run)
+            })
+            .collect();
+        let runs: Vec<(Config, u64)> = draws.iter().map(|(_, r)| r.clone()).collect();
+        for (records, (after, _)) in record_contacts(kind, &runs)?.into_iter().zip(draws) {
+            contacts.extend(records);
+            run += 1;
+            progress(
+                "simulating",
+                (contacts.len() as f32 / recorded as f32).min(1.0),
+            );
+            if contacts.len() >= recorded {
+                rng = after;
+                break 'runs;
+            }
+            if run > 1000 {
+                return Err(Error::config(
+                    "--recorded",
+                    "the runs produced too few contacts",
+                ));
+            }
         }
     }
     // Draw `recorded` of them without replacement (partial Fisher–Yates).

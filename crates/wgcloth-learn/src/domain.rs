@@ -55,6 +55,7 @@ pub fn bounds(kind: NetKind) -> (Vec<f32>, Vec<f32>) {
 }
 
 /// A small seeded generator (splitmix64), so data is reproducible.
+#[derive(Clone)]
 pub struct Rng(u64);
 
 impl Rng {

@@ -11,7 +11,7 @@ use glam::{Mat3, Quat, Vec3};
 use wgcloth::cpu::contact::{Coefficients, ForceJacobian, friction_net};
 use wgcloth::nn::weights::{NetKind, WeightsFile};
 use wgcloth::nn::{Layer, Mlp};
-use wgcloth_learn::dataset::{Counts, Dataset, generate};
+use wgcloth_learn::dataset::{Counts, Dataset, generate, random_run, record_contacts};
 use wgcloth_learn::eval::evaluate;
 use wgcloth_learn::train::{TrainOptions, train};
 
@@ -281,6 +281,27 @@ fn gen_data_is_deterministic_for_a_seed() {
         assert!((10.0..=1000.0).contains(&x[6]) && (0.0..=10.0).contains(&x[7]));
         assert!((1.0..=1000.0).contains(&x[8]) && (0.0..=1.0).contains(&x[9]));
     }
+}
+
+/// gen-data steps its runs as a batch of worlds: each run's contacts are
+/// those it records alone, in the order it records them.
+#[test]
+fn runs_recorded_as_a_batch_record_what_each_records_alone() {
+    let mut rng = wgcloth_learn::domain::Rng::new(5);
+    let runs: Vec<_> = (0..3)
+        .map(|_| random_run(NetKind::Friction, 8, &mut rng))
+        .collect();
+    let together = record_contacts(NetKind::Friction, &runs).unwrap();
+    assert_eq!(together.len(), runs.len());
+    for (k, run) in runs.iter().enumerate() {
+        let alone = record_contacts(NetKind::Friction, std::slice::from_ref(run)).unwrap();
+        assert_eq!(together[k], alone[0], "run {k}");
+    }
+    assert!(
+        together.iter().all(|r| !r.is_empty()),
+        "every run touches the cloth"
+    );
+    assert_ne!(together[0], together[1]);
 }
 
 #[test]
