@@ -114,3 +114,42 @@ fn a_folded_cloth_driven_into_itself_keeps_its_momentum_on_the_gpu() {
     assert!(changed > 0, "the failsafe acts");
     assert!(worst <= 1e-5, "momentum {worst:.2e} of Σ m|v| off");
 }
+
+/// A state set without its loads (`State::loads` empty) carries none: it
+/// steps as one whose loads are all 0, on both paths.
+#[test]
+fn a_state_without_loads_steps_as_one_that_carried_none() {
+    let scene = weightless();
+    let mut bare = folded(&scene);
+    bare.loads.clear();
+    let zeros = folded(&scene);
+    let mut runs = [CpuSim::new(scene.clone()), CpuSim::new(scene.clone())];
+    (runs[0].state, runs[1].state) = (bare.clone(), zeros.clone());
+    for _ in 0..3 {
+        runs.iter_mut().for_each(|s| _ = s.step());
+    }
+    assert!(runs[0].state.x == runs[1].state.x && runs[0].state.loads == runs[1].state.loads);
+    assert!(
+        runs[0].state.loads.iter().any(|&l| l > 0.0),
+        "the contacts carry load"
+    );
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let gpu = GpuSim::new(&ctx.device, &ctx.queue, &scene).unwrap();
+    let mut ends = Vec::new();
+    for start in [&bare, &zeros] {
+        gpu.upload_state(start);
+        for _ in 0..3 {
+            gpu.step();
+        }
+        ends.push((
+            gpu.read_positions().unwrap(),
+            gpu.read_loads(gpu.loads()).unwrap(),
+        ));
+    }
+    assert!(
+        ends[0] == ends[1],
+        "the GPU from a bare state and from zero loads"
+    );
+}

@@ -100,7 +100,7 @@ pub struct State {
     pub step: u64,
     /// Per vertex, the normal force (N) its cloth–cloth contacts carried
     /// in the last step's solve (stage "load"), which bounds the next
-    /// step's friction; 0 where it had none.
+    /// step's friction; 0 where it had none, and none at all if empty.
     pub loads: Vec<f32>,
 }
 
@@ -374,6 +374,8 @@ impl CpuSim {
                         limit: keep.mass_ratio * cloth.vertex_mass,
                         vertex_mass: cloth.vertex_mass,
                     };
+                    // A state set without its loads carries none.
+                    loads.resize(x.len(), 0.0);
                     self.self_terms =
                         self_contact::respond(&found.pairs, &found.counts, loads, x, v, &band);
                     self.self_pairs = found.pairs;
@@ -408,6 +410,7 @@ impl CpuSim {
                 );
             }
             Stage::Load => {
+                loads.resize(x.len(), 0.0);
                 load::carry(&self.self_pairs, &self.self_terms, (x, v), h, loads);
             }
             Stage::Integrate => {
