@@ -10,7 +10,10 @@
 #     sums through workgroup memory alone, into run_N_no_subgroups.json,
 #     and with --vectors vec4, the solver's vectors a vec4 each rather
 #     than packed, into run_N_vec4.json;
-#  2. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
+#  2. the thesis scene with self-contact (scenes/thesis.toml, 200 steps)
+#     at each grid of $SELF_CONTACT_GRIDS (default "512 1024"), report
+#     self_contact_N.json: issue 65 asks that it run finite;
+#  3. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput and the sphere period, into bench.json,
 #     bench.png and bench.txt.
 # Both take $SUBSTEPS solves a step (default 1: the thesis's step, the one
@@ -69,6 +72,13 @@ for n in $goal_grids; do
       echo "the ${n}² run ${variant} failed or outlasted ${RUN_TIMEOUT:-600} s"
     fi
   done
+done
+for n in ${SELF_CONTACT_GRIDS:-512 1024}; do
+  echo "== thesis scene with self-contact, ${n}²"
+  if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --config scenes/thesis.toml --grid "$n" \
+    --steps 200 --report "$out/self_contact_$n.json"; then
+    echo "the ${n}² self-contact run failed or outlasted ${RUN_TIMEOUT:-600} s"
+  fi
 done
 echo "== wgcloth bench --gpu-only"
 "$bin" bench --gpu-only --substeps "$substeps" --report "$out/bench.json" --plot "$out/bench.png" | tee "$out/bench.txt"
