@@ -32,6 +32,22 @@ fn report(dir: &Path, name: &str, args: &[&str]) -> serde_json::Value {
         .expect("report is JSON")
 }
 
+/// The sweeps in `sweeps/` name their worlds' values as the configuration
+/// has them: what a user runs with `wgcloth run --sweep sweeps/NAME`.
+#[test]
+fn every_shipped_sweep_loads() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sweeps");
+    let mut files = 0;
+    for entry in std::fs::read_dir(&dir).expect("sweeps/") {
+        let path = entry.unwrap().path();
+        let worlds = wgcloth_cli::sweep::read(&path, &wgcloth::Config::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(worlds.len() > 1, "{}", path.display());
+        files += 1;
+    }
+    assert!(files > 0);
+}
+
 fn temp_dir() -> PathBuf {
     let dir = std::env::temp_dir().join(format!("wgcloth-worlds-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
