@@ -584,10 +584,10 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
         .iter()
         .find_map(|w| Some((w.world, w.divergence.as_ref()?)))
     {
-        Some((w, (step, vertex, why))) => Err(Error::Diverged {
-            step: *step,
-            vertex: *vertex as u32,
-            reason: format!("world {w}: {why}; the other worlds ran to the end"),
+        Some((w, d)) => Err(Error::Diverged {
+            step: d.step,
+            vertex: d.vertex,
+            reason: format!("world {w}: {}; the other worlds ran to the end", d.reason),
         }),
         None => Ok(()),
     }

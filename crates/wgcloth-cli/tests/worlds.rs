@@ -48,15 +48,16 @@ fn every_shipped_sweep_loads() {
     assert!(files > 0);
 }
 
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("wgcloth-worlds-{}", std::process::id()));
+/// A fresh directory for test `name`'s files.
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("wgcloth-worlds-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir
 }
 
 #[test]
 fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
-    let dir = temp_dir();
+    let dir = temp_dir("sweep");
     // μ, the springs' stiffness and the sphere's amplitude per world.
     let worlds = [(0.2, 3000.0, 0.25), (0.8, 5000.0, 0.3), (0.5, 8000.0, 0.2)];
     let mut csv = String::from("contact.mu,cloth.stiffness,rigid.motion.amplitude\n");
@@ -106,5 +107,46 @@ fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
     }
     // The worlds differ: the sweep reached them.
     assert_ne!(batch[0]["energy_final"], batch[1]["energy_final"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A world that diverges stops and is named, the run exits with code 2,
+/// and the others run to the end, their report written.
+#[test]
+fn a_diverging_world_stops_alone_and_is_named() {
+    let dir = temp_dir("diverging");
+    let sweep = dir.join("sweep.csv");
+    // Faster than 1 mm/s: the cloth's first step of falling.
+    std::fs::write(&sweep, "solver.max_speed\n100\n0.001\n").unwrap();
+    let report = dir.join("r.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
+        .args([
+            "run",
+            "--backend",
+            "cpu",
+            "--grid",
+            "8",
+            "--steps",
+            "10",
+            "--sweep",
+        ])
+        .arg(&sweep)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .expect("the wgcloth binary starts");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("world 1") && stderr.contains("step 1"),
+        "{stderr}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let worlds = r["worlds"].as_array().unwrap();
+    assert_eq!(worlds[0]["steps"], 10);
+    assert!(worlds[0]["divergence"].is_null());
+    assert_eq!(worlds[1]["steps"], 1);
+    assert_eq!(worlds[1]["divergence"]["step"], 1);
     let _ = std::fs::remove_dir_all(&dir);
 }

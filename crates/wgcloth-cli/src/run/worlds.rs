@@ -11,7 +11,7 @@ use super::report::{Tally, median, peak_resident_bytes};
 use wgcloth::cpu::integrate;
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::error::Result;
-use wgcloth::health;
+use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
 use wgcloth::stage::SelfContactStages;
 
@@ -25,10 +25,9 @@ pub struct WorldReport {
     /// Steps it took: all of them, or up to the one that diverged.
     pub steps: u64,
     pub finite: bool,
-    /// Where it diverged and stopped: the step, the first vertex not
-    /// finite or faster than `solver.max_speed` (0 when only PCG broke
-    /// down), and which.
-    pub divergence: Option<(u64, usize, String)>,
+    /// Where it diverged and stopped (`health::diagnose`, on the failing
+    /// step's last solve).
+    pub divergence: Option<Divergence>,
     pub cg_iterations_mean: f64,
     pub cg_iterations_max: u32,
     pub cg_residual_max: f32,
@@ -63,7 +62,10 @@ impl BatchReport {
         let mut out = String::new();
         for w in &self.worlds {
             let state = match &w.divergence {
-                Some((k, i, why)) => format!("diverged at step {k}, vertex {i}: {why}"),
+                Some(d) => format!(
+                    "diverged at step {}, vertex {}: {}",
+                    d.step, d.vertex, d.reason
+                ),
                 None if w.finite => "finite".to_string(),
                 None => "NOT FINITE".to_string(),
             };
@@ -111,7 +113,7 @@ pub fn run_worlds(
     let mut batch = CpuWorlds::new(scenes);
     let n = batch.worlds().len();
     let mut tallies: Vec<Tally> = (0..n).map(|_| Tally::default()).collect();
-    let mut diverged: Vec<Option<(u64, usize, String)>> = vec![None; n];
+    let mut diverged: Vec<Option<Divergence>> = vec![None; n];
     let mut wall_ms = Vec::new();
     let started = Instant::now();
     for k in 0..steps {
@@ -125,16 +127,17 @@ pub fn run_worlds(
             let max_speed = sim.scene.config.solver.max_speed;
             let flags = integrate::health(&sim.state.x, &sim.state.v, max_speed);
             if health::failed(flags, s.pcg.breakdown) {
-                let (x, v) = (&sim.state.x, &sim.state.v);
-                let bad = (0..x.len()).find(|&i| {
-                    !(x[i].is_finite() && v[i].is_finite()) || v[i].length() > max_speed
-                });
-                let why = match bad {
-                    Some(i) if !(x[i].is_finite() && v[i].is_finite()) => "not finite",
-                    Some(_) => "faster than solver.max_speed",
-                    None => "PCG broke down",
-                };
-                diverged[w] = Some((k + 1, bad.unwrap_or(0), why.to_string()));
+                let (matrix, b) = sim.system();
+                diverged[w] = Some(health::diagnose(&FailedStep {
+                    step: k + 1,
+                    flags,
+                    breakdown: s.pcg.breakdown,
+                    diag: &matrix.diag,
+                    b,
+                    x: &sim.state.x,
+                    v: &sim.state.v,
+                    max_speed,
+                }));
             }
         }
         progress(k + 1);
