@@ -607,6 +607,8 @@ impl Config {
         let unwritable = |e: &dyn std::fmt::Display| Error::config("configuration", e.to_string());
         let mut table = toml::Table::try_from(self).map_err(|e| unwritable(&e))?;
         merge(&mut table, overrides);
+        // Parsed as text, so that an error names its dotted key as a
+        // file's does (a table deserialised directly names none).
         let text = toml::to_string(&table).map_err(|e| unwritable(&e))?;
         Self::parse_toml(&text)
             .map_err(|e| Error::config(e.key.as_deref().unwrap_or("configuration"), e.message))
