@@ -500,6 +500,25 @@ struct TomlError {
     message: String,
 }
 
+#[cfg(feature = "toml")]
+impl TomlError {
+    /// What `e` says, with its line in `text` where it was parsed from one.
+    fn of(mut e: toml::de::Error, text: Option<&str>) -> TomlError {
+        let line = (e.span().zip(text)).map(|(s, t)| t[..s.start].matches('\n').count() + 1);
+        // Without the input, the error's display names the dotted key.
+        e.set_input(None);
+        let shown = e.to_string();
+        let key = (shown.lines())
+            .find_map(|l| l.strip_prefix("in `")?.strip_suffix('`'))
+            .map(str::to_string);
+        TomlError {
+            line,
+            key,
+            message: e.message().trim().to_string(),
+        }
+    }
+}
+
 /// A run's whole configuration; the defaults are the thesis scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -607,29 +626,15 @@ impl Config {
         let unwritable = |e: &dyn std::fmt::Display| Error::config("configuration", e.to_string());
         let mut table = toml::Table::try_from(self).map_err(|e| unwritable(&e))?;
         merge(&mut table, overrides);
-        // Parsed as text, so that an error names its dotted key as a
-        // file's does (a table deserialised directly names none).
-        let text = toml::to_string(&table).map_err(|e| unwritable(&e))?;
-        Self::parse_toml(&text)
-            .map_err(|e| Error::config(e.key.as_deref().unwrap_or("configuration"), e.message))
+        Config::deserialize(toml::Value::Table(table)).map_err(|e| {
+            let e = TomlError::of(e, None);
+            Error::config(e.key.as_deref().unwrap_or("configuration"), e.message)
+        })
     }
 
     #[cfg(feature = "toml")]
     fn parse_toml(text: &str) -> std::result::Result<Config, TomlError> {
-        toml::from_str(text).map_err(|mut e| {
-            let line = (e.span()).map(|s| text[..s.start].matches('\n').count() + 1);
-            // Without the input, the error's display names the dotted key.
-            e.set_input(None);
-            let shown = e.to_string();
-            let key = (shown.lines())
-                .find_map(|l| l.strip_prefix("in `")?.strip_suffix('`'))
-                .map(str::to_string);
-            TomlError {
-                line,
-                key,
-                message: e.message().trim().to_string(),
-            }
-        })
+        toml::from_str(text).map_err(|e| TomlError::of(e, Some(text)))
     }
 
     /// [`Config::from_toml`] on a file. Needs the crate's `toml` feature.
