@@ -10,10 +10,15 @@
 #     sums through workgroup memory alone, into run_N_no_subgroups.json,
 #     and with --vectors vec4, the solver's vectors a vec4 each rather
 #     than packed, into run_N_vec4.json;
-#  2. the thesis scene with self-contact (scenes/thesis.toml, 200 steps)
+#  2. the short step (issue 67): the default run at each grid of
+#     $SHORT_GRIDS (default "32 64"), its solves run whole in one
+#     workgroup (short_N.json) and as a chain of dispatches
+#     (short_N_chain.json, --whole-solve-nodes 0): the issue asks for a
+#     64² step under 1 ms;
+#  3. the thesis scene with self-contact (scenes/thesis.toml, 200 steps)
 #     at each grid of $SELF_CONTACT_GRIDS (default "512 1024"), report
 #     self_contact_N.json: issue 65 asks that it run finite;
-#  3. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
+#  4. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput and the sphere period, into bench.json,
 #     bench.png and bench.txt.
 # Both take $SUBSTEPS solves a step (default 1: the thesis's step, the one
@@ -70,6 +75,19 @@ for n in $goal_grids; do
     if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
       --substeps "$substeps" $variant --report "$report"; then
       echo "the ${n}² run ${variant} failed or outlasted ${RUN_TIMEOUT:-600} s"
+    fi
+  done
+done
+for n in ${SHORT_GRIDS:-32 64}; do
+  for variant in "" "--whole-solve-nodes 0"; do
+    echo "== the short step, ${n}² ${variant}"
+    case "$variant" in
+      "") report=$out/short_$n.json ;;
+      *) report=$out/short_${n}_chain.json ;;
+    esac
+    if ! timeout "${RUN_TIMEOUT:-600}" "$bin" run --backend gpu --scene sphere --grid "$n" --steps 200 \
+      $variant --report "$report"; then
+      echo "the ${n}² short-step run ${variant} failed or outlasted ${RUN_TIMEOUT:-600} s"
     fi
   done
 done

@@ -291,6 +291,11 @@ struct SceneArgs {
     /// Multigrid's smoother [default: patches].
     #[arg(long, value_parser = choice(&Smoother::ALL, Smoother::name))]
     smoother: Option<Smoother>,
+    /// On the GPU, solve a multigrid step of a cloth of at most N vertices
+    /// whole, in one dispatch of one workgroup [default: 4096, a 64²
+    /// cloth]; 0 never.
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    whole_solve_nodes: Option<u32>,
     /// Speed (m/s) beyond which a vertex stops the run as diverging.
     #[arg(long, value_name = "M", allow_negative_numbers = true)]
     max_speed: Option<f32>,
@@ -342,6 +347,9 @@ impl SceneArgs {
         }
         if let Some(s) = self.smoother {
             c.solver.smoother = s;
+        }
+        if let Some(n) = self.whole_solve_nodes {
+            c.solver.whole_solve_nodes = n;
         }
         if let Some(m) = self.max_speed {
             c.solver.max_speed = m;

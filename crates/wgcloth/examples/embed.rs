@@ -23,7 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let sim = GpuSim::new(&device, &queue, &scene)?;
     let mut readback = Readback::new(&device, sim.positions().size(), 2);
     // A step records as many PCG iterations as recent steps needed, not the
-    // whole cap: each empty one still costs its dispatches.
+    // whole cap: each empty one still costs its dispatches. (A cloth of up
+    // to 64² solves whole in one dispatch, and its budget stays the cap.)
     let mut statistics = Readback::new(&device, sim.statistics().size(), 2);
     let mut budget = CgBudget::for_solver(&scene.config.solver);
 

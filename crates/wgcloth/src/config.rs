@@ -443,6 +443,11 @@ impl Default for SelfContactConfig {
 /// "Substeps that keep the body within half a spacing").
 pub const MAX_BODY_TRAVEL: f32 = 0.5;
 
+/// `solver.whole_solve_nodes` by default: cloths up to 64 × 64 vertices,
+/// whose solve one workgroup runs faster than a chain of dispatches an
+/// iteration on lavapipe (BENCHMARKS.md "The short step").
+pub const WHOLE_SOLVE_NODES: u32 = 64 * 64;
+
 /// The most substeps one step may take (`solver.substeps`).
 pub const MAX_SUBSTEPS: u32 = 64;
 
@@ -469,6 +474,12 @@ pub struct SolverConfig {
     pub preconditioner: Preconditioner,
     /// The multigrid preconditioner's smoother.
     pub smoother: Smoother,
+    /// On the GPU, a multigrid solve of a cloth of at most this many
+    /// vertices runs whole in one workgroup, one dispatch a solve, rather
+    /// than a chain of dispatches per iteration (the same iterations;
+    /// without self-contact forces, whose couplings take it past WebGPU's
+    /// bindings); 0 never. The CPU is unaffected.
+    pub whole_solve_nodes: u32,
     /// m/s².
     pub gravity: [f32; 3],
     /// m/s: a vertex faster than this stops the run as diverging (the
@@ -486,6 +497,7 @@ impl Default for SolverConfig {
             cg_tol: 1e-3,
             preconditioner: Preconditioner::Multigrid,
             smoother: Smoother::Patches,
+            whole_solve_nodes: WHOLE_SOLVE_NODES,
             gravity: [0.0, -9.81, 0.0],
             max_speed: 100.0,
         }

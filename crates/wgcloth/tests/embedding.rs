@@ -19,27 +19,36 @@ use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let Some((ctx, kernels)) = gpu() else { return };
     // A cap of 40 iterations, more than these steps take: a fifth of the
-    // default's dispatches to record.
+    // default's dispatches for the chain to record.
     let mut config = sphere(12, ModelKind::Friction).config;
     config.solver.cg_iters = 40;
-    let scene = Scene::new(&config).unwrap();
-    let separate = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    // The solve run whole in one workgroup (the default at this size) and
+    // as a chain of dispatches.
+    for whole in [true, false] {
+        config.solver.whole_solve_nodes = if whole { u32::MAX } else { 0 };
+        embedded_steps(&ctx, &kernels, &Scene::new(&config).unwrap(), whole);
+    }
+}
+
+fn embedded_steps(ctx: &GpuContext, kernels: &Arc<Kernels>, scene: &Scene, whole: bool) {
+    let separate = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene).unwrap();
     for _ in 0..50 {
         separate.step();
     }
     // An embedding app: its own encoder, many steps, one submission; the
     // clock and the rigid body's motion live on the GPU.
-    let embedded = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+    let embedded = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, scene).unwrap();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     let dispatches: u32 = (0..50).map(|_| embedded.encode_step(&mut encoder)).sum();
     ctx.queue.submit([encoder.finish()]);
     ctx.finish().unwrap();
-    // 11 outside the solve; PCG's init, init_scalars, spmv, conclude and
-    // finish; per iteration `next` (but the first) and `advance`; the
-    // multigrid setup (per coarse level L its operator, and per level but
-    // the coarsest its patch inverses) and a V-cycle (11 T + 2: four
-    // forward patch sweeps, a residual and a restriction down, a guess and
-    // four backward sweeps up, per level above the tail's first T; the
+    // 11 outside the solve, and the multigrid setup (per coarse level L
+    // its operator, and per level but the coarsest its patch inverses).
+    // Whole: PCG's init, init_scalars, the solve, correct and finish. As a
+    // chain: PCG's init, init_scalars, spmv, conclude and finish; per
+    // iteration `next` (but the first) and `advance`; a V-cycle (11 T + 2:
+    // four forward patch sweeps, a residual and a restriction down, a guess
+    // and four backward sweeps up, per level above the tail's first T; the
     // tail; the cloth's rᵀz) at the start and in every iteration.
     let levels = wgcloth::multigrid::levels(12, 12);
     let nodes: Vec<u32> = levels.iter().map(|l| l.nodes() as u32).collect();
@@ -47,8 +56,15 @@ fn steps_recorded_into_one_app_encoder_equal_separate_submissions() {
     let cpu_adapter = ctx.adapter.device_type == wgpu::DeviceType::Cpu;
     let most = wgcloth::multigrid::tail_nodes(cpu_adapter);
     let cycle = 11 * wgcloth::multigrid::tail_from(&nodes, most) as u32 + 2;
-    let pcg = 5 + (iters - 1) + iters * (1 + cycle) + 2 * coarse + cycle;
-    assert_eq!(dispatches, 50 * (11 + pcg), "dispatches per step");
+    let pcg = match whole {
+        true => 5 + 2 * coarse,
+        false => 5 + (iters - 1) + iters * (1 + cycle) + 2 * coarse + cycle,
+    };
+    assert_eq!(
+        dispatches,
+        50 * (11 + pcg),
+        "dispatches per step (whole {whole})"
+    );
     assert_eq!(
         embedded.read_positions().unwrap(),
         separate.read_positions().unwrap()

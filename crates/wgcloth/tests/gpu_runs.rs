@@ -8,7 +8,8 @@ mod parity;
 
 use common::sphere;
 use parity::{
-    MULTIGRID, PRECONDITIONERS, cpu_after, full, gpu, hang_solved, mat_dev, max_dev, max_norm,
+    MULTIGRID, PRECONDITIONERS, cpu_after, full, gpu, gpu_solves, hang_solved, mat_dev, max_dev,
+    max_norm, solved_whole,
 };
 use wgcloth::config::{ModelKind, Preconditioner};
 use wgcloth::cpu::CpuSim;
@@ -46,43 +47,79 @@ fn allowed_drift(
     )
 }
 
+/// Each preconditioner over 60 steps, multigrid's solve both as a chain of
+/// dispatches and run whole in one workgroup (`solver.whole_solve_nodes`).
 #[test]
 fn hanging_cloth_runs_like_the_cpu_for_60_steps() {
     let Some((ctx, kernels)) = gpu() else { return };
     // A fixed iteration count on both sides (tolerance 0): the thesis's 25
     // Jacobi iterations, and 5 multigrid V-cycles, about what 1e-3 takes.
-    for solve in PRECONDITIONERS {
+    for (solve, whole) in gpu_solves() {
         let (preconditioner, smoother) = solve;
         // Multigrid at 33²: on lavapipe its second level (17², past
-        // `tail_nodes`) has its own dispatches, as the cloth's.
+        // `tail_nodes`) has its own dispatches in the chain, as the cloth's.
         let (grid, iters) = match preconditioner {
             Preconditioner::Jacobi => (16, 25),
             Preconditioner::Multigrid => (33, 5),
         };
-        let scene = hang_solved(grid, solve, iters, 0.0);
+        let scene = solved_whole(hang_solved(grid, solve, iters, 0.0), whole);
         let cpu = cpu_after(&scene, 60);
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        assert_eq!(gpu.solved_whole(), whole);
         for _ in 0..60 {
             gpu.step();
         }
         let x = gpu.read_positions().unwrap();
         let dev = max_dev(&x, &cpu.state.x);
         let state = gpu.read_state().unwrap();
-        eprintln!(
-            "{preconditioner:?} ({smoother:?}), 60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}"
-        );
+        let how = format!("{preconditioner:?} ({smoother:?}, whole {whole})");
+        eprintln!("{how}, 60 steps: largest position deviation {dev:.3e} m; GPU state {state:?}");
         assert_eq!(state.steps, 60);
         assert_eq!(state.cg_iterations_total, 60 * iters);
         assert_eq!(state.clock, 60);
-        assert!(
-            dev < 1e-4,
-            "{preconditioner:?} ({smoother:?}): GPU and CPU drifted {dev} m apart"
-        );
+        assert!(dev < 1e-4, "{how}: GPU and CPU drifted {dev} m apart");
         for (i, p) in scene.cloth.pinned.iter().enumerate() {
             if *p {
                 assert_eq!(x[i], scene.cloth.rest_positions[i]);
             }
         }
+    }
+}
+
+/// Issue 67's short step: the thesis scene at 32² and 64², its solves run
+/// whole, records at most 100 dispatches a step, the same whatever the
+/// iteration budget; the chain of dispatches records more the more
+/// iterations it is given.
+#[test]
+fn a_step_solved_whole_records_at_most_100_dispatches_whatever_its_iterations() {
+    let Some((ctx, kernels)) = gpu() else { return };
+    let recorded = |sim: &GpuSim, budget: u32| {
+        sim.set_cg_budget(budget);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        sim.encode_step(&mut encoder)
+    };
+    for grid in [32, 64] {
+        let mut scene = sphere(grid, ModelKind::FrictionNet);
+        let whole = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        assert!(
+            whole.solved_whole(),
+            "{grid}²: the default solve is not whole"
+        );
+        let (few, many) = (recorded(&whole, 1), recorded(&whole, 200));
+        eprintln!("{grid}²: {few} dispatches a step solved whole");
+        assert_eq!(
+            few, many,
+            "{grid}²: the whole solve's dispatches follow the budget"
+        );
+        assert!(few <= 100, "{grid}²: {few} dispatches a step");
+        scene.config.solver.whole_solve_nodes = 0;
+        let chain = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        let (few, many) = (recorded(&chain, 1), recorded(&chain, 40));
+        eprintln!("{grid}²: {few} to {many} dispatches a step as a chain");
+        assert!(
+            many > few + 39,
+            "{grid}²: the chain's dispatches do not grow"
+        );
     }
 }
 
@@ -144,8 +181,10 @@ fn a_coarse_cloth_against_a_fine_body_assembles_and_runs_as_the_cpu() {
 #[test]
 fn thesis_scene_runs_like_the_cpu_with_both_models() {
     let Some((ctx, kernels)) = gpu() else { return };
-    for model in [ModelKind::Friction, ModelKind::Naive] {
-        let scene = sphere(16, model);
+    // Friction's solves run whole in one workgroup, the naive model's as
+    // a chain of dispatches.
+    for (model, whole) in [(ModelKind::Friction, true), (ModelKind::Naive, false)] {
+        let scene = solved_whole(sphere(16, model), whole);
         let steps = 100;
         let mut cpu = CpuSim::new(scene.clone());
         let mut cpu_contacts = 0;
@@ -165,7 +204,7 @@ fn thesis_scene_runs_like_the_cpu_with_both_models() {
         let dev = max_dev(&x, &cpu.state.x);
         let deepest = f32::from_bits(state.max_penetration_bits);
         eprintln!(
-            "{model:?}, {steps} steps: position deviation {dev:.3e} m; contacts {} vs {cpu_contacts}; deepest {deepest:.4} vs {cpu_deepest:.4}",
+            "{model:?} (whole {whole}), {steps} steps: position deviation {dev:.3e} m; contacts {} vs {cpu_contacts}; deepest {deepest:.4} vs {cpu_deepest:.4}",
             state.contacts_total
         );
         assert!(cpu_contacts > 500, "the sphere must hit the cloth");
@@ -246,10 +285,10 @@ fn a_step_of_substeps_runs_like_the_cpu() {
 #[test]
 fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
     let Some((ctx, kernels)) = gpu() else { return };
-    for solve in PRECONDITIONERS {
+    for (solve, whole) in gpu_solves() {
         let (preconditioner, smoother) = solve;
         // An odd side: the last node of each axis is a coarse node itself.
-        let scene = hang_solved(21, solve, 300, 1e-4);
+        let scene = solved_whole(hang_solved(21, solve, 300, 1e-4), whole);
         let mut cpu = CpuSim::new(scene.clone());
         let mut cpu_iters = 0;
         let mut cpu_worst = 0.0f32;
@@ -259,6 +298,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
             cpu_worst = cpu_worst.max(out.relative_residual);
         }
         let gpu = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
+        assert_eq!(gpu.solved_whole(), whole);
         let mut solved = SolvedSteps::for_scene(&gpu, &scene);
         for _ in 0..20 {
             solved.step(&gpu).unwrap();
@@ -266,7 +306,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
         let state = gpu.read_state().unwrap();
         let gpu_iters = state.cg_iterations_total;
         eprintln!(
-            "{preconditioner:?} ({smoother:?}): PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} \
+            "{preconditioner:?} ({smoother:?}, whole {whole}): PCG iterations over 20 steps: GPU {gpu_iters}, CPU {cpu_iters} \
              (cap 6000); worst residual GPU {:.2e}, CPU {cpu_worst:.2e}",
             state.cg_residual_max
         );
@@ -279,7 +319,7 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
         // f32 sums on the GPU, f64 on the CPU: the stopping iteration may differ slightly.
         assert!(
             (gpu_iters as f64 - cpu_iters as f64).abs() <= 0.05 * cpu_iters as f64 + 20.0,
-            "{preconditioner:?} ({smoother:?}): GPU {gpu_iters}, CPU {cpu_iters}"
+            "{preconditioner:?} ({smoother:?}, whole {whole}): GPU {gpu_iters}, CPU {cpu_iters}"
         );
     }
 }
@@ -292,7 +332,8 @@ fn converged_pcg_stops_early_on_the_gpu_as_on_the_cpu() {
 #[test]
 fn arrays_past_the_binding_limit_are_bound_in_parts_and_step_bit_for_bit() {
     let Some((ctx, kernels)) = gpu() else { return };
-    let scene = hang_solved(32, MULTIGRID, 40, 1e-3);
+    // The chain of dispatches: the solve of any cloth large enough to split.
+    let scene = solved_whole(hang_solved(32, MULTIGRID, 40, 1e-3), false);
     let whole = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
     assert!(
         whole.split_arrays().is_empty(),

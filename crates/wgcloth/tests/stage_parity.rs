@@ -13,8 +13,8 @@ use std::sync::Arc;
 use common::sphere;
 use glam::Vec3;
 use parity::{
-    PRECONDITIONERS, cpu_after, full, gpu, hang, hang_solved, mat_dev, max_dev, max_norm,
-    random_mlp,
+    PRECONDITIONERS, cpu_after, full, gpu, gpu_solves, hang, hang_solved, mat_dev, max_dev,
+    max_norm, random_mlp, solved_whole,
 };
 use scene_files::edge_on_pleat;
 use wgcloth::bvh::Bvh;
@@ -425,9 +425,10 @@ fn subgroup_sums_solve_as_workgroup_memory_sums_do() {
     .unwrap();
     let plain = Kernels::new(&device).unwrap();
     assert!(!plain.subgroups());
-    for solve in PRECONDITIONERS {
-        // 441 vertices: the second workgroup of each dispatch partial.
-        let scene = hang_solved(21, solve, 300, 1e-4);
+    for (solve, whole) in gpu_solves() {
+        // 441 vertices: in the chain the second workgroup of each dispatch
+        // partial; whole, the last lanes' strides one vertex short.
+        let scene = solved_whole(hang_solved(21, solve, 300, 1e-4), whole);
         let with = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         let without = GpuSim::with_kernels(&plain, &device, &queue, &scene).unwrap();
         let mut solved = [&with, &without].map(|sim| SolvedSteps::for_scene(sim, &scene));
@@ -441,7 +442,7 @@ fn subgroup_sums_solve_as_workgroup_memory_sums_do() {
             without.read_positions().unwrap(),
         );
         eprintln!(
-            "{solve:?}: iterations {} with subgroups, {} without; positions differ by {:.2e} m",
+            "{solve:?} (whole {whole}): iterations {} with subgroups, {} without; positions differ by {:.2e} m",
             a.cg_iterations_total,
             b.cg_iterations_total,
             max_dev(&pa, &pb)

@@ -9,7 +9,9 @@
 // Each dispatch works between two levels, `hop.fine` and `hop.coarse`,
 // bound per dispatch, except `tail`, which takes the coarsest levels in one
 // workgroup, a barrier where the per-level kernels take a dispatch (each
-// costs more than those levels' work); level 0 is the cloth, whose operator is A itself
+// costs more than those levels' work), and `solve`, which runs the whole
+// PCG solve with its V-cycles in one workgroup on a small cloth; level 0
+// is the cloth, whose operator is A itself
 // (diagonal blocks and spring blocks), its pinned vertices filtered out of
 // the interpolation (P̃ = S P). With block Jacobi no level stores its
 // pre-smoothing a = ω D⁻¹ r (the residual kernel recomputes it where it
@@ -57,8 +59,8 @@ var<private> hop: Hop;
 // (gpu::kernels::LevelKind): lavapipe runs every branch of a kernel, masked,
 // for every 8 invocations, so a kernel that read the kind from its hop paid
 // at every node for the cloth's rows and the coarse stencils both, and for
-// both smoothers. LEVEL_ANY reads the level from the hop, as `tail` must
-// where it starts at the cloth. Every level above the coarsest is smoothed
+// both smoothers. LEVEL_ANY reads the level from the hop, as `solve` must,
+// whose V-cycle starts at the cloth. Every level above the coarsest is smoothed
 // alike (`tail` smooths the coarsest with its own code).
 override LEVEL: u32;
 override PATCHES: bool;
@@ -78,10 +80,13 @@ fn on_cloth() -> bool {
 // vector. It, r and zq are solver vectors, read and written through
 // `vectors_at`, `vectors_set`, ... (gpu::shaders::SOLVER_VECTORS).
 @group(1) @binding(3) var<storage, read_write> vectors: array<VectorEntry>;
-// The PCG residual, level 0's right-hand side.
-@group(1) @binding(4) var<storage, read> r: array<VectorEntry>;
-// z = P⁻¹ r, the V-cycle's result (and q, which it leaves alone).
+// The PCG residual, level 0's right-hand side (which `solve` updates).
+@group(1) @binding(4) var<storage, read_write> r: array<VectorEntry>;
+// z = P⁻¹ r, the V-cycle's result (and q, which it leaves alone; `solve`
+// keeps p and its correction e after them).
 @group(1) @binding(5) var<storage, read_write> zq: array<VectorEntry>;
+// The PCG scalars `solve` starts from and leaves.
+@group(1) @binding(7) var<storage, read_write> scalars: Scalars;
 
 fn nodes(g: Grid) -> u32 {
     return g.nx * g.ny;
@@ -480,14 +485,18 @@ fn down_at(I: u32) {
 
 var<workgroup> sweep: array<vec4<f32>, COARSEST_NODES>;
 
-// The levels from `bound_hop.fine` down, in one workgroup: each one's
-// residual and restriction, the coarsest level's sweeps, then each one's
-// guess and correction back up; the per-level kernels' work, node by node.
-// It starts below the cloth (level 0 leaves PCG's partial rᵀz, one per
-// workgroup of the cloth's dispatches).
+// The levels from `bound_hop.fine` down, in one workgroup. It starts
+// below the cloth (level 0 leaves PCG's partial rᵀz, one per workgroup of
+// the cloth's dispatches).
 @compute @workgroup_size(WORKGROUP)
 fn tail(@builtin(local_invocation_index) lid: u32) {
-    let first = bound_hop.fine.level;
+    cycle(lid, bound_hop.fine.level);
+}
+
+// The V-cycle from level `first` down, by one workgroup: each level's
+// residual and restriction, the coarsest level's sweeps, then each one's
+// guess and correction back up; the per-level kernels' work, node by node.
+fn cycle(lid: u32, first: u32) {
     let coarsest = arrayLength(&hop_list) - 1u;
     for (var l = first; l < coarsest; l++) {
         hop = hop_list[l];
@@ -521,6 +530,107 @@ fn tail(@builtin(local_invocation_index) lid: u32) {
             storageBarrier();
         }
     }
+}
+
+// The whole solve in one workgroup (issue 67's short step), for a cloth
+// small enough that one workgroup's passes over it cost less than a chain
+// of dispatches per iteration (`gpu::buffers::solved_whole`): PCG's
+// iterations as pcg.wgsl's kernels take them (`spmv`, `advance`, the
+// V-cycle, `next`; CPU twin cpu/pcg.rs), one after another with a barrier
+// where those take a dispatch, and the V-cycle `cycle` from the cloth. It
+// solves for the correction e = x' − x from r = S (b − A x) and the
+// starting |S b|², rᵀr and threshold, which `init` and `init_scalars`
+// leave, and leaves e for pcg's `correct` and its scalars for `finish`; it
+// stops at convergence or `params.cg_max_iters`, so the step records one
+// dispatch whatever the iterations. zq holds z, q, p and e, n each. It
+// binds 8 storage buffers, WebGPU's default; cloth–cloth couplings would
+// take two more, so a scene with them keeps the chain.
+@compute @workgroup_size(WORKGROUP)
+fn solve(lane: Lane) {
+    let lid = lane.index;
+    let n = params.n_vertices;
+    // The scalars as one value for the whole workgroup, which it branches on.
+    if lid == 0u {
+        solve_start = scalars;
+    }
+    var s = workgroupUniformLoad(&solve_start);
+    for (var i = lid; i < n; i += WORKGROUP) {
+        zq_set(3u * n + i, vec3<f32>(0.0));
+    }
+    // The starting δ, and whether the solve goes on, are the V-cycle's, as
+    // in the chain, whatever `init`'s Jacobi rᵀz told `init_scalars`.
+    var delta = precondition(lane);
+    s.delta = delta;
+    s.done = u32(!going_on(s.rr, delta, s.threshold));
+    s.breakdown = u32(stalled(s.rr, delta, s.threshold));
+    var beta = 0.0;
+    while s.done == 0u && s.iterations < params.cg_max_iters {
+        // p = z + β p, q = S A p and pᵀq.
+        // The first p is z alone, whatever the last solve left in p.
+        for (var i = lid; i < n; i += WORKGROUP) {
+            zq_set(2u * n + i, select(zq_at(i) + beta * zq_at(2u * n + i), zq_at(i), beta == 0.0));
+        }
+        storageBarrier();
+        var pq = 0.0;
+        for (var i = lid; i < n; i += WORKGROUP) {
+            let qi = cloth_row(i, 2u * n);
+            zq_set(n + i, qi);
+            pq += dot(zq_at(2u * n + i), qi);
+        }
+        pq = workgroup_sum(lane, pq);
+        if !usable(pq) {
+            s.breakdown = 1u;
+            s.done = 1u;
+            break;
+        }
+        // e += α p, r −= α q and rᵀr.
+        let alpha = s.delta / pq;
+        var rr = 0.0;
+        for (var i = lid; i < n; i += WORKGROUP) {
+            zq_set(3u * n + i, zq_at(3u * n + i) + alpha * zq_at(2u * n + i));
+            let ri = r_at(i) - alpha * zq_at(n + i);
+            r_set(i, ri);
+            rr += dot(ri, ri);
+        }
+        rr = workgroup_sum(lane, rr);
+        storageBarrier();
+        delta = precondition(lane);
+        s.iterations += 1u;
+        s.rr = rr;
+        beta = delta / s.delta;
+        s.delta = delta;
+        s.done = u32(!going_on(rr, delta, s.threshold));
+        s.breakdown = u32(stalled(rr, delta, s.threshold));
+    }
+    if lid == 0u {
+        scalars = s;
+    }
+}
+
+// The starting scalars `solve` reads, made uniform across its workgroup.
+var<workgroup> solve_start: Scalars;
+
+// z = P⁻¹ r by the V-cycle from the cloth, returning rᵀz.
+fn precondition(lane: Lane) -> f32 {
+    cycle(lane.index, 0u);
+    var rz = 0.0;
+    for (var i = lane.index; i < params.n_vertices; i += WORKGROUP) {
+        rz += dot(r_at(i), zq_at(i));
+    }
+    return workgroup_sum(lane, rz);
+}
+
+// Row i of S A times zq's vector from `at` (0 at a pinned vertex).
+fn cloth_row(i: u32, at: u32) -> vec3<f32> {
+    if is_pinned(i) {
+        return vec3<f32>(0.0);
+    }
+    var acc = sym_mul(sym_unpack(matrix_at(i)), zq_at(at + i));
+    for (var k = adjacency_begin(i); k < adjacency_begin(i + 1u); k++) {
+        acc += sym_mul(sym_unpack(matrix_at(params.n_vertices + adjacent_spring(k))),
+                       zq_at(at + adjacent_vertex(k)));
+    }
+    return acc;
 }
 
 // Level l's four patch sweeps in the tail's workgroup (`hop` is level l's),

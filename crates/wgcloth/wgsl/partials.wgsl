@@ -1,6 +1,40 @@
-// The PCG solve's per-workgroup partial sums, one segment per quantity,
-// each reduced by the next dispatch (shared by pcg.wgsl and
-// multigrid.wgsl, whose last up-leg kernel leaves the partial rᵀz).
+// The PCG solve's scalars, the tests on them, and its per-workgroup
+// partial sums, one segment per quantity, each reduced by the next
+// dispatch (shared by pcg.wgsl and multigrid.wgsl, whose last up-leg
+// kernel leaves the partial rᵀz, and whose `solve` runs the whole solve).
+
+struct Scalars {
+    delta: f32,
+    bb: f32,
+    threshold: f32,
+    iterations: u32,
+    done: u32,
+    breakdown: u32,
+    rr: f32,
+    pad: u32,
+    // `next`'s [workgroups, 1, 1]: the cloth's while the solve goes on, one
+    // (to carry the scalars) once it is over.
+    next_groups: array<u32, 3>,
+}
+
+// Whether the solve goes on from residual rᵀr = rr and δ = rᵀz.
+fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
+    return rr > threshold && delta > 0.0;
+}
+
+// A non-finite scalar, or rᵀz ≤ 0 above the goal (a preconditioner that is
+// not positive definite): a breakdown, never convergence.
+fn stalled(rr: f32, delta: f32, threshold: f32) -> bool {
+    return !(delta == delta && rr == rr) || (rr > threshold && !(delta > 0.0));
+}
+
+// pᵀq > 0 and finite (as the CPU twin asks); anything else is a breakdown.
+// The bound is f32's largest finite value written exactly: browsers' WGSL
+// compilers (Tint) read the decimal 3.4028235e38 as just above it, and
+// refuse it.
+fn usable(pq: f32) -> bool {
+    return pq > 0.0 && pq <= 0x1.fffffep+127f;
+}
 
 @group(1) @binding(41) var<storage, read_write> partials: array<f32>;
 

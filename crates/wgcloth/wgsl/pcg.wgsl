@@ -26,20 +26,9 @@
 // sizes too made its iterations 2.5 to 5 times as long.
 // For the same reason every way an iteration ends writes its scalars in
 // one store, and a stop's sizes are zeroed one per invocation, not in a loop.
-
-struct Scalars {
-    delta: f32,
-    bb: f32,
-    threshold: f32,
-    iterations: u32,
-    done: u32,
-    breakdown: u32,
-    rr: f32,
-    pad: u32,
-    // `next`'s [workgroups, 1, 1]: the cloth's while the solve goes on, one
-    // (to carry the scalars) once it is over.
-    next_groups: array<u32, 3>,
-}
+// A small cloth preconditioned by multigrid skips the iterations: multigrid's
+// `solve` runs them all in one workgroup after `init_scalars`, and
+// `correct` adds the correction it leaves to x before `finish`.
 
 // A scalars buffer whole.
 struct ScalarsAndSizes {
@@ -57,7 +46,8 @@ struct ScalarsAndSizes {
 @group(1) @binding(2) var<storage, read> b: array<VectorEntry>;
 @group(1) @binding(3) var<storage, read_write> x: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> r: array<VectorEntry>;
-// z = P⁻¹ r, then q = S A p.
+// z = P⁻¹ r, then q = S A p (where multigrid's `solve` runs the whole
+// solve, then p and the correction e too).
 @group(1) @binding(5) var<storage, read_write> zq: array<VectorEntry>;
 // This iteration's direction p, and the next one's.
 @group(1) @binding(6) var<storage, read_write> p: array<VectorEntry>;
@@ -148,11 +138,6 @@ fn init(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     }
 }
 
-// Whether the solve goes on from residual rᵀr = rr and δ = rᵀz.
-fn going_on(rr: f32, delta: f32, threshold: f32) -> bool {
-    return rr > threshold && delta > 0.0;
-}
-
 // Once the solve is over, later iterations dispatch no workgroups: level l's
 // sizes zeroed by invocation l of the first workgroup, one store each where
 // a loop in the leader cost lavapipe 48 masked stores in every 8 invocations
@@ -162,12 +147,6 @@ fn stop_levels(lane: Lane, wg: u32) {
         scalars_next.groups[3u * lane.index] = 0u;
         scalars_next.patch_groups[3u * lane.index] = 0u;
     }
-}
-
-// A non-finite scalar, or rᵀz ≤ 0 above the goal (a preconditioner that is
-// not positive definite): a breakdown, never convergence.
-fn stalled(rr: f32, delta: f32, threshold: f32) -> bool {
-    return !(delta == delta && rr == rr) || (rr > threshold && !(delta > 0.0));
 }
 
 // The starting scalars (one workgroup), and every level's dispatch size
@@ -228,14 +207,6 @@ fn spmv(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
     if lane.index == 0u {
         store_partial(pq_segment(scalars_in.iterations), wg.x, s);
     }
-}
-
-// pᵀq > 0 and finite (as the CPU twin asks); anything else is a breakdown.
-// The bound is f32's largest finite value written exactly: browsers' WGSL
-// compilers (Tint) read the decimal 3.4028235e38 as just above it, and
-// refuse it.
-fn usable(pq: f32) -> bool {
-    return pq > 0.0 && pq <= 0x1.fffffep+127f;
 }
 
 // α = δ / pᵀq, or 0 at a breakdown (which `next` or `conclude` records).
@@ -442,6 +413,16 @@ fn couple(@builtin(global_invocation_id) id: vec3<u32>, lane: Lane,
 @compute @workgroup_size(WORKGROUP)
 fn conclude(lane: Lane) {
     _ = end_iteration(lane, 0u);
+}
+
+// After multigrid's `solve`: x += e, the correction it left in zq's
+// fourth vector.
+@compute @workgroup_size(WORKGROUP)
+fn correct(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i < params.n_vertices {
+        x[i] = vec4<f32>(x[i].xyz + zq_at(3u * params.n_vertices + i), x[i].w);
+    }
 }
 
 // Folds the solve's outcome into the run statistics (one invocation).

@@ -92,6 +92,7 @@ pub(super) fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Res
         gpu_split_arrays: Vec::new(),
         gpu_subgroup_sums: None,
         gpu_vectors: None,
+        gpu_solved_whole: None,
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration: tally.max_penetration,
         finite: sim.is_finite(),

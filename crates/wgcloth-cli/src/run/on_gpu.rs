@@ -197,6 +197,7 @@ pub(super) fn run_gpu(
             .collect(),
         gpu_subgroup_sums: Some(kernels.subgroups()),
         gpu_vectors: Some(sim.vector_layout().name().to_string()),
+        gpu_solved_whole: Some(sim.solved_whole()),
         peak_resident_bytes: peak_resident_bytes(),
         max_penetration: f32::from_bits(last.max_penetration_bits),
         finite,

@@ -53,6 +53,9 @@ pub struct Report {
     /// How the solver's vectors lay in GPU memory, `packed` or `vec4`
     /// (`Kernels::vectors`; GPU only).
     pub gpu_vectors: Option<String>,
+    /// Whether each solve ran whole, PCG and its V-cycle in one dispatch
+    /// (`GpuSim::solved_whole`, `solver.whole_solve_nodes`; GPU only).
+    pub gpu_solved_whole: Option<bool>,
     /// The process's peak resident memory, bytes (Linux `VmHWM`; absent
     /// elsewhere): on the CPU path the simulation's memory plus the
     /// program's own.
@@ -369,6 +372,10 @@ impl Report {
                     )
                 })
                 .unwrap_or_default();
+        let whole = match self.gpu_solved_whole {
+            Some(true) => ", each solve whole in one dispatch",
+            _ => "",
+        };
         format!(
             "wgcloth run: scene {:?}, model {}, grid {}x{}, {} steps of {} s{}\n\
              backend      {} — {}{}{}\n\
@@ -376,7 +383,7 @@ impl Report {
              ms/step      {:.3} (median{dispatches}), {:.3} (mean)\n\
              {memory}\
              stages (ms)  {}\n\
-             pcg          {} preconditioner, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} solved again after the iteration budget cut them, {} breakdowns\n\
+             pcg          {} preconditioner{whole}, {:.1} iterations/step (most {}), relative residual median {:.2e}, worst {:.2e}, {} steps above {RESIDUAL_GOAL:.0e}, {} solved again after the iteration budget cut them, {} breakdowns\n\
              contacts     {:.1} per step\n\
              penetration  {:.4} m deepest (thickness not counted)\n\
              state        {} (final energy {:.4} J)",

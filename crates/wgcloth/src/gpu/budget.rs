@@ -106,7 +106,9 @@ impl CgBudget {
 /// [`GpuSim::step`] does, with each step's PCG iterations recorded by a
 /// [`CgBudget`] instead of the whole cap, and a step the budget cut short
 /// of the tolerance solved again from its start with the cap, as
-/// `wgcloth run` does without waiting. Iterations after convergence
+/// `wgcloth run` does without waiting (where each solve runs whole,
+/// `GpuSim::solved_whole`, the budget is the cap and nothing is cut).
+/// Iterations after convergence
 /// change nothing, so each step ends bit for bit where one recording the
 /// cap ends, for the dispatches it records. `wgcloth validate`, the
 /// viewer and the tests step this way. It keeps the start of the step it runs on the
@@ -145,15 +147,13 @@ impl SolvedSteps {
 
     /// Runs one step to the tolerance and waits for it: its [`StepState`].
     pub fn step(&mut self, sim: &GpuSim) -> Result<StepState> {
-        let mut budget = self.budget.next();
-        let mut state = self.run(sim, budget, true)?;
+        let (mut state, mut budget) = self.run(sim, self.budget.next(), true)?;
         if self
             .budget
             .cut(state.last_iterations, budget, state.last_residual)
         {
             self.resolved += 1;
-            budget = self.budget.cap();
-            state = self.run(sim, budget, false)?;
+            (state, budget) = self.run(sim, self.budget.cap(), false)?;
         }
         // The repeat, not the cut step, counts towards the next budgets.
         self.budget
@@ -162,8 +162,9 @@ impl SolvedSteps {
     }
 
     /// Steps recording `budget` iterations, from the state `sim` holds
-    /// (kept first) or from the kept start.
-    fn run(&self, sim: &GpuSim, budget: u32, keep: bool) -> Result<StepState> {
+    /// (kept first) or from the kept start: its state, and the budget it
+    /// recorded (the cap where the solve runs whole).
+    fn run(&self, sim: &GpuSim, budget: u32, keep: bool) -> Result<(StepState, u32)> {
         let mut encoder = sim.device().create_command_encoder(&Default::default());
         for (live, kept) in sim.step_start().into_iter().zip(&self.start) {
             let (from, to) = if keep { (live, kept) } else { (kept, live) };
@@ -172,7 +173,7 @@ impl SolvedSteps {
         sim.set_cg_budget(budget);
         sim.encode_step(&mut encoder);
         sim.queue().submit([encoder.finish()]);
-        sim.read_state()
+        Ok((sim.read_state()?, sim.cg_budget()))
     }
 
     /// Steps the budget cut and [`Self::step`] solved again.

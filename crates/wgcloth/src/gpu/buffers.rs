@@ -275,6 +275,15 @@ pub(crate) fn multigrid_grids(scene: &Scene) -> Vec<Grid> {
     multigrid_layout(scene).0
 }
 
+/// Whether each solve runs whole in one workgroup (`multigrid::solve`):
+/// a multigrid solve with coarse levels, no cloth–cloth couplings, and at
+/// most `solver.whole_solve_nodes` vertices.
+pub(crate) fn solved_whole(scene: &Scene) -> bool {
+    multigrid_grids(scene).len() > 1
+        && !SelfContactStages::of(&scene.config.self_contact).forces
+        && scene.cloth.vertex_count() as u64 <= scene.config.solver.whole_solve_nodes as u64
+}
+
 /// [`multigrid_grids`], and the operators' elements (blocks) they use: up to
 /// the last patch inverse, or the last stencil block; 1 with no levels.
 fn multigrid_layout(scene: &Scene) -> (Vec<Grid>, u64) {
@@ -374,8 +383,11 @@ pub(crate) struct Sizes {
     pub(crate) per_vertex: u64,
     /// One entry per cloth vertex of a solver vector
     /// (`gpu::shaders::SOLVER_VECTORS`, as `VectorLayout` lays it out): b,
-    /// r, each p, P⁻¹ (and twice this for z and q together, `zq`).
+    /// r, each p, P⁻¹.
     pub(crate) solver_vector: u64,
+    /// z and q together; and p and the correction e where the solve runs
+    /// whole ([`solved_whole`]).
+    pub(crate) zq: u64,
     pub(crate) topology: u64,
     pub(crate) contacts: u64,
     pub(crate) responses: u64,
@@ -434,6 +446,7 @@ impl Sizes {
         Sizes {
             per_vertex: size(n, 16),
             solver_vector: n * vectors.bytes(),
+            zq: if solved_whole(scene) { 4 } else { 2 } * n * vectors.bytes(),
             topology: size(topology_words as u64, 4),
             contacts: size(slots, size_of::<Contact>()),
             responses: size(slots, size_of::<Response>()),
@@ -475,7 +488,7 @@ impl Sizes {
         vec![
             ("per-vertex vectors", self.per_vertex),
             ("solver vectors", self.solver_vector),
-            ("PCG z and q", 2 * self.solver_vector),
+            ("PCG z and q", self.zq),
             ("contacts", self.contacts),
             ("responses", self.responses),
             ("triangle contact lists", self.triangle_contacts),
@@ -627,7 +640,7 @@ impl Buffers {
             vector_layout: vectors,
             b: zeroed("b", sizes.solver_vector),
             r: zeroed("r", sizes.solver_vector),
-            zq: zeroed("z and q", 2 * sizes.solver_vector),
+            zq: zeroed("z and q", sizes.zq),
             p: [
                 zeroed("p 0", sizes.solver_vector),
                 zeroed("p 1", sizes.solver_vector),

@@ -95,7 +95,7 @@ pub enum Levels {
     Cloth,
     /// Coarse levels.
     Coarse,
-    /// Each hop's own: `tail` when it starts at the cloth.
+    /// Each hop's own: `solve`, whose V-cycle starts at the cloth.
     Any,
 }
 

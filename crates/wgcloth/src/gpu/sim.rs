@@ -12,7 +12,9 @@ use glam::Vec3;
 
 use crate::cpu::State;
 use crate::error::{Error, Result};
-use crate::gpu::buffers::{Buffers, Sizes, check_limits, fit_pair_list, params_for, vec4s};
+use crate::gpu::buffers::{
+    Buffers, Sizes, check_limits, fit_pair_list, params_for, solved_whole, vec4s,
+};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
@@ -44,6 +46,8 @@ pub struct GpuSim {
     timer: Option<Timer>,
     /// PCG iterations a step records ([`GpuSim::set_cg_budget`]).
     cg_budget: AtomicU32,
+    /// Whether each solve runs whole in one dispatch (`solver.whole_solve_nodes`).
+    solved_whole: bool,
 }
 
 impl GpuSim {
@@ -160,6 +164,7 @@ impl GpuSim {
             queue: queue.clone(),
             stages: Stages::new(kernels, device, &buffers, scene, network),
             cg_budget: AtomicU32::new(params.cg_max_iters),
+            solved_whole: solved_whole(scene),
             params,
             buffers,
             timer,
@@ -306,10 +311,23 @@ impl GpuSim {
     }
 
     /// Records at most `iterations` PCG iterations (at least 1, at most
-    /// `solver.cg_iters`) in the steps encoded from now on ([`Self::cg_budget`]).
+    /// `solver.cg_iters`) in the steps encoded from now on ([`Self::cg_budget`]);
+    /// where each solve runs whole ([`Self::solved_whole`]) the budget stays
+    /// the cap.
     pub fn set_cg_budget(&self, iterations: u32) {
-        let budget = iterations.clamp(1, self.params.cg_max_iters.max(1));
+        let cap = self.params.cg_max_iters.max(1);
+        let budget = match self.solved_whole {
+            true => cap,
+            false => iterations.clamp(1, cap),
+        };
         self.cg_budget.store(budget, Ordering::Relaxed);
+    }
+
+    /// Whether each solve runs whole, PCG and its V-cycle in one dispatch
+    /// of one workgroup (`solver.whole_solve_nodes`), so that a step
+    /// records the same dispatches whatever its iterations.
+    pub fn solved_whole(&self) -> bool {
+        self.solved_whole
     }
 
     /// Cloth triangles as `u32` indices into [`Self::positions`]: an index

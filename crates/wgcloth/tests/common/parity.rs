@@ -73,6 +73,25 @@ pub fn hang_solved(
     Scene::new(&c).unwrap()
 }
 
+/// Each of [`PRECONDITIONERS`] with each way the GPU runs its solve: as a
+/// chain of dispatches (false), and with multigrid also whole in one
+/// workgroup (true, `solver.whole_solve_nodes`).
+pub fn gpu_solves() -> impl Iterator<Item = ((Preconditioner, Smoother), bool)> {
+    PRECONDITIONERS.into_iter().flat_map(|solve| {
+        let ways: &[bool] = match solve.0 {
+            Preconditioner::Jacobi => &[false],
+            Preconditioner::Multigrid => &[false, true],
+        };
+        ways.iter().map(move |&whole| (solve, whole))
+    })
+}
+
+/// `scene` with its GPU solve run whole, or as a chain of dispatches.
+pub fn solved_whole(mut scene: Scene, whole: bool) -> Scene {
+    scene.config.solver.whole_solve_nodes = if whole { u32::MAX } else { 0 };
+    scene
+}
+
 /// A CPU simulator advanced `steps` steps, so springs are stretched and moving.
 pub fn cpu_after(scene: &Scene, steps: usize) -> CpuSim {
     let mut cpu = CpuSim::new(scene.clone());

@@ -2,7 +2,9 @@
 //! cpu/multigrid.rs): the coarse operators (and the patch smoother's
 //! inverses) rebuilt once a step, then one V-cycle per PCG iteration, each
 //! dispatch bound to its pair of levels down to the tail: the levels of at
-//! most [`tail_nodes`] nodes, in one dispatch of one workgroup.
+//! most [`tail_nodes`] nodes, in one dispatch of one workgroup. A small
+//! cloth's solve runs whole instead, PCG and V-cycle in one workgroup
+//! (`solve`, where `gpu::buffers::solved_whole`).
 
 use crate::gpu::buffers::Buffers;
 use crate::gpu::constants::WORKGROUP;
@@ -42,6 +44,8 @@ pub(crate) struct Multigrid {
     up: Vec<Bound>,
     /// With the patch smoother.
     patches: Option<Patches>,
+    /// The whole solve, where the scene's is ([`Precondition::whole`]).
+    solve: Option<Bound>,
 }
 
 impl Multigrid {
@@ -51,6 +55,7 @@ impl Multigrid {
         device: &wgpu::Device,
         b: &Buffers,
         grids: &[Grid],
+        whole: bool,
     ) -> Option<Multigrid> {
         let last = grids.len().checked_sub(1).filter(|&l| l > 0)?;
         let buffers = |l: usize, colour: usize| {
@@ -61,6 +66,8 @@ impl Multigrid {
                 ("r", &b.r),
                 ("zq", &b.zq),
                 ("partials", &b.partials),
+                // `solve` reads the scalars `init_scalars` leaves first.
+                ("scalars", &b.scalars[0]),
             ]
         };
         let parted = [&b.topology, &b.matrix, &b.operators];
@@ -104,20 +111,13 @@ impl Multigrid {
             galerkin: hops(Entry::MultigridGalerkin, last),
             residual: hops(Entry::MultigridResidual, tail),
             down: hops(Entry::MultigridDown, tail),
-            // The tail walks every level from its first.
-            tail: bind_as(
-                Entry::MultigridTail,
-                tail,
-                0,
-                if tail == 0 {
-                    Levels::Any
-                } else {
-                    Levels::Coarse
-                },
-            ),
+            // The tail walks the coarse levels from its first.
+            tail: bind_as(Entry::MultigridTail, tail, 0, Levels::Coarse),
             guess: hops(Entry::MultigridGuessUp, tail),
             up: hops(Entry::MultigridUp, ups),
             patches,
+            // Its V-cycle starts at the cloth.
+            solve: whole.then(|| bind_as(Entry::MultigridSolve, 0, 0, Levels::Any)),
             grids: grids.to_vec(),
         })
     }
@@ -136,6 +136,10 @@ impl Precondition for Multigrid {
                 inverses.dispatch(pass, px * py, WORKGROUP);
             }
         }
+    }
+
+    fn whole(&self) -> Option<&Bound> {
+        self.solve.as_ref()
     }
 
     /// One V-cycle on the PCG residual, leaving z and partial rᵀz: sized

@@ -5,9 +5,12 @@
 //! dispatches with Jacobi, and the V-cycle's besides with multigrid; each
 //! iteration's are sized by the GPU (`next`
 //! to one workgroup, which carries the scalars, after convergence), so the
-//! iterations recorded after convergence do almost no work.
+//! iterations recorded after convergence do almost no work. Where the
+//! preconditioner runs the whole solve in one dispatch
+//! ([`Precondition::whole`]), a solve is `init`, `init_scalars`, that
+//! dispatch, `correct` and `finish`, whatever its iterations.
 
-use crate::gpu::buffers::{Buffers, multigrid_grids};
+use crate::gpu::buffers::{Buffers, multigrid_grids, solved_whole};
 use crate::gpu::constants::WORKGROUP;
 use crate::gpu::kernels::{Bound, Entry, Kernels};
 use crate::gpu::layout::ScalarsAndSizes;
@@ -43,6 +46,8 @@ pub(crate) struct Pcg {
     sides: [Side; 2],
     /// The scalars, which hold each iteration's dispatch sizes.
     scalars: [wgpu::Buffer; 2],
+    /// x += e after a whole solve.
+    correct: Bound,
     preconditioner: Box<dyn Precondition>,
 }
 
@@ -87,8 +92,17 @@ impl Pcg {
         Pcg {
             sides: [side(0), side(1)],
             scalars: b.scalars.clone(),
+            correct: kernels
+                .kernel(Entry::PcgCorrect)
+                .bind(device, &[("x", &b.v), ("zq", &b.zq)]),
             // Multigrid's levels, or none where Jacobi preconditions.
-            preconditioner: match Multigrid::new(kernels, device, b, &multigrid_grids(scene)) {
+            preconditioner: match Multigrid::new(
+                kernels,
+                device,
+                b,
+                &multigrid_grids(scene),
+                solved_whole(scene),
+            ) {
                 Some(multigrid) => Box::new(multigrid),
                 None => Box::new(Jacobi),
             },
@@ -107,6 +121,16 @@ impl Record for Pcg {
         let iters = r.cg_iterations.min(p.cg_max_iters) as usize;
         let pc = &self.preconditioner;
         pc.encode_setup(pass);
+        if let Some(solve) = pc.whole() {
+            // `init_scalars` (side 1) leaves scalars[0], which `solve`
+            // carries to the end and `finish` (side 0) reads.
+            self.sides[0].init.dispatch(pass, n, WORKGROUP);
+            self.sides[1].init_scalars.dispatch(pass, 1, 1);
+            solve.dispatch(pass, 1, 1);
+            self.correct.dispatch(pass, n, WORKGROUP);
+            self.sides[0].finish.dispatch(pass, 1, 1);
+            return;
+        }
         let coupled = p.cloth_thickness > 0.0;
         self.sides[0].init.dispatch(pass, n, WORKGROUP);
         if coupled {

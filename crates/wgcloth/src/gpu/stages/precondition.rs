@@ -1,6 +1,7 @@
 //! Stage "pcg"'s preconditioners on the GPU (CPU twin:
 //! `cpu::precondition`): what the solve asks of one, and Jacobi's.
 
+use crate::gpu::kernels::Bound;
 use crate::gpu::pass::Pass;
 
 /// A preconditioner P ≈ A of the GPU's solve, twin of
@@ -16,6 +17,11 @@ pub(crate) trait Precondition {
     /// `update` applies in its x and r pass, so that nothing else does.
     fn fused(&self) -> bool {
         false
+    }
+    /// The whole solve in one dispatch, where P runs one: PCG and P
+    /// looped in one workgroup, from `init`'s residual and scalars.
+    fn whole(&self) -> Option<&Bound> {
+        None
     }
 }
 
