@@ -8,6 +8,7 @@
 //! solve it again ([`InFlight::rewind`]) or to name what failed.
 
 use std::collections::VecDeque;
+use std::time::Instant;
 
 use wgcloth::cpu::State;
 use wgcloth::error::{Error, Result};
@@ -43,6 +44,7 @@ struct Pending {
     step: u64,
     budget: u32,
     dispatches: u32,
+    record_ms: f64,
     slot: usize,
     submission: wgpu::SubmissionIndex,
 }
@@ -56,6 +58,8 @@ pub struct Finished {
     pub budget: u32,
     /// The compute dispatches the step recorded.
     pub dispatches: u32,
+    /// The host's time to record the step (`GpuSim::encode_step`), ms.
+    pub record_ms: f64,
     /// The clock and statistics right after the step.
     pub state: StepState,
     /// Each pass's time, empty without timestamp queries.
@@ -123,7 +127,9 @@ impl InFlight {
         for (from, to) in sim.step_start().into_iter().zip(slot.kept()) {
             encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
         }
+        let recording = Instant::now();
         let dispatches = sim.encode_step(&mut encoder);
+        let record_ms = recording.elapsed().as_secs_f64() * 1e3;
         encoder.copy_buffer_to_buffer(stats, 0, staging, 0, stats.size());
         if let Some(t) = sim.timestamps() {
             encoder.copy_buffer_to_buffer(t, 0, staging, TICKS_AT, t.size());
@@ -135,6 +141,7 @@ impl InFlight {
             step,
             budget: sim.cg_budget(),
             dispatches,
+            record_ms,
             slot: k,
             submission,
         });
@@ -189,6 +196,7 @@ impl InFlight {
             step: oldest.step,
             budget: oldest.budget,
             dispatches: oldest.dispatches,
+            record_ms: oldest.record_ms,
             state,
             stage_ms: match ticks.is_empty() {
                 true => Vec::new(),

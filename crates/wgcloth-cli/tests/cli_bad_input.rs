@@ -590,6 +590,50 @@ fn gpu_runs_say_how_the_solver_sums_and_lays_out_its_vectors() {
     }
 }
 
+/// A GPU run says whether its solves ran whole in one dispatch
+/// (`gpu_solved_whole`, the pcg line): by default on a small cloth, not
+/// with `--whole-solve-nodes 0`, whose chain records more dispatches a
+/// step; and how long the host took to record a step.
+#[test]
+fn gpu_runs_say_whether_the_solve_ran_whole() {
+    if let Err(e) = wgcloth::gpu::GpuContext::pick_adapter() {
+        if std::env::var("WGCLOTH_NO_GPU_TESTS").is_ok_and(|v| v == "1") {
+            return eprintln!("skipping GPU test: {e}");
+        }
+        panic!("the GPU tests need an adapter (WGCLOTH_NO_GPU_TESTS=1 skips them): {e}");
+    }
+    let dir = TempDir::new("whole");
+    let mut dispatches = Vec::new();
+    for (flags, whole) in [(&[][..], true), (&["--whole-solve-nodes", "0"][..], false)] {
+        let report = dir.path(&format!("report_{whole}.json"));
+        let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
+        // Multigrid has coarse levels from 8².
+        args.extend(["--grid", "8", "--steps", "3"]);
+        args.extend(flags);
+        let out = wgcloth(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(
+            json["gpu_solved_whole"],
+            serde_json::json!(whole),
+            "{flags:?}"
+        );
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            stdout.contains("each solve whole in one dispatch"),
+            whole,
+            "{flags:?}: {stdout}"
+        );
+        assert!(json["record_ms_per_step"].as_f64().unwrap() > 0.0, "{json}");
+        dispatches.push(json["dispatches_per_step"].as_u64().unwrap());
+    }
+    assert!(
+        dispatches[0] < dispatches[1],
+        "whole and chain: {dispatches:?}"
+    );
+}
+
 #[test]
 fn tiny_run_with_config_and_mesh_succeeds() {
     let dir = TempDir::new("config_and_mesh");

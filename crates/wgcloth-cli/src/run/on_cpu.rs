@@ -87,6 +87,7 @@ pub(super) fn run_cpu(mut sim: CpuSim, steps: Steps, obs: &mut Observers) -> Res
         ms_per_step_mean,
         stage_ms,
         dispatches_per_step: None,
+        record_ms_per_step: None,
         gpu_state_bytes: None,
         gpu_bytes_per_vertex: None,
         gpu_split_arrays: Vec::new(),

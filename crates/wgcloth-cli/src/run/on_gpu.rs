@@ -53,7 +53,7 @@ pub(super) fn run_gpu(
     let mut flight = InFlight::new(&ctx.device, &sim);
     let (mut last, mut breakdowns, mut submitted) = (StepState::default(), 0, 0);
     let (mut cg_iterations, mut contacts, mut resolved) = (0u64, 0u64, 0u64);
-    let mut dispatches = Series::default();
+    let (mut dispatches, mut record_ms) = (Series::default(), Series::default());
     // Iterations the next step records instead of the budget's: the whole
     // cap for a step solved again, or the first step's (`first_budget`).
     let mut forced = steps.first_budget;
@@ -99,6 +99,7 @@ pub(super) fn run_gpu(
                     f.stage_ms.iter().copied(),
                 );
                 dispatches.push(f.dispatches as f64);
+                record_ms.push(f.record_ms);
             }
             since = now;
             // The step's iterations and contacts, summed over its
@@ -188,6 +189,7 @@ pub(super) fn run_gpu(
         stage_ms,
         dispatches_per_step: (!dispatches.values.is_empty())
             .then(|| median(&mut dispatches.values).round() as u32),
+        record_ms_per_step: (!record_ms.values.is_empty()).then(|| median(&mut record_ms.values)),
         gpu_state_bytes: Some(sim.state_bytes()),
         gpu_bytes_per_vertex: Some(sim.state_bytes() as f64 / scene.cloth.vertex_count() as f64),
         gpu_split_arrays: sim

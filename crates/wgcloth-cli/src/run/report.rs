@@ -40,6 +40,9 @@ pub struct Report {
     /// (GPU only, and none if no step was timed; the iteration budget
     /// varies them from step to step).
     pub dispatches_per_step: Option<u32>,
+    /// The host's time to record a step (`GpuSim::encode_step`, CPU side),
+    /// ms, the median over the timed steps (GPU only).
+    pub record_ms_per_step: Option<f64>,
     /// GPU memory of the scene's state, bytes (`GpuSim::state_bytes`; GPU
     /// only), and per cloth vertex.
     pub gpu_state_bytes: Option<u64>,
@@ -344,7 +347,11 @@ impl Report {
         let dispatches = self
             .dispatches_per_step
             .map(|d| format!(", {d} dispatches/step"))
-            .unwrap_or_default();
+            .unwrap_or_default()
+            + &self
+                .record_ms_per_step
+                .map(|ms| format!(", recorded in {ms:.3} ms"))
+                .unwrap_or_default();
         let memory = match (self.gpu_state_bytes, self.gpu_bytes_per_vertex) {
             (Some(bytes), Some(per_vertex)) => {
                 let split: Vec<String> = self
