@@ -541,6 +541,18 @@ fn tiny_run_writes_report_json() {
     assert_eq!(json["finite"], serde_json::json!(true), "{text}");
 }
 
+/// `wgcloth run --backend gpu FLAGS --report` in `dir` (report `k`),
+/// which must succeed: its report and its standard output.
+fn gpu_run(dir: &TempDir, k: usize, flags: &[&str]) -> (serde_json::Value, String) {
+    let report = dir.path(&format!("report_{k}.json"));
+    let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
+    args.extend(flags);
+    let out = wgcloth(&args);
+    assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
+    let json = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    (json, String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
 /// A GPU run says how its solver sums (the backend line, the report's
 /// `gpu_subgroup_sums`): through subgroups where the adapter has them,
 /// through workgroup memory with `--no-subgroups`; and how it lays out its
@@ -564,14 +576,7 @@ fn gpu_runs_say_how_the_solver_sums_and_lays_out_its_vectors() {
         (&["--vectors", "vec4"], has, "vec4"),
     ];
     for (k, (flags, sums, vectors)) in cases.into_iter().enumerate() {
-        let report = dir.path(&format!("report_{k}.json"));
-        let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
-        args.extend(TINY);
-        args.extend(flags);
-        let out = wgcloth(&args);
-        assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let (json, stdout) = gpu_run(&dir, k, &[TINY, flags].concat());
         assert_eq!(
             json["gpu_subgroup_sums"],
             serde_json::json!(sums),
@@ -582,7 +587,6 @@ fn gpu_runs_say_how_the_solver_sums_and_lays_out_its_vectors() {
             true => "solver sums through subgroups",
             false => "solver sums through workgroup memory",
         };
-        let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(
             stdout.contains(&format!("{how}, vectors {vectors}")),
             "{flags:?}: {stdout}"
@@ -604,22 +608,18 @@ fn gpu_runs_say_whether_the_solve_ran_whole() {
     }
     let dir = TempDir::new("whole");
     let mut dispatches = Vec::new();
-    for (flags, whole) in [(&[][..], true), (&["--whole-solve-nodes", "0"][..], false)] {
-        let report = dir.path(&format!("report_{whole}.json"));
-        let mut args = vec!["run", "--backend", "gpu", "--report", s(&report)];
-        // Multigrid has coarse levels from 8².
-        args.extend(["--grid", "8", "--steps", "3"]);
-        args.extend(flags);
-        let out = wgcloth(&args);
-        assert_eq!(out.status.code(), Some(0), "{}", describe("gpu run", &out));
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    // Multigrid has coarse levels from 8².
+    let small = ["--grid", "8", "--steps", "3"];
+    for (k, (flags, whole)) in [(&[][..], true), (&["--whole-solve-nodes", "0"][..], false)]
+        .into_iter()
+        .enumerate()
+    {
+        let (json, stdout) = gpu_run(&dir, k, &[&small[..], flags].concat());
         assert_eq!(
             json["gpu_solved_whole"],
             serde_json::json!(whole),
             "{flags:?}"
         );
-        let stdout = String::from_utf8_lossy(&out.stdout);
         assert_eq!(
             stdout.contains("each solve whole in one dispatch"),
             whole,
