@@ -13,8 +13,8 @@ use std::sync::Arc;
 use common::sphere;
 use glam::Vec3;
 use parity::{
-    PRECONDITIONERS, cpu_after, full, gpu, gpu_solves, hang, hang_solved, mat_dev, max_dev,
-    max_norm, random_mlp, solved_whole,
+    cpu_after, full, gpu, gpu_solves, hang, hang_solved, mat_dev, max_dev, max_norm, random_mlp,
+    solved_whole,
 };
 use scene_files::edge_on_pleat;
 use wgcloth::bvh::Bvh;
