@@ -476,9 +476,9 @@ pub struct SolverConfig {
     pub smoother: Smoother,
     /// On the GPU, a multigrid solve of a cloth of at most this many
     /// vertices runs whole in one workgroup, one dispatch a solve, rather
-    /// than a chain of dispatches per iteration (the same iterations;
-    /// without self-contact forces, whose couplings take it past WebGPU's
-    /// bindings); 0 never. The CPU is unaffected.
+    /// than a chain of dispatches per iteration (the same algorithm, its
+    /// sums in another order; without self-contact forces, whose couplings
+    /// take it past WebGPU's bindings); 0 never. The CPU is unaffected.
     pub whole_solve_nodes: u32,
     /// m/s².
     pub gravity: [f32; 3],
