@@ -5,11 +5,12 @@
 //! kept, and the CLI reports it in one line, in its report and as an OBJ.
 //! Without an adapter the GPU halves fail unless WGCLOTH_NO_GPU_TESTS=1 opts out.
 
+mod cli;
+
 #[path = "../../wgcloth/tests/common/mod.rs"]
 mod common;
 
 use common::gpu_context as gpu;
-use std::process::Command;
 
 use glam::Vec3;
 use wgcloth::config::{ModelKind, SceneKind};
@@ -241,16 +242,7 @@ fn the_cli_reports_a_divergence_in_one_line_and_keeps_the_last_good_state() {
     let (report, obj) = (dir.join("r.json"), dir.join("good.obj"));
     let config = dir.join("fall.toml");
     std::fs::write(&config, "[solver]\ngravity = [0.0, 0.0, -9.81]\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
-        .args([
-            "run",
-            "--backend",
-            "cpu",
-            "--scene",
-            "hang",
-            "--model",
-            "friction",
-        ])
+    let out = cli::cpu_friction_run("hang")
         .args(["--grid", "8", "--steps", "50", "--max-speed", "0.25"])
         .arg("--config")
         .arg(&config)

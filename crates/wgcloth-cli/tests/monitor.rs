@@ -3,10 +3,10 @@
 //! and, on the GPU, the allocator's bytes; GPU and CPU samples agree.
 //! Without an adapter the GPU half fails unless WGCLOTH_NO_GPU_TESTS=1 opts out.
 
+mod cli;
+
 #[path = "../../wgcloth/tests/common/mod.rs"]
 mod common;
-
-use std::process::Command;
 
 use wgcloth::config::{ModelKind, SceneKind};
 use wgcloth::cpu::CpuSim;
@@ -29,16 +29,7 @@ fn the_cli_writes_a_row_every_k_steps() {
     let dir = std::env::temp_dir().join(format!("wgcloth-monitor-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("m.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
-        .args([
-            "run",
-            "--backend",
-            "cpu",
-            "--scene",
-            "hang",
-            "--model",
-            "friction",
-        ])
+    let out = cli::cpu_friction_run("hang")
         .args([
             "--grid",
             "6",

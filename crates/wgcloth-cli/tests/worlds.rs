@@ -2,22 +2,15 @@
 //! batch ends where the same configuration run alone ends, whichever
 //! sweep format set its values.
 
+mod cli;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// Runs `wgcloth run` with `args` on the CPU path; its `--report` JSON.
 fn report(dir: &Path, name: &str, args: &[&str]) -> serde_json::Value {
     let path = dir.join(format!("{name}.json"));
-    let out = Command::new(env!("CARGO_BIN_EXE_wgcloth"))
-        .args([
-            "run",
-            "--backend",
-            "cpu",
-            "--scene",
-            "sphere",
-            "--model",
-            "friction",
-        ])
+    let out = cli::cpu_friction_run("sphere")
         .args(["--grid", "8", "--steps", "25", "--report"])
         .arg(&path)
         .args(args)

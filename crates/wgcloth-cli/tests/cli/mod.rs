@@ -1,0 +1,20 @@
+//! The `wgcloth` binary as the CLI tests start it.
+
+use std::process::Command;
+
+/// `wgcloth run` on the CPU path with the analytic friction model on
+/// `scene`: the start the runs of several tests share; each adds its own
+/// flags.
+pub fn cpu_friction_run(scene: &str) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_wgcloth"));
+    command.args([
+        "run",
+        "--backend",
+        "cpu",
+        "--scene",
+        scene,
+        "--model",
+        "friction",
+    ]);
+    command
+}
