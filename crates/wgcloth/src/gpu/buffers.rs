@@ -14,15 +14,27 @@ use crate::gpu::constants::{
 };
 use crate::gpu::layout::{
     BvhNode, ClothPair, Contact, Grid, Hop, Params, Response, RigidFrame, ScalarsAndSizes,
-    Sections, StepState, Sym3, VectorLayout,
+    Sections, StepState, Sym3, VectorLayout, WorldParams,
 };
 use crate::gpu::shaders::PARTS;
+use crate::gpu::worlds::MAX_WORLDS;
 use crate::multigrid::{self, NO_PATCHES, PATCH_BLOCKS, PATCH_COLOURS, STORED_STENCIL};
 use crate::nn::weights::NetKind;
 use crate::scene::{Motion, Scene};
 use crate::stage::SelfContactStages;
 
 /// Workgroups covering `n` invocations.
+/// The least common multiple of `a` and `b`.
+fn lcm(a: u64, b: u64) -> u64 {
+    let gcd = |mut a: u64, mut b: u64| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    a / gcd(a, b) * b
+}
+
 pub(crate) fn groups(n: u32) -> u32 {
     n.div_ceil(WORKGROUP)
 }
@@ -115,6 +127,27 @@ pub(crate) struct Buffers {
     /// The renderer's force segments (stage "lines") and their scale.
     pub(crate) lines: wgpu::Buffer,
     pub(crate) line_scale: wgpu::Buffer,
+    /// Worlds the per-world buffers hold, one region each.
+    pub(crate) worlds: u32,
+    /// One world's region of each per-world buffer, in bytes.
+    pub(crate) region: Sizes,
+    /// A batch's own parameters (`gpu::worlds`); `None` for one scene.
+    pub(crate) batch: Option<WorldBuffers>,
+}
+
+/// What a batch of worlds adds to group 0 (`gpu::worlds`).
+pub(crate) struct WorldBuffers {
+    /// Each world's [`WorldParams`], in a uniform of `MAX_WORLDS` of them.
+    pub(crate) params: wgpu::Buffer,
+    /// Each per-world global's region, in its elements.
+    pub(crate) strides: wgpu::Buffer,
+}
+
+/// A batch of worlds, as [`Buffers::new`] lays it out: each world's own
+/// parameters and the size of each per-world global's region.
+pub(crate) struct Batch<'a> {
+    pub(crate) params: &'a [WorldParams],
+    pub(crate) strides: &'a [u32],
 }
 
 /// An array the kernels may bind in parts (`gpu::shaders::SPLIT_ARRAYS`):
@@ -284,6 +317,34 @@ pub(crate) fn solved_whole(scene: &Scene) -> bool {
         && scene.cloth.vertex_count() as u64 <= scene.config.solver.whole_solve_nodes as u64
 }
 
+/// Whether a batch of worlds of `scene` runs on the GPU (`gpu::worlds`),
+/// or why not: so far its kernels record no indirect dispatch, so each
+/// step must be solved whole, with an analytic contact model and no
+/// self-contact.
+pub(crate) fn batchable(scene: &Scene) -> Result<()> {
+    let refuse = |why: &str| {
+        Err(Error::config(
+            "worlds",
+            format!("a GPU batch of worlds {why}"),
+        ))
+    };
+    if SelfContactStages::of(&scene.config.self_contact).separate {
+        return refuse("runs without self-contact so far (self_contact.enabled = false)");
+    }
+    if scene.network.is_some() {
+        return refuse("runs the analytic contact models so far (model = naive or friction)");
+    }
+    if !solved_whole(scene) {
+        return refuse(&format!(
+            "solves each world whole in one dispatch: it needs the multigrid preconditioner \
+             and at most solver.whole_solve_nodes = {} vertices (the cloth has {})",
+            scene.config.solver.whole_solve_nodes,
+            scene.cloth.vertex_count()
+        ));
+    }
+    Ok(())
+}
+
 /// [`multigrid_grids`], and the operators' elements (blocks) they use: up to
 /// the last patch inverse, or the last stencil block; 1 with no levels.
 fn multigrid_layout(scene: &Scene) -> (Vec<Grid>, u64) {
@@ -408,6 +469,11 @@ pub(crate) struct Sizes {
     pub(crate) net_inputs: u64,
     pub(crate) net_outputs: u64,
     pub(crate) lines: u64,
+    pub(crate) frame: u64,
+    pub(crate) state: u64,
+    /// Each of PCG's two scalars buffers.
+    pub(crate) scalars: u64,
+    pub(crate) self_dispatches: u64,
 }
 
 impl Sizes {
@@ -480,7 +546,78 @@ impl Sizes {
             net_inputs: size(batch * p.net_width as u64, 4),
             net_outputs: size(batch * (p.net_rows * p.net_outputs) as u64, 4),
             lines: size(2 * slots, 16),
+            frame: size_of::<RigidFrame>() as u64,
+            state: size_of::<StepState>() as u64,
+            scalars: size_of::<ScalarsAndSizes>() as u64,
+            self_dispatches: 4 * self_header::DISPATCH_WORDS as u64,
         }
+    }
+
+    /// Each buffer a world of a batch has a region of: its bytes here, and
+    /// the WGSL names it is bound under (`gpu::worlds::PER_WORLD`).
+    fn per_world(&mut self) -> [(&mut u64, &'static [&'static str]); 26] {
+        [
+            (&mut self.per_vertex, &["x", "v"]),
+            (
+                &mut self.solver_vector,
+                &["b", "r", "p", "p_next", "inv_diag"],
+            ),
+            (&mut self.zq, &["zq"]),
+            (&mut self.contacts, &["contacts"]),
+            (&mut self.responses, &["responses"]),
+            (&mut self.triangle_contacts, &["triangle_contacts"]),
+            (&mut self.matrix, &["matrix"]),
+            (&mut self.partials, &["partials"]),
+            (&mut self.operators, &["operators"]),
+            (&mut self.vectors, &["vectors"]),
+            (&mut self.rigid, &["rigid"]),
+            (&mut self.bounds, &["bounds"]),
+            (&mut self.separations, &["separations"]),
+            (&mut self.self_pairs, &["pairs"]),
+            (&mut self.cloth_lists, &["cloth_lists"]),
+            (&mut self.cloth_pairs, &["cloth_pairs"]),
+            (&mut self.cloth_loads, &["cloth_loads"]),
+            (&mut self.x_start, &["x_start"]),
+            (&mut self.net_batch, &["net_batch"]),
+            (&mut self.net_inputs, &["net_inputs"]),
+            (&mut self.net_outputs, &["net_outputs"]),
+            (&mut self.lines, &["lines"]),
+            (&mut self.frame, &["frame"]),
+            (&mut self.state, &["state"]),
+            (
+                &mut self.scalars,
+                &["scalars", "scalars_in", "scalars_next", "scalars_spare"],
+            ),
+            (&mut self.self_dispatches, &["dispatches"]),
+        ]
+    }
+
+    /// The sizes of a batch of `worlds` worlds of this scene: each
+    /// per-world buffer `worlds` regions, each a whole number of the
+    /// elements of every name it is bound under (`element_bytes`,
+    /// `gpu::worlds::element_bytes`); and each name's region in elements,
+    /// in `gpu::worlds::PER_WORLD` order (its `world_strides`).
+    pub(crate) fn for_worlds(
+        &self,
+        worlds: u32,
+        element_bytes: &std::collections::BTreeMap<String, u32>,
+    ) -> (Sizes, Vec<u32>) {
+        let mut sizes = self.clone();
+        let mut strides = vec![0; 4 * crate::gpu::worlds::STRIDE_VECTORS];
+        for (bytes, names) in sizes.per_world() {
+            let elements: Vec<(usize, u64)> = (names.iter())
+                .filter_map(|n| {
+                    Some((crate::gpu::worlds::slot(n)?, *element_bytes.get(*n)? as u64))
+                })
+                .collect();
+            let unit = elements.iter().fold(1, |unit, &(_, e)| lcm(unit, e));
+            let region = bytes.div_ceil(unit) * unit;
+            for (slot, element) in elements {
+                strides[slot] = (region / element) as u32;
+            }
+            *bytes = region * worlds as u64;
+        }
+        (sizes, strides)
     }
 
     /// Each buffer a kernel binds whole, by what it holds.
@@ -522,13 +659,19 @@ impl Sizes {
 }
 
 impl Buffers {
+    /// The buffers of `scene`, or of a batch of its worlds (`batch`), at
+    /// `sizes` (`Sizes::for_worlds` for a batch, whose worlds each start
+    /// at the scene's rest).
     pub(crate) fn new(
         device: &wgpu::Device,
         scene: &Scene,
         params: &Params,
         (topology, sections): (Vec<u32>, Sections),
         vectors: VectorLayout,
+        (sizes, region): (Sizes, Sizes),
+        batch: Option<Batch>,
     ) -> Buffers {
+        let worlds = batch.as_ref().map_or(1, |b| b.params.len());
         let cloth = &scene.cloth;
         let level_hops = hops(&multigrid_grids(scene));
         let usage = wgpu::BufferUsages::STORAGE
@@ -568,7 +711,6 @@ impl Buffers {
                 mapped_at_creation: false,
             }))
         };
-        let sizes = Sizes::of(scene, params, topology.len(), vectors);
         // `bytes` cut at `cuts` (elements of `size` bytes; at the end where
         // a part is not needed).
         let parts = |name, buffer: wgpu::Buffer, bytes: u64, cuts: [u32; 2], size: usize| {
@@ -608,7 +750,7 @@ impl Buffers {
             }),
             x: init(
                 "positions",
-                bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0)),
+                bytemuck::cast_slice(&vec4s(&cloth.rest_positions, 1.0).repeat(worlds)),
                 wgpu::BufferUsages::VERTEX,
             ),
             v: zeroed("velocities", sizes.per_vertex),
@@ -648,10 +790,9 @@ impl Buffers {
             inv_diag: zeroed("inverse diagonal", sizes.solver_vector),
             partials: zeroed("partial sums", sizes.partials),
             scalars: [0, 1].map(|k| {
-                let bytes = size_of::<ScalarsAndSizes>() as u64;
                 counted(device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(&format!("pcg scalars {k}")),
-                    size: bytes,
+                    size: sizes.scalars,
                     usage: usage | wgpu::BufferUsages::INDIRECT,
                     mapped_at_creation: false,
                 }))
@@ -679,7 +820,7 @@ impl Buffers {
                 })
                 .collect(),
             hop_list: storage("multigrid hops", bytemuck::cast_slice(&level_hops)),
-            state: zeroed("step state", size_of::<StepState>() as u64),
+            state: zeroed("step state", sizes.state),
             body_vertices: storage("body vertices", bytemuck::cast_slice(&body_vertices)),
             body_normals: storage("body vertex normals", bytemuck::cast_slice(&body_normals)),
             body_face_normals: storage(
@@ -692,12 +833,12 @@ impl Buffers {
                 &vec![0u8; sizes.rigid as usize],
                 wgpu::BufferUsages::VERTEX,
             ),
-            frame: zeroed("rigid frame", size_of::<RigidFrame>() as u64),
+            frame: zeroed("rigid frame", sizes.frame),
             bounds: zeroed("tile bounds", sizes.bounds),
             separations: zeroed("least separations", sizes.separations),
             self_dispatches: counted(device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("self-contact dispatches"),
-                size: 4 * self_header::DISPATCH_WORDS as u64,
+                size: sizes.self_dispatches,
                 usage: usage | wgpu::BufferUsages::INDIRECT,
                 mapped_at_creation: false,
             })),
@@ -715,6 +856,23 @@ impl Buffers {
                 contents: bytemuck::cast_slice(&[scene.metres_per_force(), 0.0, 0.0, 0.0]),
                 usage: wgpu::BufferUsages::UNIFORM,
             }),
+            batch: batch.map(|b| {
+                let uniform = |label, contents: &[u8]| {
+                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents,
+                        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    })
+                };
+                let mut each = b.params.to_vec();
+                each.resize(MAX_WORLDS as usize, WorldParams::default());
+                WorldBuffers {
+                    params: uniform("world params", bytemuck::cast_slice(&each)),
+                    strides: uniform("world strides", bytemuck::cast_slice(b.strides)),
+                }
+            }),
+            worlds: worlds as u32,
+            region,
             // Last: every buffer above is counted.
             storage_bytes: allocated.get(),
         }

@@ -7,11 +7,12 @@ use std::collections::BTreeMap;
 use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
-use crate::gpu::buffers::Parts;
+use crate::gpu::buffers::{Parts, WorldBuffers};
 use crate::gpu::constants;
 use crate::gpu::layout::VectorLayout;
 use crate::gpu::pass::Pass;
 use crate::gpu::shaders::{self, Binding, STAGES};
+use crate::gpu::worlds;
 
 /// Declares [`Entry`], [`Entry::ALL`] and [`Entry::wgsl`] from one list:
 /// each entry point's variant, its WGSL file (stage) and its name there.
@@ -142,10 +143,11 @@ impl Bound {
         pass.dispatch_workgroups_indirect(args, offset);
     }
 
-    /// Records one invocation per `threads`, in workgroups of `workgroup`.
+    /// Records one invocation per `threads`, in workgroups of `workgroup`
+    /// (for each world of a batch).
     pub fn dispatch(&self, pass: &mut Pass, threads: u32, workgroup: u32) {
         self.set(pass);
-        pass.dispatch_workgroups(threads.div_ceil(workgroup), 1, 1);
+        pass.dispatch_workgroups(threads.div_ceil(workgroup));
     }
 }
 
@@ -247,6 +249,11 @@ pub struct Kernels {
     /// The same kernels binding them in parts, compiled the first time a
     /// scene on this device needs them ([`Kernels::in_parts`]).
     in_parts: OnceLock<Box<Kernels>>,
+    /// Whether each kernel steps a batch of worlds (`gpu::worlds`).
+    worlds: bool,
+    /// The same kernels for a batch of worlds, compiled the first time a
+    /// batch on this device needs them ([`Kernels::for_worlds`]).
+    for_worlds: OnceLock<Box<Kernels>>,
 }
 
 /// Storage buffers per shader stage a device must allow for kernels that
@@ -285,7 +292,7 @@ impl Kernels {
     /// only once the event loop runs.
     pub async fn create(device: &wgpu::Device) -> Result<Kernels> {
         let vectors = VectorLayout::for_adapter(device.adapter_info().device_type);
-        Self::compiled(device, false, vectors).await
+        Self::compiled(device, false, vectors, false).await
     }
 
     /// [`Kernels::new`] with the solver's vectors laid out as `vectors`,
@@ -293,7 +300,7 @@ impl Kernels {
     /// the layouts.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn with_vectors(device: &wgpu::Device, vectors: VectorLayout) -> Result<Kernels> {
-        pollster::block_on(Self::compiled(device, false, vectors))
+        pollster::block_on(Self::compiled(device, false, vectors, false))
     }
 
     /// The kernels for a scene whose largest arrays pass one binding: these
@@ -303,20 +310,34 @@ impl Kernels {
             return Ok(self);
         }
         if self.in_parts.get().is_none() {
-            let parted = Self::compiled(device, true, self.variant.vectors).await?;
+            let parted = Self::compiled(device, true, self.variant.vectors, self.worlds).await?;
             // Another scene may have set it meanwhile: the same kernels.
             let _ = self.in_parts.set(Box::new(parted));
         }
         Ok(self.in_parts.get().expect("set above"))
     }
 
+    /// The kernels for a batch of worlds (`gpu::worlds`), compiled on first
+    /// use. A batch binds every array whole.
+    pub(crate) async fn for_worlds(&self, device: &wgpu::Device) -> Result<&Kernels> {
+        if self.worlds {
+            return Ok(self);
+        }
+        if self.for_worlds.get().is_none() {
+            let batched = Self::compiled(device, false, self.variant.vectors, true).await?;
+            let _ = self.for_worlds.set(Box::new(batched));
+        }
+        Ok(self.for_worlds.get().expect("set above"))
+    }
+
     async fn compiled(
         device: &wgpu::Device,
         parted: bool,
         vectors: VectorLayout,
+        worlds: bool,
     ) -> Result<Kernels> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let kernels = Self::compile(device, parted, vectors);
+        let kernels = Self::compile(device, parted, vectors, worlds);
         if let Some(e) = scope.pop().await {
             return Err(Error::Gpu(format!(
                 "compiling the kernels: {}",
@@ -326,30 +347,46 @@ impl Kernels {
         kernels
     }
 
-    fn compile(device: &wgpu::Device, split: bool, vectors: VectorLayout) -> Result<Kernels> {
+    fn compile(
+        device: &wgpu::Device,
+        split: bool,
+        vectors: VectorLayout,
+        worlds: bool,
+    ) -> Result<Kernels> {
         let variant = shaders::Variant::for_device(device, split, vectors);
         let splittable =
             device.limits().max_storage_buffers_per_shader_stage >= SPLIT_STORAGE_BUFFERS;
+        let uniform = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let mut group0 = vec![uniform(shaders::PARAMS_BINDING)];
+        if worlds {
+            group0.push(uniform(worlds::WORLD_PARAMS_BINDING));
+            group0.push(uniform(worlds::WORLD_STRIDES_BINDING));
+        }
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("params"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: shaders::PARAMS_BINDING,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
+            entries: &group0,
         });
         let mut compiled = Vec::new();
         for &(stage, _) in STAGES {
             let mut reflected = shaders::reflect(stage, variant)
                 .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl: {e}")))?;
+            let source = match worlds && !shaders::STANDALONE.contains(&stage) {
+                true => crate::gpu::worlds::source(stage, variant)
+                    .map_err(|e| Error::Gpu(format!("wgsl/{stage}.wgsl for worlds: {e}")))?,
+                false => shaders::source(stage, variant),
+            };
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(stage),
-                source: wgpu::ShaderSource::Wgsl(shaders::source(stage, variant).into()),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
             });
             for entry in Entry::ALL.into_iter().filter(|e| e.wgsl().0 == stage) {
                 let name = entry.wgsl().1;
@@ -380,6 +417,8 @@ impl Kernels {
             software: device.adapter_info().device_type == wgpu::DeviceType::Cpu,
             splittable,
             in_parts: OnceLock::new(),
+            worlds,
+            for_worlds: OnceLock::new(),
         })
     }
 
@@ -493,16 +532,40 @@ impl Kernels {
         4 * self.variant.mlp_threads
     }
 
-    /// Group 0 of every scene stage's pass: the run's constants.
-    pub fn bind_params(&self, device: &wgpu::Device, params: &wgpu::Buffer) -> wgpu::BindGroup {
+    /// Group 0 of every scene stage's pass: the run's constants, and for a
+    /// batch each world's own and its regions' sizes (`gpu::worlds`).
+    pub(crate) fn bind_params(
+        &self,
+        device: &wgpu::Device,
+        params: &wgpu::Buffer,
+        worlds: Option<&WorldBuffers>,
+    ) -> wgpu::BindGroup {
+        fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }
+        }
+        let mut entries = vec![entry(shaders::PARAMS_BINDING, params)];
+        if let Some(w) = worlds {
+            entries.push(entry(worlds::WORLD_PARAMS_BINDING, &w.params));
+            entries.push(entry(worlds::WORLD_STRIDES_BINDING, &w.strides));
+        }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("params"),
             layout: &self.params_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: shaders::PARAMS_BINDING,
-                resource: params.as_entire_binding(),
-            }],
+            entries: &entries,
         })
+    }
+
+    /// What the kernels were compiled for.
+    pub fn variant(&self) -> shaders::Variant {
+        self.variant
+    }
+
+    /// Whether these kernels step a batch of worlds.
+    pub fn worlds(&self) -> bool {
+        self.worlds
     }
 
     /// The kernel of `entry`.

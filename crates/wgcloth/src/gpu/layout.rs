@@ -61,6 +61,68 @@ impl VectorLayout {
     }
 }
 
+/// Declares [`WorldParams`] from one list of [`Params`] fields, each
+/// with its WGSL type: the struct, its WGSL declaration and the copies
+/// between the two.
+macro_rules! world_params {
+    ($($field:ident: $ty:ty => $wgsl:literal,)*) => {
+        #[repr(C)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+        /// The [`Params`] fields each world of a batch has its own of
+        /// (`gpu::worlds`): its contact model's coefficients, the cloth's
+        /// material, the body's motion and the solver's tolerance. The
+        /// rest (sizes, the model's kind, substeps) the worlds share. Laid
+        /// out as WGSL lays out the struct `gpu::worlds` declares.
+        pub struct WorldParams {
+            $(#[doc = concat!("[`Params::", stringify!($field), "`].")] pub $field: $ty,)*
+        }
+
+        impl WorldParams {
+            /// Each field's name and WGSL type, in order.
+            pub const FIELDS: &[(&str, &str)] = &[$((stringify!($field), $wgsl)),*];
+
+            /// The fields of `params` that are a world's own.
+            pub fn of(params: &Params) -> WorldParams {
+                WorldParams { $($field: params.$field,)* }
+            }
+
+            /// `params` with these fields set to zero: what worlds of one
+            /// batch must share.
+            pub fn shared(params: &Params) -> Params {
+                Params { $($field: Zeroable::zeroed(),)* ..*params }
+            }
+        }
+    };
+}
+
+// Scalars first, then each three-vector with a scalar in its fourth lane
+// (WGSL's vec3 alignment), so the Rust and WGSL layouts agree: 128 bytes.
+world_params! {
+    vertex_mass: f32 => "f32",
+    stiffness: f32 => "f32",
+    cg_tol: f32 => "f32",
+    damping_mass: f32 => "f32",
+    damping_stiffness: f32 => "f32",
+    naive_stiffness: f32 => "f32",
+    force_scale: f32 => "f32",
+    kn: f32 => "f32",
+    kd: f32 => "f32",
+    kt: f32 => "f32",
+    mu: f32 => "f32",
+    motion_kind: u32 => "u32",
+    motion_period: f32 => "f32",
+    motion_phase: f32 => "f32",
+    motion_amplitude: f32 => "f32",
+    max_speed: f32 => "f32",
+    gravity: [f32; 3] => "vec3<f32>",
+    thickness: f32 => "f32",
+    rigid_position: [f32; 3] => "vec3<f32>",
+    max_depth: f32 => "f32",
+    motion_vector: [f32; 3] => "vec3<f32>",
+    dt: f32 => "f32",
+    rigid_rotation: [f32; 4] => "vec4<f32>",
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 /// The run's constants, as every scene stage reads them (mirrors `Params`

@@ -16,6 +16,7 @@ pub mod readback;
 pub mod shaders;
 pub mod sim;
 pub(crate) mod stages;
+pub mod worlds;
 
 pub use budget::CgBudget;
 #[cfg(not(target_arch = "wasm32"))]

@@ -8,14 +8,24 @@
 pub struct Pass<'e> {
     pass: wgpu::ComputePass<'e>,
     dispatches: u32,
+    /// Rows of workgroups of each dispatch: one per world of a batch
+    /// (`gpu::worlds`).
+    worlds: u32,
 }
 
 impl<'e> Pass<'e> {
     /// Wraps a pass begun on the caller's encoder.
     pub fn new(pass: wgpu::ComputePass<'e>) -> Pass<'e> {
+        Self::for_worlds(pass, 1)
+    }
+
+    /// Wraps a pass whose kernels step `worlds` worlds, each dispatch a row
+    /// of workgroups per world (`gpu::worlds`).
+    pub fn for_worlds(pass: wgpu::ComputePass<'e>, worlds: u32) -> Pass<'e> {
         Pass {
             pass,
             dispatches: 0,
+            worlds,
         }
     }
 
@@ -34,15 +44,20 @@ impl<'e> Pass<'e> {
         self.pass.set_bind_group(index, group, &[]);
     }
 
-    /// A dispatch of `x × y × z` workgroups.
-    pub fn dispatch_workgroups(&mut self, x: u32, y: u32, z: u32) {
-        self.pass.dispatch_workgroups(x, y, z);
+    /// A dispatch of `groups` workgroups for each world.
+    pub fn dispatch_workgroups(&mut self, groups: u32) {
+        self.pass.dispatch_workgroups(groups, self.worlds, 1);
         self.dispatches += 1;
     }
 
     /// A dispatch whose workgroup counts the GPU wrote at `offset` of
-    /// `args` (three `u32`s).
+    /// `args` (three `u32`s): of one world's kernels, as a batch records
+    /// none.
     pub fn dispatch_workgroups_indirect(&mut self, args: &wgpu::Buffer, offset: u64) {
+        debug_assert_eq!(
+            self.worlds, 1,
+            "a batch of worlds dispatches no kernel indirectly"
+        );
         self.pass.dispatch_workgroups_indirect(args, offset);
         self.dispatches += 1;
     }

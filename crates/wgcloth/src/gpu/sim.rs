@@ -13,15 +13,16 @@ use glam::Vec3;
 use crate::cpu::State;
 use crate::error::{Error, Result};
 use crate::gpu::buffers::{
-    Buffers, Sizes, check_limits, fit_pair_list, params_for, solved_whole, vec4s,
+    Batch, Buffers, Sizes, batchable, check_limits, fit_pair_list, params_for, solved_whole, vec4s,
 };
 #[cfg(not(target_arch = "wasm32"))]
 use crate::gpu::context::read_buffer;
 use crate::gpu::kernels::Kernels;
-use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState};
+use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState, WorldParams};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::pass::Pass;
 use crate::gpu::stages::{Recording, Stages};
+use crate::gpu::worlds::MAX_WORLDS;
 use crate::scene::Scene;
 use crate::stage::{SelfContactStages, Stage};
 
@@ -103,11 +104,113 @@ impl GpuSim {
                 false => kernels,
                 true => kernels.in_parts(device).await?,
             };
+        let sizes = (sizes.clone(), sizes);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let sim = Self::build(kernels, device, queue, scene, params, (topology, sections));
+        let sim = Self::build(
+            kernels,
+            device,
+            queue,
+            scene,
+            params,
+            ((topology, sections), sizes, None),
+        );
         captured(oom, "allocating the scene's buffers").await?;
         captured(scope, "creating the scene's GPU state").await?;
+        sim
+    }
+
+    /// A batch of worlds, one per scene, stepped together: each kernel
+    /// covers every world, so a step records the dispatches of one
+    /// (`gpu::worlds`). World k ends each step where `scenes[k]` alone
+    /// would. The worlds share their cloth's grid, their body's mesh, the
+    /// contact model's kind and everything else that sizes a buffer or a
+    /// dispatch; each has its own [`WorldParams`] (coefficients, material,
+    /// the body's motion, tolerance) and state. So far a batch runs the
+    /// scenes whose step a single dispatch solves
+    /// ([`GpuSim::solved_whole`]) with an analytic contact model and no
+    /// self-contact; any other gets an error saying which.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn with_worlds(
+        kernels: &Kernels,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scenes: &[Scene],
+    ) -> Result<GpuSim> {
+        pollster::block_on(Self::create_worlds(kernels, device, queue, scenes))
+    }
+
+    /// [`GpuSim::with_worlds`] as a future.
+    pub async fn create_worlds(
+        kernels: &Kernels,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scenes: &[Scene],
+    ) -> Result<GpuSim> {
+        let Some(scene) = scenes.first() else {
+            return Err(Error::config("worlds", "a batch needs at least one world"));
+        };
+        if scenes.len() > MAX_WORLDS as usize {
+            return Err(Error::config(
+                "worlds",
+                format!(
+                    "{} worlds, but a batch holds at most {MAX_WORLDS} (each world's \
+                     parameters take {} B of one 64 KiB uniform binding)",
+                    scenes.len(),
+                    size_of::<WorldParams>()
+                ),
+            ));
+        }
+        let (topology, sections) = layout::topology(scene);
+        let mut params = params_for(scene, &sections);
+        fit_pair_list(&device.limits(), &mut params);
+        batchable(scene)?;
+        let shared = WorldParams::shared(&params);
+        let mut each = Vec::with_capacity(scenes.len());
+        for (k, world) in scenes.iter().enumerate() {
+            let (its_topology, its_sections) = layout::topology(world);
+            let mut its = params_for(world, &its_sections);
+            fit_pair_list(&device.limits(), &mut its);
+            let same_body = (world.rigid.as_ref().map(|b| &b.mesh.vertices))
+                == (scene.rigid.as_ref().map(|b| &b.mesh.vertices));
+            if its_topology != topology
+                || world.cloth.rest_positions != scene.cloth.rest_positions
+                || !same_body
+                || bytemuck::bytes_of(&WorldParams::shared(&its)) != bytemuck::bytes_of(&shared)
+            {
+                return Err(Error::config(
+                    "worlds",
+                    format!(
+                        "world {k} differs from world 0 in what a batch shares (the cloth's \
+                         grid, the body's mesh, the contact model, the solver's sizes or \
+                         substeps); run it in a batch of its own"
+                    ),
+                ));
+            }
+            each.push(WorldParams::of(&its));
+        }
+        let kernels = kernels.for_worlds(device).await?;
+        let elements = crate::gpu::worlds::element_bytes(kernels.variant()).map_err(Error::Gpu)?;
+        let sizes = Sizes::of(scene, &params, topology.len(), kernels.vectors());
+        let (region, _) = sizes.for_worlds(1, &elements);
+        let (batched, strides) = sizes.for_worlds(scenes.len() as u32, &elements);
+        check_limits(&device.limits(), &batched, &mut params, false)?;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let batch = Batch {
+            params: &each,
+            strides: &strides,
+        };
+        let sim = Self::build(
+            kernels,
+            device,
+            queue,
+            scene,
+            params,
+            ((topology, sections), (batched, region), Some(batch)),
+        );
+        captured(oom, "allocating the worlds' buffers").await?;
+        captured(scope, "creating the worlds' GPU state").await?;
         sim
     }
 
@@ -119,9 +222,17 @@ impl GpuSim {
         queue: &wgpu::Queue,
         scene: &Scene,
         params: Params,
-        topology: (Vec<u32>, Sections),
+        (topology, sizes, batch): ((Vec<u32>, Sections), (Sizes, Sizes), Option<Batch>),
     ) -> Result<GpuSim> {
-        let buffers = Buffers::new(device, scene, &params, topology, kernels.vectors());
+        let buffers = Buffers::new(
+            device,
+            scene,
+            &params,
+            topology,
+            kernels.vectors(),
+            sizes,
+            batch,
+        );
         let network = match &scene.network {
             Some(net) if params.has_rigid != 0 => {
                 let slots = (params.n_vertices + params.n_rigid_vertices) as usize;
@@ -354,7 +465,7 @@ impl GpuSim {
         substep: u32,
     ) -> Pass<'e> {
         let k = query_pass(stage, substep);
-        Pass::new(
+        Pass::for_worlds(
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(stage.name()),
                 timestamp_writes: self
@@ -366,6 +477,7 @@ impl GpuSim {
                         end_of_pass_write_index: Some(2 * k + 1),
                     }),
             }),
+            self.buffers.worlds,
         )
     }
 
@@ -430,30 +542,63 @@ impl GpuSim {
         pass.dispatches()
     }
 
-    /// Replaces the cloth state with `state` (e.g. a CPU state, to compare
-    /// a stage): positions, velocities, the loads its cloth–cloth contacts
-    /// carried (none where `state.loads` is empty), and the clock at
-    /// `state.step` steps of `solver.dt`.
+    /// Replaces the cloth state of every world with `state` (e.g. a CPU
+    /// state, to compare a stage): positions, velocities, the loads its
+    /// cloth–cloth contacts carried (none where `state.loads` is empty),
+    /// and the clock at `state.step` steps of `solver.dt`.
     pub fn upload_state(&self, state: &State) {
+        for k in 0..self.buffers.worlds {
+            self.upload_world_state(k, state);
+        }
+    }
+
+    /// [`Self::upload_state`] for world `k` of a batch alone.
+    pub fn upload_world_state(&self, k: u32, state: &State) {
         let (x, v) = (&state.x, &state.v);
-        self.queue
-            .write_buffer(&self.buffers.x, 0, bytemuck::cast_slice(&vec4s(x, 1.0)));
-        self.queue
-            .write_buffer(&self.buffers.v, 0, bytemuck::cast_slice(&vec4s(v, 0.0)));
+        let (b, region) = (&self.buffers, &self.buffers.region);
+        let at = |bytes: u64| k as u64 * bytes;
+        let write = |buffer, at, data: &[u8]| self.queue.write_buffer(buffer, at, data);
+        write(
+            &b.x,
+            at(region.per_vertex),
+            bytemuck::cast_slice(&vec4s(x, 1.0)),
+        );
+        write(
+            &b.v,
+            at(region.per_vertex),
+            bytemuck::cast_slice(&vec4s(v, 0.0)),
+        );
         if self.params.cloth_thickness > 0.0 {
             let loads: Vec<[f32; 2]> = (0..x.len())
                 .map(|i| [state.loads.get(i).copied().unwrap_or(0.0), 1.0])
                 .collect();
-            self.queue
-                .write_buffer(&self.buffers.cloth_loads, 0, bytemuck::cast_slice(&loads));
+            write(
+                &b.cloth_loads,
+                at(region.cloth_loads),
+                bytemuck::cast_slice(&loads),
+            );
         }
         let clock = state.step as u32 * self.params.substeps;
-        self.queue
-            .write_buffer(&self.buffers.state, 0, bytemuck::bytes_of(&clock));
+        write(&b.state, at(region.state), bytemuck::bytes_of(&clock));
         // A new state starts healthy.
         let health = std::mem::offset_of!(StepState, health) as u64;
-        self.queue
-            .write_buffer(&self.buffers.state, health, bytemuck::bytes_of(&0u32));
+        write(
+            &b.state,
+            at(region.state) + health,
+            bytemuck::bytes_of(&0u32),
+        );
+    }
+
+    /// Worlds this simulator steps: 1 for a scene, else a batch's.
+    pub fn worlds(&self) -> u32 {
+        self.buffers.worlds
+    }
+
+    /// Where world `k`'s positions lie in [`Self::positions`], in bytes:
+    /// one `vec4<f32>` per cloth vertex, to draw it with [`Self::indices`].
+    pub fn world_positions(&self, k: u32) -> std::ops::Range<u64> {
+        let at = k as u64 * self.buffers.region.per_vertex;
+        at..at + 16 * self.params.n_vertices as u64
     }
 
     /// Records and submits one step; returns its dispatch count.
@@ -481,9 +626,30 @@ impl GpuSim {
     }
 
     #[cfg(not(target_arch = "wasm32"))]
-    /// Cloth positions, read back (blocks until the GPU is done).
+    /// Cloth positions (world 0's in a batch), read back (blocks until the
+    /// GPU is done).
     pub fn read_positions(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.x)
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// World `k`'s positions and velocities, and its clock and statistics,
+    /// read back (blocks until the GPU is done).
+    pub fn read_world(&self, k: u32) -> Result<(Vec<Vec3>, Vec<Vec3>, StepState)> {
+        let region = &self.buffers.region;
+        let vectors = |buffer| -> Result<Vec<Vec3>> {
+            let raw: Vec<[f32; 4]> = self.read(buffer)?;
+            let at = (k as u64 * region.per_vertex / 16) as usize;
+            let n = self.params.n_vertices as usize;
+            Ok(raw[at..at + n]
+                .iter()
+                .map(|p| Vec3::from_slice(&p[..3]))
+                .collect())
+        };
+        let bytes: Vec<u8> = self.read(&self.buffers.state)?;
+        let at = (k as u64 * region.state) as usize;
+        let state = bytemuck::pod_read_unaligned(&bytes[at..at + size_of::<StepState>()]);
+        Ok((vectors(&self.buffers.x)?, vectors(&self.buffers.v)?, state))
     }
 
     #[cfg(not(target_arch = "wasm32"))]

@@ -28,6 +28,9 @@ pub(crate) struct Collide {
     /// per rigid vertex, each taking every this-many-th beyond.
     max_groups: u32,
     triangle_contacts: wgpu::Buffer,
+    /// Each world's region of `triangle_contacts` (a batch's, `gpu::worlds`).
+    worlds: std::ops::Range<u32>,
+    region: u64,
 }
 
 impl Collide {
@@ -58,6 +61,8 @@ impl Collide {
             order: bind(Entry::CollideOrder),
             max_groups: device.limits().max_compute_workgroups_per_dimension,
             triangle_contacts: b.triangle_contacts.clone(),
+            worlds: 0..b.worlds,
+            region: b.region.triangle_contacts,
         }
     }
 }
@@ -67,7 +72,10 @@ impl Record for Collide {
     /// list, as found and in order, so every list starts empty (zero heads).
     fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
         let heads = 2 * 4 * p.n_triangles as u64;
-        encoder.clear_buffer(&self.triangle_contacts, 0, Some(heads));
+        for k in self.worlds.clone() {
+            let at = k as u64 * self.region;
+            encoder.clear_buffer(&self.triangle_contacts, at, Some(heads));
+        }
     }
 
     fn encode(&self, pass: &mut Pass, r: &Recording) {
@@ -78,7 +86,7 @@ impl Record for Collide {
         self.vertex_face.dispatch(pass, p.n_vertices, WORKGROUP);
         if p.cells_x.max(p.cells_y) >= FACE_VERTEX_TILED_FROM {
             self.face_vertex.set(pass);
-            pass.dispatch_workgroups(p.n_rigid_vertices.min(self.max_groups), 1, 1);
+            pass.dispatch_workgroups(p.n_rigid_vertices.min(self.max_groups));
         } else {
             self.face_vertex_serial
                 .dispatch(pass, p.n_rigid_vertices, WORKGROUP);

@@ -93,7 +93,7 @@ impl Stages {
         network: Option<GpuMlp>,
     ) -> Stages {
         Stages {
-            params: kernels.bind_params(device, &b.params),
+            params: kernels.bind_params(device, &b.params, b.batch.as_ref()),
             rigid: rigid::Rigid::new(kernels, device, b),
             collide: collide::Collide::new(kernels, device, b),
             contact: contact::Contact::new(kernels, device, b, network),
