@@ -7,8 +7,8 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use wgcloth::config::{ModelKind, Preconditioner, SceneKind, Shape, Smoother};
-use wgcloth::gpu::GpuContext;
 use wgcloth::gpu::layout::VectorLayout;
+use wgcloth::gpu::{GpuContext, GpuSim};
 use wgcloth::nn::weights::NetKind;
 use wgcloth::{Config, Error, Result, Scene};
 use wgcloth_cli::run::{self, Backend, Chosen, check_diverged, choose_backend};
@@ -523,7 +523,8 @@ fn run(args: &RunArgs) -> Result<()> {
     check_diverged(&report)
 }
 
-/// `run --worlds N` / `--sweep FILE`: a batch of worlds on the CPU path.
+/// `run --worlds N` / `--sweep FILE`: a batch of worlds, on the GPU where
+/// `--backend` chooses it (`auto`: a hardware adapter), else the CPU path.
 fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
     let one_world = [
         (args.out.is_some(), "--out"),
@@ -537,16 +538,6 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
             *flag,
             "takes a run of one world; leave out --worlds and --sweep",
         ));
-    }
-    match args.backend {
-        Backend::Gpu => {
-            return Err(Error::config(
-                "--backend",
-                "batched worlds run on the CPU path so far; use --backend cpu or auto",
-            ));
-        }
-        Backend::Auto => eprintln!("notice: batched worlds run on the CPU reference path"),
-        Backend::Cpu => {}
     }
     if let Some(path) = &args.report {
         writable(path)?;
@@ -579,8 +570,30 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
             .collect::<Result<Vec<_>>>()?,
     };
     let steps = config.solver.steps;
+    if args.backend == Backend::Gpu {
+        GpuSim::batchable(&scenes[0])?;
+    }
+    let (chosen, notice) = run::choose_backend(args.backend, wgcloth::gpu::OPTIONAL_FEATURES)?;
+    if let Some(notice) = notice {
+        eprintln!("{notice}");
+    }
     let bar = progress_bar(steps);
-    let report = run::run_worlds(scenes, &set, steps, |k| bar.set_position(k))?;
+    // `auto` runs on the CPU what the GPU batch does not run yet.
+    let gpu = match chosen
+        .context()
+        .map(|ctx| (ctx, GpuSim::batchable(&scenes[0])))
+    {
+        Some((_, Err(e))) => {
+            eprintln!("notice: {e}; running the batch on the CPU reference path");
+            None
+        }
+        Some((ctx, Ok(()))) => Some(ctx),
+        None => None,
+    };
+    let report = match gpu {
+        Some(ctx) => run::run_worlds_gpu(ctx, scenes, &set, steps, |k| bar.set_position(k))?,
+        None => run::run_worlds(scenes, &set, steps, |k| bar.set_position(k))?,
+    };
     bar.finish_and_clear();
     println!("{}", report.summary());
     if let Some(path) = &args.report {

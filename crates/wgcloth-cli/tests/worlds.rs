@@ -7,10 +7,10 @@ mod cli;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Runs `wgcloth run` with `args` on the CPU path; its `--report` JSON.
-fn report(dir: &Path, name: &str, args: &[&str]) -> serde_json::Value {
+/// Runs `wgcloth run` with `args` on `backend`; its `--report` JSON.
+fn report(dir: &Path, backend: &str, name: &str, args: &[&str]) -> serde_json::Value {
     let path = dir.join(format!("{name}.json"));
-    let out = cli::cpu_friction_run("sphere")
+    let out = cli::friction_run("sphere", backend)
         .args(["--grid", "8", "--steps", "25", "--report"])
         .arg(&path)
         .args(args)
@@ -50,7 +50,21 @@ fn temp_dir(name: &str) -> PathBuf {
 
 #[test]
 fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
-    let dir = temp_dir("sweep");
+    sweep_ends_where_each_configuration_ends_alone("cpu");
+}
+
+/// The same on the GPU (lavapipe in CI), its batch in one step's dispatches.
+#[test]
+fn each_world_of_a_gpu_sweep_ends_where_its_configuration_ends_alone() {
+    if std::env::var("WGCLOTH_NO_GPU_TESTS").is_ok_and(|v| v == "1") {
+        eprintln!("skipping GPU test: WGCLOTH_NO_GPU_TESTS=1");
+        return;
+    }
+    sweep_ends_where_each_configuration_ends_alone("gpu");
+}
+
+fn sweep_ends_where_each_configuration_ends_alone(backend: &str) {
+    let dir = temp_dir(&format!("sweep-{backend}"));
     // μ, the springs' stiffness and the sphere's amplitude per world.
     let worlds = [(0.2, 3000.0, 0.25), (0.8, 5000.0, 0.3), (0.5, 8000.0, 0.2)];
     let mut csv = String::from("contact.mu,cloth.stiffness,rigid.motion.amplitude\n");
@@ -65,8 +79,19 @@ fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
     let toml_path = dir.join("sweep.toml");
     std::fs::write(&csv_path, csv).unwrap();
     std::fs::write(&toml_path, toml).unwrap();
-    let from_csv = report(&dir, "csv", &["--sweep", csv_path.to_str().unwrap()]);
-    let from_toml = report(&dir, "toml", &["--sweep", toml_path.to_str().unwrap()]);
+    let from_csv = report(
+        &dir,
+        backend,
+        "csv",
+        &["--sweep", csv_path.to_str().unwrap()],
+    );
+    let from_toml = report(
+        &dir,
+        backend,
+        "toml",
+        &["--sweep", toml_path.to_str().unwrap()],
+    );
+    assert_eq!(from_csv["backend"], backend);
     assert_eq!(
         from_csv["worlds"], from_toml["worlds"],
         "CSV and TOML sweeps"
@@ -84,6 +109,7 @@ fn each_world_of_a_sweep_ends_where_its_configuration_ends_alone() {
         .unwrap();
         let alone = report(
             &dir,
+            backend,
             &format!("alone{k}"),
             &["--config", config.to_str().unwrap()],
         );

@@ -303,7 +303,8 @@ impl BenchOptions {
     }
 
     /// The batched-worlds rows alone (`bench --worlds`), 1 to 1,024 worlds
-    /// on the CPU: no step, period, network or solver-iteration rows.
+    /// on the CPU and on the GPU where there is one: no step, period,
+    /// network or solver-iteration rows.
     pub fn worlds() -> BenchOptions {
         BenchOptions {
             grids: Vec::new(),
@@ -311,7 +312,6 @@ impl BenchOptions {
             period_steps: 0,
             batch_sizes: Vec::new(),
             iteration_grids: Vec::new(),
-            backends: Backends::Cpu,
             ..BenchOptions::full()
         }
     }
@@ -634,10 +634,13 @@ pub fn bench(opts: &BenchOptions, mut progress: impl FnMut(&str)) -> Result<Benc
     let gpu = chosen.iter().find_map(Chosen::context);
     let networks = network_rows(opts, gpu, &mut progress)?;
     let iterations = solver_iterations(opts, &bandwidth[0], &mut progress)?;
-    let worlds = match opts.backends {
+    let mut worlds = match opts.backends {
         Backends::Gpu => Vec::new(),
         _ => worlds::rows(opts, &mut progress)?,
     };
+    if let Some(ctx) = gpu {
+        worlds.extend(worlds::gpu_rows(opts, ctx, &mut progress)?);
+    }
     Ok(BenchReport {
         quick: opts.quick,
         period_grid: opts.period_grid,
@@ -1387,23 +1390,27 @@ impl BenchReport {
                     .into(),
                 &[
                     ("backend", Left),
+                    ("model", Left),
                     ("worlds", Right),
                     ("grid", Right),
                     ("steps", Right),
                     ("batched world-steps/s", Right),
                     ("separate world-steps/s", Right),
                     ("× separate", Right),
+                    ("dispatches a batch step", Right),
                 ],
                 &self.worlds,
                 |w| {
                     vec![
                         w.backend.clone(),
+                        w.model.clone(),
                         w.worlds.to_string(),
                         w.grid.to_string(),
                         w.steps.to_string(),
                         format!("{:.1}", w.batched),
                         format!("{:.1}", w.separate),
                         format!("{:.2}", w.ratio),
+                        w.dispatches.map_or("—".into(), |d| d.to_string()),
                     ]
                 },
             ),

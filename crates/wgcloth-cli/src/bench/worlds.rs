@@ -1,22 +1,30 @@
 //! Batched worlds against as many separate simulators (issue 67):
-//! world-steps a second of N worlds of the default run (friction-net,
-//! every solve to 1e-3), stepped as one batch and one simulator after
-//! another, side by side in one run, each from the same state: one world
-//! run through the untimed steps, so that the body presses the cloth.
+//! world-steps a second of N worlds of the default run (every solve to
+//! 1e-3), stepped as one batch and one simulator after another, side by
+//! side in one run, each from the same state: one world run through the
+//! untimed steps, so that the body presses the cloth. The CPU runs the
+//! default run's friction-net; the GPU's batch runs the analytic models so
+//! far (`GpuSim::with_worlds`), so its rows run friction.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{BenchOptions, HEADLINE, UNTIMED_STEPS};
-use wgcloth::cpu::CpuSim;
+use super::{BenchOptions, HEADLINE, UNTIMED_STEPS, Variant};
+use wgcloth::config::ModelKind;
 use wgcloth::cpu::worlds::CpuWorlds;
+use wgcloth::cpu::{CpuSim, State};
 use wgcloth::error::Result;
+use wgcloth::gpu::worlds::MAX_WORLDS;
+use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
+use wgcloth::scene::Scene;
 
 /// One batch size on one backend.
 #[derive(Clone, Debug, Serialize)]
 pub struct WorldsRow {
     pub backend: String,
+    /// The contact model the worlds run.
+    pub model: String,
     pub worlds: usize,
     pub grid: u32,
     /// Steps timed, each of every world.
@@ -28,6 +36,20 @@ pub struct WorldsRow {
     pub separate: f64,
     /// `batched` over `separate`.
     pub ratio: f64,
+    /// Dispatches a batch step records (GPU), whatever its worlds.
+    pub dispatches: Option<u32>,
+}
+
+/// The scene of the rows of `model` at `grid`, and its state after the
+/// untimed steps on the CPU.
+fn warm_scene(model: ModelKind, grid: u32, opts: &BenchOptions) -> Result<(Scene, State)> {
+    let variant = Variant { model, ..HEADLINE };
+    let scene = variant.scene(grid, opts.substeps)?;
+    let mut warm = CpuSim::new(scene.clone());
+    for _ in 0..UNTIMED_STEPS {
+        warm.step();
+    }
+    Ok((scene, warm.state))
 }
 
 /// The CPU's rows, one for each of `opts.worlds`.
@@ -36,14 +58,9 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
         return Ok(Vec::new());
     }
     let grid = opts.period_grid;
-    let scene = HEADLINE.scene(grid, opts.substeps)?;
-    let mut warm = CpuSim::new(scene.clone());
-    for _ in 0..UNTIMED_STEPS {
-        warm.step();
-    }
+    let (scene, warm) = warm_scene(HEADLINE.model, grid, opts)?;
     let steps = opts.worlds_steps;
-    let from_warm =
-        |sims: &mut [CpuSim]| sims.iter_mut().for_each(|s| s.state = warm.state.clone());
+    let from_warm = |sims: &mut [CpuSim]| sims.iter_mut().for_each(|s| s.state = warm.clone());
     let mut rows = Vec::new();
     for &n in &opts.worlds {
         progress(&format!("worlds cpu {n} × {grid}²"));
@@ -66,12 +83,74 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
         ));
         rows.push(WorldsRow {
             backend: "cpu".into(),
+            model: HEADLINE.model.name().into(),
             worlds: n,
             grid,
             steps,
             batched,
             separate,
             ratio: batched / separate,
+            dispatches: None,
+        });
+    }
+    Ok(rows)
+}
+
+/// The GPU's rows on `ctx`, one for each of `opts.worlds` a batch holds
+/// ([`MAX_WORLDS`]): the separate simulators each record and submit their
+/// step in turn, the batch its one step; each side waits for the device
+/// once, at the end.
+pub fn gpu_rows(
+    opts: &BenchOptions,
+    ctx: &GpuContext,
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<WorldsRow>> {
+    let grid = opts.period_grid;
+    let model = ModelKind::Friction;
+    let (scene, warm) = warm_scene(model, grid, opts)?;
+    let kernels = Kernels::new(&ctx.device)?;
+    let steps = opts.worlds_steps;
+    let mut rows = Vec::new();
+    for &n in &opts.worlds {
+        if n > MAX_WORLDS as usize {
+            progress(&format!(
+                "worlds gpu {n}: a batch holds at most {MAX_WORLDS}"
+            ));
+            continue;
+        }
+        progress(&format!("worlds gpu {n} × {grid}² ({})", model.name()));
+        let separate = (0..n)
+            .map(|_| GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene))
+            .collect::<Result<Vec<_>>>()?;
+        separate.iter().for_each(|s| s.upload_state(&warm));
+        ctx.finish()?;
+        let start = Instant::now();
+        for _ in 0..steps {
+            separate.iter().for_each(|s| _ = s.step());
+        }
+        ctx.finish()?;
+        let separate = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
+        let scenes = vec![scene.clone(); n];
+        let batch = GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, &scenes)?;
+        batch.upload_state(&warm);
+        ctx.finish()?;
+        let start = Instant::now();
+        let dispatches = (0..steps).map(|_| batch.step()).max();
+        ctx.finish()?;
+        let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
+        progress(&format!(
+            "  {batched:.1} world-steps/s batched, {separate:.1} separate"
+        ));
+        rows.push(WorldsRow {
+            backend: "gpu".into(),
+            model: model.name().into(),
+            worlds: n,
+            grid,
+            steps,
+            batched,
+            separate,
+            ratio: batched / separate,
+            dispatches,
         });
     }
     Ok(rows)

@@ -1,16 +1,19 @@
 //! A batch of worlds (`run --worlds N`, `--sweep FILE`; issue 67): every
 //! world steps together, the CPU path spreading them over its threads
-//! (`wgcloth::cpu::worlds`). A world that diverges stops there and the
-//! rest go on. What it reports: one line a world and one for the batch.
+//! (`wgcloth::cpu::worlds`), the GPU in one step's dispatches
+//! (`GpuSim::with_worlds`). A world that diverges stops there on the CPU;
+//! on the GPU its region steps on unread. The rest go on either way.
+//! What it reports: one line a world and one for the batch.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::report::{Tally, median, peak_resident_bytes};
-use wgcloth::cpu::integrate;
+use super::report::{RESIDUAL_GOAL, Tally, median, peak_resident_bytes};
 use wgcloth::cpu::worlds::CpuWorlds;
+use wgcloth::cpu::{self, integrate};
 use wgcloth::error::Result;
+use wgcloth::gpu::{GpuContext, GpuSim, Kernels, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
 use wgcloth::scene::Scene;
 use wgcloth::stage::SelfContactStages;
@@ -174,6 +177,95 @@ pub fn run_worlds(
             "CPU reference path ({} threads)",
             rayon::current_num_threads()
         ),
+        steps,
+        ms_per_step: median(&mut wall_ms),
+        world_steps_per_second: world_steps as f64 / seconds.max(1e-9),
+        peak_resident_bytes: peak_resident_bytes(),
+        worlds,
+    })
+}
+
+/// [`run_worlds`] on the GPU: the batch records each step once for every
+/// world, and reads back every world's statistics after it (one copy).
+pub fn run_worlds_gpu(
+    ctx: &GpuContext,
+    scenes: Vec<Scene>,
+    set: &[String],
+    steps: u64,
+    mut progress: impl FnMut(u64),
+) -> Result<BatchReport> {
+    let kernels = Kernels::new(&ctx.device)?;
+    let batch = GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, &scenes)?;
+    let n = scenes.len();
+    // Per world: iterations, most iterations, worst residual, steps above
+    // the goal, contacts, deepest penetration.
+    let mut iterations = vec![(0u64, 0u32); n];
+    let mut residuals = vec![(0f32, 0u64); n];
+    let mut taken = vec![0u64; n];
+    let mut diverged: Vec<Option<Divergence>> = vec![None; n];
+    let mut last = batch.read_world_states()?;
+    let mut wall_ms = Vec::new();
+    let started = Instant::now();
+    for k in 0..steps {
+        let start = Instant::now();
+        batch.step();
+        let states = batch.read_world_states()?;
+        wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        for (w, s) in states.iter().enumerate() {
+            if diverged[w].is_some() {
+                continue;
+            }
+            taken[w] = k + 1;
+            iterations[w].0 += s.last_iterations as u64;
+            iterations[w].1 = iterations[w].1.max(s.last_iterations);
+            let r = s.last_residual;
+            residuals[w].0 = residuals[w].0.max(r);
+            residuals[w].1 += u64::from(r > RESIDUAL_GOAL || r.is_nan());
+            let breakdown = s.cg_breakdowns > last[w].cg_breakdowns;
+            if health::failed(s.health, breakdown) {
+                let (x, v, _) = batch.read_world(w as u32)?;
+                let (diag, _, b) = batch.read_world_system(w as u32)?;
+                diverged[w] = Some(health::diagnose(&FailedStep {
+                    step: k + 1,
+                    flags: s.health,
+                    breakdown,
+                    diag: &diag,
+                    b: &b,
+                    x: &x,
+                    v: &v,
+                    max_speed: scenes[w].config.solver.max_speed,
+                }));
+            }
+        }
+        last = states;
+        progress(k + 1);
+    }
+    ctx.finish()?;
+    let seconds = started.elapsed().as_secs_f64();
+    let mut worlds = Vec::with_capacity(n);
+    for (w, scene) in scenes.iter().enumerate() {
+        let (x, v, state) = batch.read_world(w as u32)?;
+        let done = taken[w].max(1) as f64;
+        worlds.push(WorldReport {
+            world: w,
+            set: set.get(w).cloned().unwrap_or_default(),
+            steps: taken[w],
+            finite: x.iter().chain(&v).all(|p| p.is_finite()),
+            divergence: diverged[w].clone(),
+            cg_iterations_mean: iterations[w].0 as f64 / done,
+            cg_iterations_max: iterations[w].1,
+            cg_residual_max: residuals[w].0,
+            cg_steps_above_goal: residuals[w].1,
+            max_penetration: f32::from_bits(state.max_penetration_bits),
+            contacts_mean: state.contacts_total as f64 / state.steps.max(1) as f64,
+            energy_final: cpu::energy(scene, &x, &v).total(),
+            failsafe_share: None,
+        });
+    }
+    let world_steps: u64 = taken.iter().sum();
+    Ok(BatchReport {
+        backend: "gpu".into(),
+        adapter: describe(&ctx.adapter),
         steps,
         ms_per_step: median(&mut wall_ms),
         world_steps_per_second: world_steps as f64 / seconds.max(1e-9),

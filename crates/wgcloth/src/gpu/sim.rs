@@ -29,6 +29,14 @@ use crate::stage::{SelfContactStages, Stage};
 /// A contact slot and its response, as read back.
 pub type ContactSlot = (Contact, Response);
 
+/// What [`GpuSim::build`] lays out: the topology, the buffers' sizes (all
+/// of them, and one world's region) and a batch's own parameters.
+struct Laid<'a> {
+    topology: (Vec<u32>, Sections),
+    sizes: (Sizes, Sizes),
+    batch: Option<Batch<'a>>,
+}
+
 /// Timestamp queries around each pass, where the adapter has them.
 struct Timer {
     queries: wgpu::QuerySet,
@@ -113,7 +121,11 @@ impl GpuSim {
             queue,
             scene,
             params,
-            ((topology, sections), sizes, None),
+            Laid {
+                topology: (topology, sections),
+                sizes,
+                batch: None,
+            },
         );
         captured(oom, "allocating the scene's buffers").await?;
         captured(scope, "creating the scene's GPU state").await?;
@@ -138,6 +150,12 @@ impl GpuSim {
         scenes: &[Scene],
     ) -> Result<GpuSim> {
         pollster::block_on(Self::create_worlds(kernels, device, queue, scenes))
+    }
+
+    /// Whether [`GpuSim::with_worlds`] runs worlds of `scene`, or an error
+    /// saying why not.
+    pub fn batchable(scene: &Scene) -> Result<()> {
+        batchable(scene)
     }
 
     /// [`GpuSim::with_worlds`] as a future.
@@ -207,7 +225,11 @@ impl GpuSim {
             queue,
             scene,
             params,
-            ((topology, sections), (batched, region), Some(batch)),
+            Laid {
+                topology: (topology, sections),
+                sizes: (batched, region),
+                batch: Some(batch),
+            },
         );
         captured(oom, "allocating the worlds' buffers").await?;
         captured(scope, "creating the worlds' GPU state").await?;
@@ -222,8 +244,13 @@ impl GpuSim {
         queue: &wgpu::Queue,
         scene: &Scene,
         params: Params,
-        (topology, sizes, batch): ((Vec<u32>, Sections), (Sizes, Sizes), Option<Batch>),
+        laid: Laid,
     ) -> Result<GpuSim> {
+        let Laid {
+            topology,
+            sizes,
+            batch,
+        } = laid;
         let buffers = Buffers::new(
             device,
             scene,
@@ -646,9 +673,7 @@ impl GpuSim {
                 .map(|p| Vec3::from_slice(&p[..3]))
                 .collect())
         };
-        let bytes: Vec<u8> = self.read(&self.buffers.state)?;
-        let at = (k as u64 * region.state) as usize;
-        let state = bytemuck::pod_read_unaligned(&bytes[at..at + size_of::<StepState>()]);
+        let state = self.read_world_states()?[k as usize];
         Ok((vectors(&self.buffers.x)?, vectors(&self.buffers.v)?, state))
     }
 
@@ -713,18 +738,38 @@ impl GpuSim {
     /// The assembled system of the last step: A's diagonal and per-spring
     /// blocks, and b.
     pub fn read_system(&self) -> Result<(Vec<layout::Sym3>, Vec<layout::Sym3>, Vec<Vec3>)> {
+        self.read_world_system(0)
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// [`Self::read_system`] of world `k` of a batch.
+    pub fn read_world_system(
+        &self,
+        k: u32,
+    ) -> Result<(Vec<layout::Sym3>, Vec<layout::Sym3>, Vec<Vec3>)> {
+        let (n, region) = (self.params.n_vertices as usize, &self.buffers.region);
         let floats: Vec<f32> = self.read(&self.buffers.b)?;
-        let entry = self.vector_layout().bytes() as usize / 4;
-        let b = floats
-            .chunks(entry)
-            .take(self.params.n_vertices as usize)
+        let b = floats[(k as u64 * region.solver_vector / 4) as usize..]
+            .chunks(self.vector_layout().bytes() as usize / 4)
+            .take(n)
             .map(Vec3::from_slice)
             .collect();
-        let mut diagonal: Vec<layout::Sym3> = self.read(&self.buffers.matrix.buffer)?;
-        let n = self.params.n_vertices as usize;
-        let mut off = diagonal.split_off(n);
-        off.truncate(self.params.n_springs as usize);
+        let blocks: Vec<layout::Sym3> = self.read(&self.buffers.matrix.buffer)?;
+        let at = (k as u64 * region.matrix / size_of::<layout::Sym3>() as u64) as usize;
+        let diagonal = blocks[at..at + n].to_vec();
+        let off = blocks[at + n..at + n + self.params.n_springs as usize].to_vec();
         Ok((diagonal, off, b))
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    /// Every world's clock and statistics, read back in one copy (blocks
+    /// until the GPU is done).
+    pub fn read_world_states(&self) -> Result<Vec<StepState>> {
+        let bytes: Vec<u8> = self.read(&self.buffers.state)?;
+        let region = self.buffers.region.state as usize;
+        Ok((0..self.buffers.worlds as usize)
+            .map(|k| bytemuck::pod_read_unaligned(&bytes[k * region..][..size_of::<StepState>()]))
+            .collect())
     }
 
     #[cfg(not(target_arch = "wasm32"))]
