@@ -66,7 +66,14 @@ fn a_gpu_only_bench_has_no_cpu_row() {
     assert!(report.periods.iter().all(|p| p.backend == "gpu") && !report.periods.is_empty());
     assert!(report.networks.iter().all(|n| n.backend == "gpu"));
     assert!(report.iterations.is_empty());
-    assert!(report.worlds.is_empty());
+    // The GPU's batched-worlds rows: one per batch size, each recording
+    // the dispatches of one world's step, whatever its worlds.
+    let worlds: Vec<usize> = report.worlds.iter().map(|w| w.worlds).collect();
+    assert_eq!(worlds, opts.worlds);
+    assert!(report.worlds.iter().all(|w| w.backend == "gpu"));
+    let dispatches: Vec<Option<u32>> = report.worlds.iter().map(|w| w.dispatches).collect();
+    assert!(dispatches[0].is_some_and(|d| d > 0), "{dispatches:?}");
+    assert!(dispatches.iter().all(|d| *d == dispatches[0]), "{dispatches:?}");
 }
 
 /// `--cpu-only`: the CPU's rows (steps, periods, networks, solver
