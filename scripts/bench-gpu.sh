@@ -19,8 +19,10 @@
 #     at each grid of $SELF_CONTACT_GRIDS (default "512 1024"), report
 #     self_contact_N.json: issue 65 asks that it run finite;
 #  4. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
-#     networks' throughput and the sphere period, into bench.json,
-#     bench.png and bench.txt.
+#     networks' throughput, the sphere period and the batched worlds (1 to
+#     256 worlds of the 32² run as one GpuSim against as many separate
+#     ones: the issue asks for 5,000 world-steps a second), into
+#     bench.json, bench.png and bench.txt.
 # Both take $SUBSTEPS solves a step (default 1: the thesis's step, the one
 # the goal names and the H200 figures in BENCHMARKS.md timed; 0 takes the
 # scene's own, which keep the sphere within half the cloth's spacing a
