@@ -73,7 +73,10 @@ fn a_gpu_only_bench_has_no_cpu_row() {
     assert!(report.worlds.iter().all(|w| w.backend == "gpu"));
     let dispatches: Vec<Option<u32>> = report.worlds.iter().map(|w| w.dispatches).collect();
     assert!(dispatches[0].is_some_and(|d| d > 0), "{dispatches:?}");
-    assert!(dispatches.iter().all(|d| *d == dispatches[0]), "{dispatches:?}");
+    assert!(
+        dispatches.iter().all(|d| *d == dispatches[0]),
+        "{dispatches:?}"
+    );
 }
 
 /// `--cpu-only`: the CPU's rows (steps, periods, networks, solver
