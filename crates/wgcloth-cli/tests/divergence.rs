@@ -242,7 +242,7 @@ fn the_cli_reports_a_divergence_in_one_line_and_keeps_the_last_good_state() {
     let (report, obj) = (dir.join("r.json"), dir.join("good.obj"));
     let config = dir.join("fall.toml");
     std::fs::write(&config, "[solver]\ngravity = [0.0, 0.0, -9.81]\n").unwrap();
-    let out = cli::cpu_friction_run("hang")
+    let out = cli::friction_run("hang", "cpu")
         .args(["--grid", "8", "--steps", "50", "--max-speed", "0.25"])
         .arg("--config")
         .arg(&config)

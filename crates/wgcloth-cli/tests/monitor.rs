@@ -29,7 +29,7 @@ fn the_cli_writes_a_row_every_k_steps() {
     let dir = std::env::temp_dir().join(format!("wgcloth-monitor-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("m.csv");
-    let out = cli::cpu_friction_run("hang")
+    let out = cli::friction_run("hang", "cpu")
         .args([
             "--grid",
             "6",

@@ -2,14 +2,9 @@
 
 use std::process::Command;
 
-/// `wgcloth run` on the CPU path with the analytic friction model on
+/// `wgcloth run` on `backend` with the analytic friction model on
 /// `scene`: the start the runs of several tests share; each adds its own
 /// flags.
-pub fn cpu_friction_run(scene: &str) -> Command {
-    friction_run(scene, "cpu")
-}
-
-/// [`cpu_friction_run`] on `backend`.
 pub fn friction_run(scene: &str, backend: &str) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_wgcloth"));
     command.args([
