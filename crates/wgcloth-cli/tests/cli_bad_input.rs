@@ -1110,19 +1110,23 @@ fn worlds_that_disagree_with_the_sweep_or_number_none_are_rejected() {
 }
 
 #[test]
-fn worlds_refuse_the_flags_of_a_single_world_and_a_model_the_gpu_batch_lacks() {
+fn worlds_refuse_the_flags_of_a_single_world_and_a_scene_the_gpu_batch_lacks() {
     let dir = TempDir::new("worlds-flags");
     let frames = dir.path("frames");
     let out = run_tiny(&["--worlds", "2", "--out", s(&frames)]);
     expect_error("--out", &out, &["--out", "one world"], &[]);
     assert!(!frames.exists(), "nothing is written");
-    // The GPU batch runs the analytic models so far; the default is the network's.
-    let mut args = vec!["run", "--backend", "gpu", "--worlds", "2"];
-    args.extend_from_slice(TINY);
-    expect_error(
+    // The GPU batch runs without self-contact so far.
+    let folding = dir.file("folding.toml", "[self_contact]\nenabled = true\n");
+    let mut args = vec![
+        "run",
+        "--backend",
         "gpu",
-        &wgcloth(&args),
-        &["worlds", "model", "friction"],
-        &[],
-    );
+        "--worlds",
+        "2",
+        "--config",
+        s(&folding),
+    ];
+    args.extend_from_slice(TINY);
+    expect_error("gpu", &wgcloth(&args), &["worlds", "self-contact"], &[]);
 }

@@ -15,8 +15,13 @@ const STEPS: usize = 30;
 /// The thesis scene at 16² with world `k`'s friction and sphere path:
 /// worlds that would end differently if they were mixed up.
 fn world(k: usize) -> Scene {
+    world_of(ModelKind::Friction, k)
+}
+
+/// [`world`] with `model`.
+fn world_of(model: ModelKind, k: usize) -> Scene {
     let mut c = Config {
-        model: ModelKind::Friction,
+        model,
         ..Default::default()
     };
     c.cloth.grid = [16, 16];
@@ -68,47 +73,75 @@ fn a_world_disturbed_or_left_out_changes_no_other() {
     assert_eq!(shaken[2].state.step, (STEPS / 2) as u64);
 }
 
-/// A GPU batch of `worlds` worlds, each at rest, and its kernels' device.
-fn gpu_batch(ctx: &wgcloth::gpu::GpuContext, kernels: &Kernels, worlds: usize) -> GpuSim {
-    let scenes: Vec<Scene> = (0..worlds).map(world).collect();
+/// A GPU batch of `worlds` worlds of `model`, each at rest.
+fn gpu_batch(
+    ctx: &wgcloth::gpu::GpuContext,
+    kernels: &Kernels,
+    model: ModelKind,
+    worlds: usize,
+) -> GpuSim {
+    let scenes: Vec<Scene> = (0..worlds).map(|k| world_of(model, k)).collect();
     GpuSim::with_worlds(kernels, &ctx.device, &ctx.queue, &scenes).expect("the batch fits")
 }
 
+/// The analytic model, and the network's, whose one batch serves every
+/// world's contacts.
 #[test]
 fn each_world_of_a_gpu_batch_ends_bit_for_bit_where_it_ends_alone() {
     let Some(ctx) = common::gpu_context() else {
         return;
     };
     let kernels = Kernels::new(&ctx.device).unwrap();
-    let together = gpu_batch(&ctx, &kernels, 4);
+    for model in [ModelKind::Friction, ModelKind::FrictionNet] {
+        gpu_batch_ends_where_each_world_ends_alone(&ctx, &kernels, model);
+    }
+}
+
+fn gpu_batch_ends_where_each_world_ends_alone(
+    ctx: &wgcloth::gpu::GpuContext,
+    kernels: &Kernels,
+    model: ModelKind,
+) {
+    let together = gpu_batch(ctx, kernels, model, 4);
     let dispatches: Vec<u32> = (0..STEPS).map(|_| together.step()).collect();
-    let mut ends = Vec::new();
+    let name = model.name();
+    let (mut ends, mut touched) = (Vec::new(), 0);
     for k in 0..4 {
-        let alone = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &world(k)).unwrap();
+        let scene = world_of(model, k);
+        let alone = GpuSim::with_kernels(kernels, &ctx.device, &ctx.queue, &scene).unwrap();
         let alone_dispatches: Vec<u32> = (0..STEPS).map(|_| alone.step()).collect();
+        // But for the network's chunks, a batch records one world's dispatches.
+        let besides = |d: &[u32], sim: &GpuSim| -> Vec<u32> {
+            d.iter().map(|d| d - sim.network_dispatches()).collect()
+        };
         assert_eq!(
-            dispatches, alone_dispatches,
-            "a batch records one world's dispatches"
+            besides(&dispatches, &together),
+            besides(&alone_dispatches, &alone),
+            "{name}: a batch records one world's dispatches"
         );
         let (x, v, state) = together.read_world(k as u32).unwrap();
-        assert!(x == alone.read_positions().unwrap(), "world {k}: positions");
+        assert!(
+            x == alone.read_positions().unwrap(),
+            "{name}, world {k}: positions"
+        );
         assert!(
             v == alone.read_velocities().unwrap(),
-            "world {k}: velocities"
+            "{name}, world {k}: velocities"
         );
         let alone_state = alone.read_state().unwrap();
-        assert_eq!(state.steps, alone_state.steps, "world {k}: steps");
-        assert_eq!(
-            state.cg_iterations_total, alone_state.cg_iterations_total,
-            "world {k}"
-        );
-        assert_eq!(
-            state.contacts_total, alone_state.contacts_total,
-            "world {k}"
-        );
+        assert_eq!(state.steps, alone_state.steps, "{name}, world {k}: steps");
+        let iterations = (state.cg_iterations_total, alone_state.cg_iterations_total);
+        assert_eq!(iterations.0, iterations.1, "{name}, world {k}: iterations");
+        let contacts = (state.contacts_total, alone_state.contacts_total);
+        assert_eq!(contacts.0, contacts.1, "{name}, world {k}: contacts");
+        touched += usize::from(contacts.0 > 0);
         ends.push(x);
     }
-    assert!(ends[0] != ends[1], "the worlds' parameters reach them");
+    assert!(touched > 0, "{name}: the sphere reaches some world's cloth");
+    assert!(
+        ends[0] != ends[1],
+        "{name}: the worlds' parameters reach them"
+    );
 }
 
 #[test]
@@ -117,8 +150,11 @@ fn a_world_of_a_gpu_batch_disturbed_changes_no_other() {
         return;
     };
     let kernels = Kernels::new(&ctx.device).unwrap();
-    let (calm, shaken) = (gpu_batch(&ctx, &kernels, 4), gpu_batch(&ctx, &kernels, 4));
-    let mut nudged = State::initial(&world(1));
+    // The network's: every world's contacts share its batch.
+    let model = ModelKind::FrictionNet;
+    let batch = || gpu_batch(&ctx, &kernels, model, 4);
+    let (calm, shaken) = (batch(), batch());
+    let mut nudged = State::initial(&world_of(model, 1));
     nudged.nudge(1e3 * PERTURBATION);
     shaken.upload_world_state(1, &nudged);
     for _ in 0..STEPS {
@@ -129,8 +165,6 @@ fn a_world_of_a_gpu_batch_disturbed_changes_no_other() {
         let (a, b) = (calm.read_world(k).unwrap(), shaken.read_world(k).unwrap());
         assert!(a.0 == b.0 && a.1 == b.1, "world {k} moved");
     }
-    assert!(
-        calm.read_world(1).unwrap().0 != shaken.read_world(1).unwrap().0,
-        "the disturbed world"
-    );
+    let moved = calm.read_world(1).unwrap().0 != shaken.read_world(1).unwrap().0;
+    assert!(moved, "the disturbed world");
 }

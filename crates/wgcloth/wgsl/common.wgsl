@@ -30,6 +30,10 @@ struct Params {
 // recompiles a kernel whenever its uniforms are rebound).
 @group(0) @binding(0) var<uniform> params: Params;
 
+// The world this invocation steps: 0 for one scene; in a batch of worlds
+// (gpu::worlds) its workgroup's row, set where each entry point starts.
+var<private> world: u32;
+
 // Time and run statistics, on the GPU so a step needs no host writes.
 // Mirrors `gpu::layout::StepState`.
 struct StepState {

@@ -22,6 +22,12 @@
 @group(1) @binding(7) var<storage, read_write> net_inputs: array<f32>;
 @group(1) @binding(8) var<storage, read> net_outputs: array<f32>;
 
+// A batch entry names contact slot s of world w as w × world_slots() + s,
+// so one network batch serves every world of a batch (gpu::worlds).
+fn world_slots() -> u32 {
+    return params.n_vertices + params.n_rigid_vertices;
+}
+
 // Naive penalty (thesis eq. 6): f = −c_n d̃ n = −c_n c.
 fn naive(c: vec3<f32>) -> ForceJacobian {
     let k = params.naive_stiffness;
@@ -170,7 +176,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         let slides = array<f32, CONTACT_FRAME_ROWS>(f.slide, -f.slide, 0.0);
         let c = f.depth * f.c_hat;
         for (var r = 0u; r < frame_rows(); r++) {
-            atomicStore(&net_batch[1u + entry + r], s);
+            atomicStore(&net_batch[1u + entry + r], world * world_slots() + s);
             let base = (entry + r) * params.net_width;
             if params.model == MODEL_FRICTION_CONTACT_NET {
                 let row = array<f32, 7>(f.depth, f.approach, slides[r], params.kn, params.kd, params.kt, params.mu);
@@ -189,7 +195,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let entry = atomicAdd(&net_batch[0], 1u);
-    atomicStore(&net_batch[1u + entry], s);
+    atomicStore(&net_batch[1u + entry], world * world_slots() + s);
     let base = entry * params.net_width;
     let f = local_frame(s, k);
     let row = array<f32, 7>(f.b.x, f.c.x, f.c.y, 0.0, f.p.x, f.p.y, f.p.z);
@@ -388,7 +394,10 @@ fn respond_batch(@builtin(global_invocation_id) id: vec3<u32>) {
     if entry >= atomicLoad(&net_batch[0]) || second {
         return;
     }
-    let s = atomicLoad(&net_batch[1u + entry]);
+    // One thread per entry of every world's: the entry names its world.
+    let named = atomicLoad(&net_batch[1u + entry]);
+    world = named / world_slots();
+    let s = named % world_slots();
     let k = contacts[s];
     let v_rel = relative_velocity(k);
     let r = response(network_force(entry, s, k, v_rel), k.normal, v_rel, 0.0);

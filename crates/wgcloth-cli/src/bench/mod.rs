@@ -1390,27 +1390,26 @@ impl BenchReport {
                     .into(),
                 &[
                     ("backend", Left),
-                    ("model", Left),
                     ("worlds", Right),
                     ("grid", Right),
                     ("steps", Right),
                     ("batched world-steps/s", Right),
                     ("separate world-steps/s", Right),
                     ("× separate", Right),
-                    ("dispatches a batch step", Right),
+                    ("dispatches a batch step (network's)", Right),
                 ],
                 &self.worlds,
                 |w| {
                     vec![
                         w.backend.clone(),
-                        w.model.clone(),
                         w.worlds.to_string(),
                         w.grid.to_string(),
                         w.steps.to_string(),
                         format!("{:.1}", w.batched),
                         format!("{:.1}", w.separate),
                         format!("{:.2}", w.ratio),
-                        w.dispatches.map_or("—".into(), |d| d.to_string()),
+                        w.dispatches
+                            .map_or("—".into(), |(d, net)| format!("{d} ({net})")),
                     ]
                 },
             ),

@@ -2,16 +2,14 @@
 //! world-steps a second of N worlds of the default run (every solve to
 //! 1e-3), stepped as one batch and one simulator after another, side by
 //! side in one run, each from the same state: one world run through the
-//! untimed steps, so that the body presses the cloth. The CPU runs the
-//! default run's friction-net; the GPU's batch runs the analytic models so
-//! far (`GpuSim::with_worlds`), so its rows run friction.
+//! untimed steps, so that the body presses the cloth: a batch of
+//! `CpuWorlds` on the CPU, one `GpuSim::with_worlds` on the GPU.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{BenchOptions, HEADLINE, UNTIMED_STEPS, Variant};
-use wgcloth::config::ModelKind;
+use super::{BenchOptions, HEADLINE, UNTIMED_STEPS};
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::cpu::{CpuSim, State};
 use wgcloth::error::Result;
@@ -23,8 +21,6 @@ use wgcloth::scene::Scene;
 #[derive(Clone, Debug, Serialize)]
 pub struct WorldsRow {
     pub backend: String,
-    /// The contact model the worlds run.
-    pub model: String,
     pub worlds: usize,
     pub grid: u32,
     /// Steps timed, each of every world.
@@ -36,15 +32,16 @@ pub struct WorldsRow {
     pub separate: f64,
     /// `batched` over `separate`.
     pub ratio: f64,
-    /// Dispatches a batch step records (GPU), whatever its worlds.
-    pub dispatches: Option<u32>,
+    /// Dispatches a batch step records (GPU), and of them the network
+    /// batch's: the rest are one world's, whatever the worlds; the network
+    /// takes a chunk's more for each chunk the worlds' contacts fill.
+    pub dispatches: Option<(u32, u32)>,
 }
 
-/// The scene of the rows of `model` at `grid`, and its state after the
-/// untimed steps on the CPU.
-fn warm_scene(model: ModelKind, grid: u32, opts: &BenchOptions) -> Result<(Scene, State)> {
-    let variant = Variant { model, ..HEADLINE };
-    let scene = variant.scene(grid, opts.substeps)?;
+/// The rows' scene at `grid`, and its state after the untimed steps on
+/// the CPU.
+fn warm_scene(grid: u32, opts: &BenchOptions) -> Result<(Scene, State)> {
+    let scene = HEADLINE.scene(grid, opts.substeps)?;
     let mut warm = CpuSim::new(scene.clone());
     for _ in 0..UNTIMED_STEPS {
         warm.step();
@@ -58,7 +55,7 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
         return Ok(Vec::new());
     }
     let grid = opts.period_grid;
-    let (scene, warm) = warm_scene(HEADLINE.model, grid, opts)?;
+    let (scene, warm) = warm_scene(grid, opts)?;
     let steps = opts.worlds_steps;
     let from_warm = |sims: &mut [CpuSim]| sims.iter_mut().for_each(|s| s.state = warm.clone());
     let mut rows = Vec::new();
@@ -83,7 +80,6 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
         ));
         rows.push(WorldsRow {
             backend: "cpu".into(),
-            model: HEADLINE.model.name().into(),
             worlds: n,
             grid,
             steps,
@@ -106,8 +102,7 @@ pub fn gpu_rows(
     progress: &mut impl FnMut(&str),
 ) -> Result<Vec<WorldsRow>> {
     let grid = opts.period_grid;
-    let model = ModelKind::Friction;
-    let (scene, warm) = warm_scene(model, grid, opts)?;
+    let (scene, warm) = warm_scene(grid, opts)?;
     let kernels = Kernels::new(&ctx.device)?;
     let steps = opts.worlds_steps;
     let mut rows = Vec::new();
@@ -118,7 +113,7 @@ pub fn gpu_rows(
             ));
             continue;
         }
-        progress(&format!("worlds gpu {n} × {grid}² ({})", model.name()));
+        progress(&format!("worlds gpu {n} × {grid}²"));
         let separate = (0..n)
             .map(|_| GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene))
             .collect::<Result<Vec<_>>>()?;
@@ -135,7 +130,10 @@ pub fn gpu_rows(
         batch.upload_state(&warm);
         ctx.finish()?;
         let start = Instant::now();
-        let dispatches = (0..steps).map(|_| batch.step()).max();
+        let dispatches = (0..steps)
+            .map(|_| batch.step())
+            .max()
+            .map(|d| (d, batch.network_dispatches()));
         ctx.finish()?;
         let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
         progress(&format!(
@@ -143,7 +141,6 @@ pub fn gpu_rows(
         ));
         rows.push(WorldsRow {
             backend: "gpu".into(),
-            model: model.name().into(),
             worlds: n,
             grid,
             steps,

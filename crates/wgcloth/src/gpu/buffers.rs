@@ -318,9 +318,9 @@ pub(crate) fn solved_whole(scene: &Scene) -> bool {
 }
 
 /// Whether a batch of worlds of `scene` runs on the GPU (`gpu::worlds`),
-/// or why not: so far its kernels record no indirect dispatch, so each
-/// step must be solved whole, with an analytic contact model and no
-/// self-contact.
+/// or why not: so far the only indirect dispatches its kernels record are
+/// the network's (over every world's contacts at once), so each step must
+/// be solved whole and without self-contact.
 pub(crate) fn batchable(scene: &Scene) -> Result<()> {
     let refuse = |why: &str| {
         Err(Error::config(
@@ -330,9 +330,6 @@ pub(crate) fn batchable(scene: &Scene) -> Result<()> {
     };
     if SelfContactStages::of(&scene.config.self_contact).separate {
         return refuse("runs without self-contact so far (self_contact.enabled = false)");
-    }
-    if scene.network.is_some() {
-        return refuse("runs the analytic contact models so far (model = naive or friction)");
     }
     if !solved_whole(scene) {
         return refuse(&format!(

@@ -122,7 +122,7 @@ impl LevelKind {
 }
 
 /// A kernel bound to one scene's buffers: ready to record (a scene
-/// stage's pass binds `params` once, [`Kernels::bind_params`]).
+/// stage's pass binds `params` once).
 pub struct Bound {
     pipeline: wgpu::ComputePipeline,
     index: u32,
@@ -148,6 +148,13 @@ impl Bound {
     pub fn dispatch(&self, pass: &mut Pass, threads: u32, workgroup: u32) {
         self.set(pass);
         pass.dispatch_workgroups(threads.div_ceil(workgroup));
+    }
+
+    /// [`Bound::dispatch`] once, whatever the worlds
+    /// ([`Pass::dispatch_workgroups_once`]).
+    pub fn dispatch_once(&self, pass: &mut Pass, threads: u32, workgroup: u32) {
+        self.set(pass);
+        pass.dispatch_workgroups_once(threads.div_ceil(workgroup));
     }
 }
 

@@ -527,11 +527,16 @@ impl GpuMlp {
         self.multiply_adds * self.rows_per_contact
     }
 
+    /// Dispatches [`GpuMlp::record`] records: the plan, then each chunk's.
+    pub fn dispatches(&self) -> u32 {
+        1 + self.layers.len() as u32
+    }
+
     /// Records the batch: the dispatch sizes, then each chunk's
     /// `per_contact` or every layer of every chunk (chunks past the batch
     /// size dispatch nothing).
     pub fn record(&self, pass: &mut Pass) {
-        self.plan.dispatch(pass, self.entries, BATCH_GROUP);
+        self.plan.dispatch_once(pass, self.entries, BATCH_GROUP);
         for (e, layer) in self.layers.iter().enumerate() {
             layer.dispatch_indirect(pass, &self.dispatch, 12 * e as u64);
         }

@@ -50,14 +50,17 @@ impl<'e> Pass<'e> {
         self.dispatches += 1;
     }
 
+    /// A dispatch of `groups` workgroups once, whatever the worlds: a
+    /// kernel that covers every world's work itself (the network's batch).
+    pub fn dispatch_workgroups_once(&mut self, groups: u32) {
+        self.pass.dispatch_workgroups(groups, 1, 1);
+        self.dispatches += 1;
+    }
+
     /// A dispatch whose workgroup counts the GPU wrote at `offset` of
-    /// `args` (three `u32`s): of one world's kernels, as a batch records
-    /// none.
+    /// `args` (three `u32`s), once: the GPU sized it for every world's
+    /// work (the network's batch).
     pub fn dispatch_workgroups_indirect(&mut self, args: &wgpu::Buffer, offset: u64) {
-        debug_assert_eq!(
-            self.worlds, 1,
-            "a batch of worlds dispatches no kernel indirectly"
-        );
         self.pass.dispatch_workgroups_indirect(args, offset);
         self.dispatches += 1;
     }

@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 
 #[cfg(not(target_arch = "wasm32"))]
 use bytemuck::Pod;
+#[cfg(not(target_arch = "wasm32"))]
 use glam::Vec3;
 
 use crate::cpu::State;
@@ -138,9 +139,9 @@ impl GpuSim {
     /// would. The worlds share their cloth's grid, their body's mesh, the
     /// contact model's kind and everything else that sizes a buffer or a
     /// dispatch; each has its own [`WorldParams`] (coefficients, material,
-    /// the body's motion, tolerance) and state. So far a batch runs the
-    /// scenes whose step a single dispatch solves
-    /// ([`GpuSim::solved_whole`]) with an analytic contact model and no
+    /// the body's motion, tolerance) and state; the network runs once over
+    /// every world's contacts. So far a batch runs the scenes whose step a
+    /// single dispatch solves ([`GpuSim::solved_whole`]) and no
     /// self-contact; any other gets an error saying which.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn with_worlds(
@@ -194,14 +195,15 @@ impl GpuSim {
             if its_topology != topology
                 || world.cloth.rest_positions != scene.cloth.rest_positions
                 || !same_body
+                || world.network != scene.network
                 || bytemuck::bytes_of(&WorldParams::shared(&its)) != bytemuck::bytes_of(&shared)
             {
                 return Err(Error::config(
                     "worlds",
                     format!(
                         "world {k} differs from world 0 in what a batch shares (the cloth's \
-                         grid, the body's mesh, the contact model, the solver's sizes or \
-                         substeps); run it in a batch of its own"
+                         grid, the body's mesh, the contact model or its network, the \
+                         solver's sizes or substeps); run it in a batch of its own"
                     ),
                 ));
             }
@@ -262,7 +264,9 @@ impl GpuSim {
         );
         let network = match &scene.network {
             Some(net) if params.has_rigid != 0 => {
-                let slots = (params.n_vertices + params.n_rigid_vertices) as usize;
+                // One batch for every world's contacts (`gpu::worlds`).
+                let slots = (params.n_vertices + params.n_rigid_vertices) as usize
+                    * buffers.worlds as usize;
                 let (capacity, wrt) = (slots * net.kind.evaluations(), net.kind.wrt());
                 debug_assert!(buffers.net_outputs.size() >= output_bytes(&net.mlp, capacity, &wrt));
                 Some(GpuMlp::new(
@@ -478,6 +482,14 @@ impl GpuSim {
     /// The kernel running a network model's network.
     pub fn network_kernel(&self) -> Option<NetworkKernel> {
         self.stages.contact.network_kernel()
+    }
+
+    /// Dispatches a step's network batch records (0 without a network): a
+    /// batch of worlds' one batch takes a chunk's more for each chunk its
+    /// worlds' contacts fill (`GpuMlp`); the rest of a step records one
+    /// world's dispatches, whatever the worlds.
+    pub fn network_dispatches(&self) -> u32 {
+        self.stages.contact.network_dispatches() * self.params.substeps
     }
 
     /// The cloth's indices at the start of [`Self::indices`]: three per triangle.

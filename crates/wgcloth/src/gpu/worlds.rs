@@ -20,9 +20,11 @@ use crate::gpu::shaders::{self, Variant};
 pub const MAX_WORLDS: u32 = 512;
 
 /// The storage globals every world shares: the cloth's rest grid and
-/// topology, the body's mesh and BVH (in its own frame), and the multigrid
-/// hierarchy's shape.
-pub const SHARED: [&str; 8] = [
+/// topology, the body's mesh and BVH (in its own frame), the multigrid
+/// hierarchy's shape, and the network batch, whose entries name their
+/// world (wgsl/contact.wgsl) so the network runs once over every world's
+/// contacts.
+pub const SHARED: [&str; 11] = [
     "topology",
     "rest_positions",
     "body_vertices",
@@ -31,11 +33,14 @@ pub const SHARED: [&str; 8] = [
     "bvh_nodes",
     "bound_hop",
     "hop_list",
+    "net_batch",
+    "net_inputs",
+    "net_outputs",
 ];
 
 /// Every per-world storage global of the stages, by name: its slot in
 /// `world_strides`, the elements of its type one world's region holds.
-pub const PER_WORLD: [&str; 34] = [
+pub const PER_WORLD: [&str; 31] = [
     "x",
     "v",
     "b",
@@ -53,9 +58,6 @@ pub const PER_WORLD: [&str; 34] = [
     "triangle_contacts",
     "rigid",
     "bounds",
-    "net_batch",
-    "net_inputs",
-    "net_outputs",
     "lines",
     "x_start",
     "separations",
@@ -329,8 +331,8 @@ fn rewrite_span(
     Ok(())
 }
 
-/// Each entry point's body starts by setting `world` from its workgroup's
-/// row (the `workgroup_id` argument [`with_workgroup_id`] made sure of),
+/// Each entry point's body starts by setting `world` (common.wgsl) from
+/// its workgroup's row (the `workgroup_id` argument [`with_workgroup_id`] made sure of),
 /// and keeps its own name (naga escapes one that is also a builtin's).
 fn with_world_set(text: &str, module: &naga::Module) -> Result<String, String> {
     let mut out = String::with_capacity(text.len());
@@ -366,8 +368,8 @@ fn with_world_set(text: &str, module: &naga::Module) -> Result<String, String> {
     Ok(out)
 }
 
-/// What the rewritten code uses: the world, its parameters and the size
-/// of each per-world global's region.
+/// What the rewritten code uses: the world's parameters and the size of
+/// each per-world global's region.
 fn declarations() -> String {
     let fields: String = WorldParams::FIELDS
         .iter()
@@ -377,7 +379,6 @@ fn declarations() -> String {
         "struct WorldParams {{\n{fields}}}\n\
          @group(0) @binding({WORLD_PARAMS_BINDING}) var<uniform> world_params: array<WorldParams, {MAX_WORLDS}>;\n\
          @group(0) @binding({WORLD_STRIDES_BINDING}) var<uniform> world_strides: array<vec4<u32>, {STRIDE_VECTORS}>;\n\
-         var<private> world: u32;\n\
          fn world_at(slot: u32, i: u32) -> u32 {{\n    \
              return world * world_strides[slot / 4u][slot % 4u] + i;\n}}\n"
     )
@@ -422,7 +423,7 @@ mod tests {
     #[test]
     fn world_params_match_their_wgsl_layout() {
         let text = format!(
-            "{}@compute @workgroup_size(1) fn main() {{ world = 0u; }}",
+            "{}var<private> world: u32;\n@compute @workgroup_size(1) fn main() {{ world = 0u; }}",
             declarations()
         );
         let module = naga::front::wgsl::parse_str(&text).expect("parses");

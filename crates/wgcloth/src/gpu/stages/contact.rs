@@ -54,6 +54,11 @@ impl Contact {
     pub(crate) fn network_kernel(&self) -> Option<NetworkKernel> {
         self.network.as_ref().map(GpuMlp::kernel)
     }
+
+    /// Dispatches the network's batch records (0 without one).
+    pub(crate) fn network_dispatches(&self) -> u32 {
+        self.network.as_ref().map_or(0, GpuMlp::dispatches)
+    }
 }
 
 impl Record for Contact {
@@ -66,7 +71,8 @@ impl Record for Contact {
             self.respond_slots.dispatch(pass, n + r, WORKGROUP);
             return;
         };
-        self.reset_batch.dispatch(pass, 1, 1);
+        // One batch for every world's contacts (`gpu::worlds`).
+        self.reset_batch.dispatch_once(pass, 1, 1);
         self.gather.dispatch(pass, n + r, WORKGROUP);
         net.record(pass);
         pass.set_bind_group(0, group0);
