@@ -27,7 +27,9 @@
 //! - [`scene`]: cloth grid, springs, rigid body and its motion (OBJ bodies
 //!   with the `obj` feature).
 //! - [`cpu`]: the reference step, one module per stage.
-//! - [`gpu`]: the same stages as WGSL compute passes, and [`gpu::GpuSim`].
+//! - [`gpu`]: the same stages as WGSL compute passes, and [`gpu::GpuSim`]
+//!   (one scene, or a batch of worlds stepped together:
+//!   [`gpu::GpuSim::with_worlds`]).
 //! - [`nn`]: the contact networks, their weights files and their inputs.
 //! - [`render`]: drawing a scene's frames from the simulator's buffers.
 //! - [`health`]: what a step must leave, and where divergence started.
