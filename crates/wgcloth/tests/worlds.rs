@@ -7,6 +7,7 @@ mod common;
 use wgcloth::config::ModelKind;
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::cpu::{CpuSim, PERTURBATION, State};
+use wgcloth::gpu::worlds::MAX_WORLDS;
 use wgcloth::gpu::{GpuSim, Kernels};
 use wgcloth::{Config, Scene};
 
@@ -167,4 +168,36 @@ fn a_world_of_a_gpu_batch_disturbed_changes_no_other() {
     }
     let moved = calm.read_world(1).unwrap().0 != shaken.read_world(1).unwrap().0;
     assert!(moved, "the disturbed world");
+}
+
+/// Worlds that cannot share a batch get one error naming what, before any
+/// buffer is made: none, more than a batch holds, a world whose grid
+/// differs, and a scene the batch does not run (self-contact).
+#[test]
+fn a_gpu_batch_refuses_worlds_it_cannot_hold_with_an_error_naming_why() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let kernels = Kernels::new(&ctx.device).unwrap();
+    let refused =
+        |scenes: &[Scene]| match GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, scenes) {
+            Ok(_) => panic!("a batch of {} worlds was made", scenes.len()),
+            Err(e) => e.to_string(),
+        };
+    assert!(refused(&[]).contains("at least one world"));
+    let many = vec![world(0); MAX_WORLDS as usize + 1];
+    assert!(refused(&many).contains(&MAX_WORLDS.to_string()));
+    let mut coarser = Config::default();
+    coarser.cloth.grid = [8, 8];
+    let mixed = [world(0), Scene::new(&coarser).unwrap()];
+    let message = refused(&mixed);
+    assert!(
+        message.contains("world 1") && message.contains("grid"),
+        "{message}"
+    );
+    let mut folding = Config::default();
+    folding.cloth.grid = [16, 16];
+    folding.self_contact.enabled = true;
+    let message = refused(&[Scene::new(&folding).unwrap()]);
+    assert!(message.contains("self-contact"), "{message}");
 }
