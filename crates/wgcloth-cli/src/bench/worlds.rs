@@ -49,6 +49,30 @@ fn warm_scene(grid: u32, opts: &BenchOptions) -> Result<(Scene, State)> {
     Ok((scene, warm.state))
 }
 
+/// The row of `worlds` worlds at `grid`, `steps` timed, at `batched` and
+/// `separate` world-steps a second, told to `progress` too.
+fn row(
+    backend: &str,
+    (worlds, grid, steps): (usize, u32, u64),
+    (batched, separate): (f64, f64),
+    dispatches: Option<(u32, u32)>,
+    progress: &mut impl FnMut(&str),
+) -> WorldsRow {
+    progress(&format!(
+        "  {batched:.1} world-steps/s batched, {separate:.1} separate"
+    ));
+    WorldsRow {
+        backend: backend.into(),
+        worlds,
+        grid,
+        steps,
+        batched,
+        separate,
+        ratio: batched / separate,
+        dispatches,
+    }
+}
+
 /// The CPU's rows, one for each of `opts.worlds`.
 pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<WorldsRow>> {
     if opts.worlds.is_empty() {
@@ -75,19 +99,13 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
             batch.step();
         }
         let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
-        progress(&format!(
-            "  {batched:.1} world-steps/s batched, {separate:.1} separate"
+        rows.push(row(
+            "cpu",
+            (n, grid, steps),
+            (batched, separate),
+            None,
+            progress,
         ));
-        rows.push(WorldsRow {
-            backend: "cpu".into(),
-            worlds: n,
-            grid,
-            steps,
-            batched,
-            separate,
-            ratio: batched / separate,
-            dispatches: None,
-        });
     }
     Ok(rows)
 }
@@ -136,19 +154,8 @@ pub fn gpu_rows(
             .map(|d| (d, batch.network_dispatches()));
         ctx.finish()?;
         let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
-        progress(&format!(
-            "  {batched:.1} world-steps/s batched, {separate:.1} separate"
-        ));
-        rows.push(WorldsRow {
-            backend: "gpu".into(),
-            worlds: n,
-            grid,
-            steps,
-            batched,
-            separate,
-            ratio: batched / separate,
-            dispatches,
-        });
+        let timed = (batched, separate);
+        rows.push(row("gpu", (n, grid, steps), timed, dispatches, progress));
     }
     Ok(rows)
 }

@@ -254,18 +254,28 @@ pub struct EntryPoint {
     pub bindings: BTreeMap<String, Binding>,
 }
 
+/// Validates `module`, parsed from `src`, with the capabilities `variant`
+/// uses; a readable error where it is not valid.
+pub fn validate(
+    module: &naga::Module,
+    variant: Variant,
+    src: &str,
+) -> Result<naga::valid::ModuleInfo, String> {
+    let capabilities = match variant.subgroups {
+        true => naga::valid::Capabilities::SUBGROUP,
+        false => naga::valid::Capabilities::empty(),
+    };
+    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
+        .validate(module)
+        .map_err(|e| e.emit_to_string(src))
+}
+
 /// Parses and validates a stage with naga, returning a readable error, and
 /// lists its entry points with the bindings each uses.
 pub fn reflect(stage: &str, variant: Variant) -> Result<Vec<EntryPoint>, String> {
     let src = source(stage, variant);
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
-    let capabilities = match variant.subgroups {
-        true => naga::valid::Capabilities::SUBGROUP,
-        false => naga::valid::Capabilities::empty(),
-    };
-    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-        .validate(&module)
-        .map_err(|e| e.emit_to_string(&src))?;
+    let info = validate(&module, variant, &src)?;
     let mut declared = Vec::new();
     for (handle, var) in module.global_variables.iter() {
         let (Some(name), Some(rb)) = (&var.name, &var.binding) else {

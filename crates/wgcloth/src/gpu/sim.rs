@@ -113,23 +113,29 @@ impl GpuSim {
                 false => kernels,
                 true => kernels.in_parts(device).await?,
             };
-        let sizes = (sizes.clone(), sizes);
+        let laid = Laid {
+            topology: (topology, sections),
+            sizes: (sizes.clone(), sizes),
+            batch: None,
+        };
+        Self::built(kernels, (device, queue), scene, params, laid, "the scene's").await
+    }
+
+    /// [`GpuSim::build`] within error scopes, which `what` the errors
+    /// they catch name.
+    async fn built(
+        kernels: &Kernels,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        scene: &Scene,
+        params: Params,
+        laid: Laid<'_>,
+        what: &str,
+    ) -> Result<GpuSim> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let sim = Self::build(
-            kernels,
-            device,
-            queue,
-            scene,
-            params,
-            Laid {
-                topology: (topology, sections),
-                sizes,
-                batch: None,
-            },
-        );
-        captured(oom, "allocating the scene's buffers").await?;
-        captured(scope, "creating the scene's GPU state").await?;
+        let sim = Self::build(kernels, device, queue, scene, params, laid);
+        captured(oom, &format!("allocating {what} buffers")).await?;
+        captured(scope, &format!("creating {what} GPU state")).await?;
         sim
     }
 
@@ -215,27 +221,15 @@ impl GpuSim {
         let (region, _) = sizes.for_worlds(1, &elements);
         let (batched, strides) = sizes.for_worlds(scenes.len() as u32, &elements);
         check_limits(&device.limits(), &batched, &mut params, false)?;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let batch = Batch {
-            params: &each,
-            strides: &strides,
+        let laid = Laid {
+            topology: (topology, sections),
+            sizes: (batched, region),
+            batch: Some(Batch {
+                params: &each,
+                strides: &strides,
+            }),
         };
-        let sim = Self::build(
-            kernels,
-            device,
-            queue,
-            scene,
-            params,
-            Laid {
-                topology: (topology, sections),
-                sizes: (batched, region),
-                batch: Some(batch),
-            },
-        );
-        captured(oom, "allocating the worlds' buffers").await?;
-        captured(scope, "creating the worlds' GPU state").await?;
-        sim
+        Self::built(kernels, (device, queue), scene, params, laid, "the worlds'").await
     }
 
     /// Builds everything once the scene is known to fit (errors the device

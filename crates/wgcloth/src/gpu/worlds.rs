@@ -136,13 +136,7 @@ pub fn source(stage: &str, variant: Variant) -> Result<String, String> {
     let src = shaders::source(stage, variant);
     let mut module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
     with_workgroup_id(&mut module);
-    let capabilities = match variant.subgroups {
-        true => naga::valid::Capabilities::SUBGROUP,
-        false => naga::valid::Capabilities::empty(),
-    };
-    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-        .validate(&module)
-        .map_err(|e| e.emit_to_string(&src))?;
+    let info = shaders::validate(&module, variant, &src)?;
     let written =
         naga::back::wgsl::write_string(&module, &info, naga::back::wgsl::WriterFlags::empty())
             .map_err(|e| format!("{stage}: writing WGSL: {e}"))?;
@@ -409,13 +403,8 @@ mod tests {
                     source(stage, variant(subgroups)).unwrap_or_else(|e| panic!("{stage}: {e}"));
                 let module = naga::front::wgsl::parse_str(&text)
                     .unwrap_or_else(|e| panic!("{stage}:\n{}", e.emit_to_string(&text)));
-                let capabilities = match subgroups {
-                    true => naga::valid::Capabilities::SUBGROUP,
-                    false => naga::valid::Capabilities::empty(),
-                };
-                naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-                    .validate(&module)
-                    .unwrap_or_else(|e| panic!("{stage}:\n{}", e.emit_to_string(&text)));
+                shaders::validate(&module, variant(subgroups), &text)
+                    .unwrap_or_else(|e| panic!("{stage}:\n{e}"));
             }
         }
     }
