@@ -20,7 +20,7 @@
 #     self_contact_N.json: issue 65 asks that it run finite;
 #  4. `wgcloth bench --gpu-only`: every variant from 32² to 1024², the
 #     networks' throughput, the sphere period and the batched worlds (1 to
-#     256 worlds of the 32² run as one GpuSim against as many separate
+#     1,024 worlds of the 32² run as one GpuSim against as many separate
 #     ones: the issue asks for 5,000 world-steps a second), into
 #     bench.json, bench.png and bench.txt.
 # Both take $SUBSTEPS solves a step (default 1: the thesis's step, the one

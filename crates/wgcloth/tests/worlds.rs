@@ -201,3 +201,43 @@ fn a_gpu_batch_refuses_worlds_it_cannot_hold_with_an_error_naming_why() {
     let message = refused(&[Scene::new(&folding).unwrap()]);
     assert!(message.contains("self-contact"), "{message}");
 }
+
+/// Past the first 512 worlds, whose parameters the first uniform binding
+/// holds, each world still reads its own: worlds under different gravity,
+/// so that each step tells them apart.
+#[test]
+fn a_world_past_the_first_binding_of_parameters_keeps_its_own() {
+    let Some(ctx) = common::gpu_context() else {
+        return;
+    };
+    let under = |k: usize| {
+        let mut c = Config::default();
+        c.cloth.grid = [8, 8];
+        c.model = ModelKind::Friction;
+        c.solver.gravity[1] *= 1.0 + 0.1 * k as f32;
+        Scene::new(&c).unwrap()
+    };
+    let kernels = Kernels::new(&ctx.device).unwrap();
+    let scenes: Vec<Scene> = (0..514).map(|k| under(k % 3)).collect();
+    let batch = GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, &scenes).unwrap();
+    for _ in 0..3 {
+        batch.step();
+    }
+    for k in [0, 511, 512, 513] {
+        let alone = GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scenes[k]).unwrap();
+        for _ in 0..3 {
+            alone.step();
+        }
+        let (x, v, _) = batch.read_world(k as u32).unwrap();
+        assert!(x == alone.read_positions().unwrap(), "world {k}: positions");
+        assert!(
+            v == alone.read_velocities().unwrap(),
+            "world {k}: velocities"
+        );
+    }
+    let (a, b) = (
+        batch.read_world(512).unwrap().0,
+        batch.read_world(513).unwrap().0,
+    );
+    assert!(a != b, "gravity tells the worlds apart");
+}

@@ -1397,6 +1397,7 @@ impl BenchReport {
                     ("separate world-steps/s", Right),
                     ("× separate", Right),
                     ("dispatches a batch step (network's)", Right),
+                    ("ms to record a batch step", Right),
                 ],
                 &self.worlds,
                 |w| {
@@ -1410,6 +1411,7 @@ impl BenchReport {
                         format!("{:.2}", w.ratio),
                         w.dispatches
                             .map_or("—".into(), |(d, net)| format!("{d} ({net})")),
+                        w.record_ms.map_or("—".into(), |ms| format!("{ms:.3}")),
                     ]
                 },
             ),

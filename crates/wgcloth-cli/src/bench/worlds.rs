@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{BenchOptions, HEADLINE, UNTIMED_STEPS};
+use super::{BenchOptions, HEADLINE, UNTIMED_STEPS, median};
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::cpu::{CpuSim, State};
 use wgcloth::error::Result;
@@ -36,6 +36,8 @@ pub struct WorldsRow {
     /// batch's: the rest are one world's, whatever the worlds; the network
     /// takes a chunk's more for each chunk the worlds' contacts fill.
     pub dispatches: Option<(u32, u32)>,
+    /// The host's time to record a batch step (GPU), median, ms.
+    pub record_ms: Option<f64>,
 }
 
 /// The rows' scene at `grid`, and its state after the untimed steps on
@@ -55,7 +57,7 @@ fn row(
     backend: &str,
     (worlds, grid, steps): (usize, u32, u64),
     (batched, separate): (f64, f64),
-    dispatches: Option<(u32, u32)>,
+    (dispatches, record_ms): (Option<(u32, u32)>, Option<f64>),
     progress: &mut impl FnMut(&str),
 ) -> WorldsRow {
     progress(&format!(
@@ -70,6 +72,7 @@ fn row(
         separate,
         ratio: batched / separate,
         dispatches,
+        record_ms,
     }
 }
 
@@ -99,13 +102,8 @@ pub fn rows(opts: &BenchOptions, progress: &mut impl FnMut(&str)) -> Result<Vec<
             batch.step();
         }
         let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
-        rows.push(row(
-            "cpu",
-            (n, grid, steps),
-            (batched, separate),
-            None,
-            progress,
-        ));
+        let timed = (batched, separate);
+        rows.push(row("cpu", (n, grid, steps), timed, (None, None), progress));
     }
     Ok(rows)
 }
@@ -148,14 +146,23 @@ pub fn gpu_rows(
         batch.upload_state(&warm);
         ctx.finish()?;
         let start = Instant::now();
-        let dispatches = (0..steps)
-            .map(|_| batch.step())
-            .max()
-            .map(|d| (d, batch.network_dispatches()));
+        // Each step recorded and submitted as `step` does, its recording timed.
+        let (mut dispatches, mut record_ms) = (0, Vec::new());
+        for _ in 0..steps {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            let recording = Instant::now();
+            dispatches = dispatches.max(batch.encode_step(&mut encoder));
+            record_ms.push(recording.elapsed().as_secs_f64() * 1e3);
+            ctx.queue.submit([encoder.finish()]);
+        }
         ctx.finish()?;
         let batched = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
         let timed = (batched, separate);
-        rows.push(row("gpu", (n, grid, steps), timed, dispatches, progress));
+        let recorded = (
+            Some((dispatches, batch.network_dispatches())),
+            Some(median(&mut record_ms)),
+        );
+        rows.push(row("gpu", (n, grid, steps), timed, recorded, progress));
     }
     Ok(rows)
 }

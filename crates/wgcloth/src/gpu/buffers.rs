@@ -137,7 +137,8 @@ pub(crate) struct Buffers {
 
 /// What a batch of worlds adds to group 0 (`gpu::worlds`).
 pub(crate) struct WorldBuffers {
-    /// Each world's [`WorldParams`], in a uniform of `MAX_WORLDS` of them.
+    /// Each world's [`WorldParams`], `WORLDS_PER_BINDING` to a binding
+    /// (`gpu::worlds`), `MAX_WORLDS` in all.
     pub(crate) params: wgpu::Buffer,
     /// Each per-world global's region, in its elements.
     pub(crate) strides: wgpu::Buffer,

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use crate::error::{Error, Result};
 use crate::gpu::buffers::{Parts, WorldBuffers};
 use crate::gpu::constants;
-use crate::gpu::layout::VectorLayout;
+use crate::gpu::layout::{VectorLayout, WorldParams};
 use crate::gpu::pass::Pass;
 use crate::gpu::shaders::{self, Binding, STAGES};
 use crate::gpu::worlds;
@@ -375,8 +375,10 @@ impl Kernels {
         };
         let mut group0 = vec![uniform(shaders::PARAMS_BINDING)];
         if worlds {
-            group0.push(uniform(worlds::WORLD_PARAMS_BINDING));
             group0.push(uniform(worlds::WORLD_STRIDES_BINDING));
+            for k in 0..worlds::WORLD_PARAMS_BINDINGS {
+                group0.push(uniform(worlds::WORLD_PARAMS_BINDING + k));
+            }
         }
         let params_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("params"),
@@ -555,8 +557,18 @@ impl Kernels {
         }
         let mut entries = vec![entry(shaders::PARAMS_BINDING, params)];
         if let Some(w) = worlds {
-            entries.push(entry(worlds::WORLD_PARAMS_BINDING, &w.params));
             entries.push(entry(worlds::WORLD_STRIDES_BINDING, &w.strides));
+            let bytes = (worlds::WORLDS_PER_BINDING as usize * size_of::<WorldParams>()) as u64;
+            for k in 0..worlds::WORLD_PARAMS_BINDINGS {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: worlds::WORLD_PARAMS_BINDING + k,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &w.params,
+                        offset: k as u64 * bytes,
+                        size: std::num::NonZeroU64::new(bytes),
+                    }),
+                });
+            }
         }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("params"),

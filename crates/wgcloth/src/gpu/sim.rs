@@ -23,7 +23,7 @@ use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState, W
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
 use crate::gpu::pass::Pass;
 use crate::gpu::stages::{Recording, Stages};
-use crate::gpu::worlds::MAX_WORLDS;
+use crate::gpu::worlds::{MAX_WORLDS, WORLD_PARAMS_BINDINGS};
 use crate::scene::Scene;
 use crate::stage::{SelfContactStages, Stage};
 
@@ -180,7 +180,8 @@ impl GpuSim {
                 "worlds",
                 format!(
                     "{} worlds, but a batch holds at most {MAX_WORLDS} (each world's \
-                     parameters take {} B of one 64 KiB uniform binding)",
+                     parameters take {} B of {WORLD_PARAMS_BINDINGS} uniform bindings \
+                     of 64 KiB); run the rest in another batch",
                     scenes.len(),
                     size_of::<WorldParams>()
                 ),

@@ -15,9 +15,16 @@ use std::collections::BTreeMap;
 use crate::gpu::layout::WorldParams;
 use crate::gpu::shaders::{self, Variant};
 
-/// Worlds one batch holds: as many [`WorldParams`] as fill WebGPU's
-/// default uniform binding (64 KiB).
-pub const MAX_WORLDS: u32 = 512;
+/// Worlds whose [`WorldParams`] one uniform binding holds: as many as fill
+/// WebGPU's default 64 KiB.
+pub const WORLDS_PER_BINDING: u32 = 512;
+
+/// Uniform bindings of [`WorldParams`]: with `params` and
+/// `world_strides`, four of a stage's 12 by WebGPU's default.
+pub const WORLD_PARAMS_BINDINGS: u32 = 2;
+
+/// Worlds one batch holds.
+pub const MAX_WORLDS: u32 = WORLDS_PER_BINDING * WORLD_PARAMS_BINDINGS;
 
 /// The storage globals every world shares: the cloth's rest grid and
 /// topology, the body's mesh and BVH (in its own frame), the multigrid
@@ -74,10 +81,11 @@ pub const PER_WORLD: [&str; 31] = [
     "scalars_spare",
 ];
 
-/// The binding in group 0 of the worlds' own parameters.
-pub const WORLD_PARAMS_BINDING: u32 = 1;
 /// The binding in group 0 of each per-world global's region size.
-pub const WORLD_STRIDES_BINDING: u32 = 2;
+pub const WORLD_STRIDES_BINDING: u32 = 1;
+/// The first binding in group 0 of the worlds' own parameters; binding
+/// `WORLD_PARAMS_BINDING + k` holds worlds from `k × WORLDS_PER_BINDING`.
+pub const WORLD_PARAMS_BINDING: u32 = 2;
 
 /// `vec4<u32>`s of `world_strides`.
 pub const STRIDE_VECTORS: usize = PER_WORLD.len().div_ceil(4);
@@ -266,7 +274,7 @@ fn rewrite_span(
             }
             let field: String = chars[dot + 1..field_end].iter().collect();
             if WorldParams::FIELDS.iter().any(|(name, _)| *name == field) {
-                out.push_str(&format!("world_params[world].{field}"));
+                out.push_str(&format!("world_{field}()"));
                 *at = field_end;
                 continue;
             }
@@ -362,20 +370,45 @@ fn with_world_set(text: &str, module: &naga::Module) -> Result<String, String> {
     Ok(out)
 }
 
-/// What the rewritten code uses: the world's parameters and the size of
+/// What the rewritten code uses: the world's parameters (`world_F()` for
+/// each field F, from the binding that holds the world) and the size of
 /// each per-world global's region.
 fn declarations() -> String {
     let fields: String = WorldParams::FIELDS
         .iter()
         .map(|(name, ty)| format!("    {name}: {ty},\n"))
         .collect();
-    format!(
+    let mut out = format!(
         "struct WorldParams {{\n{fields}}}\n\
-         @group(0) @binding({WORLD_PARAMS_BINDING}) var<uniform> world_params: array<WorldParams, {MAX_WORLDS}>;\n\
          @group(0) @binding({WORLD_STRIDES_BINDING}) var<uniform> world_strides: array<vec4<u32>, {STRIDE_VECTORS}>;\n\
          fn world_at(slot: u32, i: u32) -> u32 {{\n    \
              return world * world_strides[slot / 4u][slot % 4u] + i;\n}}\n"
-    )
+    );
+    for k in 0..WORLD_PARAMS_BINDINGS {
+        let binding = WORLD_PARAMS_BINDING + k;
+        out += &format!(
+            "@group(0) @binding({binding}) var<uniform> world_params_{k}: \
+             array<WorldParams, {WORLDS_PER_BINDING}>;\n"
+        );
+    }
+    for (name, ty) in WorldParams::FIELDS {
+        let mut body = String::new();
+        for k in 0..WORLD_PARAMS_BINDINGS {
+            let read = format!(
+                "world_params_{k}[world - {}u].{name}",
+                k * WORLDS_PER_BINDING
+            );
+            body += &match k + 1 == WORLD_PARAMS_BINDINGS {
+                true => format!("    return {read};\n"),
+                false => format!(
+                    "    if world < {}u {{ return {read}; }}\n",
+                    (k + 1) * WORLDS_PER_BINDING
+                ),
+            };
+        }
+        out += &format!("fn world_{name}() -> {ty} {{\n{body}}}\n");
+    }
+    out
 }
 
 #[cfg(test)]
@@ -423,7 +456,7 @@ mod tests {
             ty.inner.size(module.to_ctx()) as usize,
             size_of::<WorldParams>()
         );
-        assert_eq!(size_of::<WorldParams>() as u32 * MAX_WORLDS, 65536);
+        assert_eq!(size_of::<WorldParams>() as u32 * WORLDS_PER_BINDING, 65536);
     }
 
     #[test]
@@ -441,7 +474,7 @@ mod tests {
         assert_eq!(
             out,
             "let y = x[world_at(0u, i + x[world_at(0u, j)])]; let z = v.x[1]; \
-             let w = world_params[world].kn;"
+             let w = world_kn();"
         );
     }
 }
