@@ -927,7 +927,10 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             // The library names the limit; the flag that fixes it is ours.
-            let hint = match e {
+            let hint = match &e {
+                Error::Limit { what, .. } if what.ends_with(" worlds") => {
+                    " (use fewer worlds or a smaller --grid)"
+                }
                 Error::Limit { .. } => " (use a smaller --grid)",
                 _ => "",
             };

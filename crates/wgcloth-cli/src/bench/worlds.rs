@@ -12,7 +12,7 @@ use serde::Serialize;
 use super::{BenchOptions, HEADLINE, UNTIMED_STEPS, median};
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::cpu::{CpuSim, State};
-use wgcloth::error::Result;
+use wgcloth::error::{Error, Result};
 use wgcloth::gpu::worlds::MAX_WORLDS;
 use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::scene::Scene;
@@ -130,6 +130,14 @@ pub fn gpu_rows(
             continue;
         }
         progress(&format!("worlds gpu {n} × {grid}²"));
+        let scenes = vec![scene.clone(); n];
+        let batch = match GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, &scenes) {
+            Err(e @ Error::Limit { .. }) => {
+                progress(&format!("  no row: {e}"));
+                continue;
+            }
+            batch => batch?,
+        };
         let separate = (0..n)
             .map(|_| GpuSim::with_kernels(&kernels, &ctx.device, &ctx.queue, &scene))
             .collect::<Result<Vec<_>>>()?;
@@ -141,8 +149,6 @@ pub fn gpu_rows(
         }
         ctx.finish()?;
         let separate = (n as u64 * steps) as f64 / start.elapsed().as_secs_f64();
-        let scenes = vec![scene.clone(); n];
-        let batch = GpuSim::with_worlds(&kernels, &ctx.device, &ctx.queue, &scenes)?;
         batch.upload_state(&warm);
         ctx.finish()?;
         let start = Instant::now();

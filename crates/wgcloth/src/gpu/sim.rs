@@ -221,7 +221,21 @@ impl GpuSim {
         let sizes = Sizes::of(scene, &params, topology.len(), kernels.vectors());
         let (region, _) = sizes.for_worlds(1, &elements);
         let (batched, strides) = sizes.for_worlds(scenes.len() as u32, &elements);
-        check_limits(&device.limits(), &batched, &mut params, false)?;
+        // A batch binds each array whole: its worlds must fit one binding.
+        check_limits(&device.limits(), &batched, &mut params, false).map_err(|e| match e {
+            Error::Limit {
+                what,
+                limit,
+                needed,
+                device,
+            } => Error::Limit {
+                what: format!("{what} of {} worlds", scenes.len()),
+                limit,
+                needed,
+                device,
+            },
+            e => e,
+        })?;
         let laid = Laid {
             topology: (topology, sections),
             sizes: (batched, region),
