@@ -28,9 +28,6 @@ pub(crate) struct Collide {
     /// per rigid vertex, each taking every this-many-th beyond.
     max_groups: u32,
     triangle_contacts: wgpu::Buffer,
-    /// Each world's region of `triangle_contacts` (a batch's, `gpu::worlds`).
-    worlds: std::ops::Range<u32>,
-    region: u64,
 }
 
 impl Collide {
@@ -61,8 +58,6 @@ impl Collide {
             order: bind(Entry::CollideOrder),
             max_groups: device.limits().max_compute_workgroups_per_dimension,
             triangle_contacts: b.triangle_contacts.clone(),
-            worlds: 0..b.worlds,
-            region: b.region.triangle_contacts,
         }
     }
 }
@@ -70,12 +65,11 @@ impl Collide {
 impl Record for Collide {
     /// Before the pass: face–vertex contacts link into their triangle's
     /// list, as found and in order, so every list starts empty (zero heads).
-    fn clear(&self, encoder: &mut wgpu::CommandEncoder, p: &Params) {
-        let heads = 2 * 4 * p.n_triangles as u64;
-        for k in self.worlds.clone() {
-            let at = k as u64 * self.region;
-            encoder.clear_buffer(&self.triangle_contacts, at, Some(heads));
-        }
+    /// Cleared whole, the rigid vertices' next entries too (linking writes
+    /// each before it is read): one clear for every world of a batch
+    /// (`gpu::worlds`), whose regions each start with their heads.
+    fn clear(&self, encoder: &mut wgpu::CommandEncoder, _p: &Params) {
+        encoder.clear_buffer(&self.triangle_contacts, 0, None);
     }
 
     fn encode(&self, pass: &mut Pass, r: &Recording) {
