@@ -265,7 +265,19 @@ pub fn read_buffer<T: Pod>(
     queue: &wgpu::Queue,
     buffer: &wgpu::Buffer,
 ) -> Result<Vec<T>> {
-    let size = buffer.size();
+    read_range(device, queue, buffer, 0..buffer.size())
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// [`read_buffer`] of the bytes `range` of `buffer` alone (its ends
+/// multiples of 4: `wgpu::COPY_BUFFER_ALIGNMENT`).
+pub fn read_range<T: Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    range: std::ops::Range<u64>,
+) -> Result<Vec<T>> {
+    let size = range.end - range.start;
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
         size,
@@ -273,7 +285,7 @@ pub fn read_buffer<T: Pod>(
         mapped_at_creation: false,
     });
     let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    encoder.copy_buffer_to_buffer(buffer, range.start, &staging, 0, size);
     queue.submit([encoder.finish()]);
     let (tx, rx) = std::sync::mpsc::channel();
     staging.map_async(wgpu::MapMode::Read, .., move |r| {

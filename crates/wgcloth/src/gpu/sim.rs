@@ -17,7 +17,7 @@ use crate::gpu::buffers::{
     Batch, Buffers, Sizes, batchable, check_limits, fit_pair_list, params_for, solved_whole, vec4s,
 };
 #[cfg(not(target_arch = "wasm32"))]
-use crate::gpu::context::read_buffer;
+use crate::gpu::context::{read_buffer, read_range};
 use crate::gpu::kernels::Kernels;
 use crate::gpu::layout::{self, Contact, Params, Response, Sections, StepState, WorldParams};
 use crate::gpu::mlp::{BatchBuffers, BatchShape, GpuMlp, NetworkKernel, output_bytes};
@@ -192,8 +192,8 @@ impl GpuSim {
         fit_pair_list(&device.limits(), &mut params);
         batchable(scene)?;
         let shared = WorldParams::shared(&params);
-        let mut each = Vec::with_capacity(scenes.len());
-        for (k, world) in scenes.iter().enumerate() {
+        let mut each = vec![WorldParams::of(&params)];
+        for (k, world) in scenes.iter().enumerate().skip(1) {
             let (its_topology, its_sections) = layout::topology(world);
             let mut its = params_for(world, &its_sections);
             fit_pair_list(&device.limits(), &mut its);
@@ -682,19 +682,16 @@ impl GpuSim {
 
     #[cfg(not(target_arch = "wasm32"))]
     /// World `k`'s positions and velocities, and its clock and statistics,
-    /// read back (blocks until the GPU is done).
+    /// read back alone (blocks until the GPU is done).
     pub fn read_world(&self, k: u32) -> Result<(Vec<Vec3>, Vec<Vec3>, StepState)> {
-        let region = &self.buffers.region;
+        let (device, queue, region) = (&self.device, &self.queue, &self.buffers.region);
         let vectors = |buffer| -> Result<Vec<Vec3>> {
-            let raw: Vec<[f32; 4]> = self.read(buffer)?;
-            let at = (k as u64 * region.per_vertex / 16) as usize;
-            let n = self.params.n_vertices as usize;
-            Ok(raw[at..at + n]
-                .iter()
-                .map(|p| Vec3::from_slice(&p[..3]))
-                .collect())
+            let raw: Vec<[f32; 4]> = read_range(device, queue, buffer, self.world_positions(k))?;
+            Ok(raw.iter().map(|p| Vec3::from_slice(&p[..3])).collect())
         };
-        let state = self.read_world_states()?[k as usize];
+        let at = k as u64 * region.state;
+        let bytes: Vec<u8> = read_range(device, queue, &self.buffers.state, at..at + region.state)?;
+        let state = bytemuck::pod_read_unaligned(&bytes[..size_of::<StepState>()]);
         Ok((vectors(&self.buffers.x)?, vectors(&self.buffers.v)?, state))
     }
 
