@@ -31,6 +31,18 @@ cargo test --release --workspace --features wgcloth-cli/viewer
 cargo run --release -p wgcloth --example embed
 # The library in a real browser: the demo page in headless Chromium's WebGPU.
 bash scripts/test-web.sh
+# The Python package as a user installs it (pip builds it with maturin),
+# in a virtual environment of its own, checked by pytest against the
+# `wgcloth` command built above.
+if ! python3 -c "import ensurepip, venv" >/dev/null 2>&1; then
+  echo "no Python venv module: installing python3-venv"
+  sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq python3-venv python3-pip >/dev/null
+fi
+python3 -m venv target/py
+target/py/bin/pip install --quiet --disable-pip-version-check "./crates/wgcloth-py[test]"
+WGCLOTH_BIN=target/release/wgcloth target/py/bin/python -m pytest -q crates/wgcloth-py/tests
 
 # The interactive viewer (examples/viewer.rs, feature `viewer`, built by
 # the tests above): without a display it must fail with one clear line and

@@ -590,10 +590,11 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
         Some((ctx, Ok(()))) => Some(ctx),
         None => None,
     };
-    let report = match gpu {
-        Some(ctx) => run::run_worlds_gpu(ctx, scenes, &set, steps, |k| bar.set_position(k))?,
-        None => run::run_worlds(scenes, &set, steps, |k| bar.set_position(k))?,
+    let batch = match gpu {
+        Some(ctx) => run::Batch::gpu(ctx, scenes, &set)?,
+        None => run::Batch::cpu(scenes, &set),
     };
+    let report = run::run_batch(batch, steps, |k| bar.set_position(k))?;
     bar.finish_and_clear();
     println!("{}", report.summary());
     if let Some(path) = &args.report {

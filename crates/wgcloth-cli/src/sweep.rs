@@ -112,7 +112,7 @@ fn value_of(cell: &str) -> toml::Value {
 }
 
 /// Sets the dotted `key` in `table`, making the tables on its way.
-fn set(table: &mut toml::Table, key: &[String], value: toml::Value) {
+pub fn set(table: &mut toml::Table, key: &[String], value: toml::Value) {
     match key {
         [] => {}
         [last] => {

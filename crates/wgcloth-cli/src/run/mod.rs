@@ -26,7 +26,7 @@ pub use report::{
     DeviceFault, RESIDUAL_GOAL, Report, SelfContactReport, check_diverged, median, solver_name,
 };
 pub use validate::{Validation, validate};
-pub use worlds::{BatchReport, WorldReport, run_worlds, run_worlds_gpu};
+pub use worlds::{Batch, BatchReport, WorldReport, run_batch};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {

@@ -14,7 +14,7 @@ use crate::scene::Cloth;
 /// solve, then z = P⁻¹ r once an iteration, zero on pinned rows (the
 /// filter S). `<dyn Precondition>::of` in `cpu::pcg` builds the one
 /// `solver.preconditioner` names.
-pub trait Precondition: std::fmt::Debug + Send {
+pub trait Precondition: std::fmt::Debug + Send + Sync {
     /// Whether it was built for `cloth` as `kind` with `smoother`; else the
     /// solve builds another.
     fn fits(&self, cloth: &Cloth, kind: Preconditioner, smoother: Smoother) -> bool;

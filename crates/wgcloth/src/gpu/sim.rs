@@ -696,6 +696,23 @@ impl GpuSim {
     }
 
     #[cfg(not(target_arch = "wasm32"))]
+    /// Every world's positions and velocities, world after world, read
+    /// back in one copy of each buffer (blocks until the GPU is done).
+    pub fn read_worlds(&self) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
+        let n = self.params.n_vertices as usize;
+        let stride = (self.buffers.region.per_vertex / 16) as usize;
+        let worlds = self.buffers.worlds as usize;
+        let all = |buffer| -> Result<Vec<Vec3>> {
+            let raw: Vec<[f32; 4]> = self.read(buffer)?;
+            Ok((0..worlds)
+                .flat_map(|k| &raw[k * stride..][..n])
+                .map(|p| Vec3::from_slice(&p[..3]))
+                .collect())
+        };
+        Ok((all(&self.buffers.x)?, all(&self.buffers.v)?))
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
     /// Cloth velocities, read back (blocks until the GPU is done).
     pub fn read_velocities(&self) -> Result<Vec<Vec3>> {
         self.read_vec3(&self.buffers.v)

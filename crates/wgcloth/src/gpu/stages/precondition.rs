@@ -7,7 +7,9 @@ use crate::gpu::pass::Pass;
 /// A preconditioner P ≈ A of the GPU's solve, twin of
 /// `cpu::precondition::Precondition`: set up once a step, then z = P⁻¹ r with
 /// partial rᵀz after `init` and after each iteration's x and r update.
-pub(crate) trait Precondition {
+/// `Send + Sync`, so that a simulator can move to, and be shared by, an
+/// app's other threads.
+pub(crate) trait Precondition: Send + Sync {
     /// P from this step's A, before `init`.
     fn encode_setup(&self, pass: &mut Pass);
     /// z = P⁻¹ r and partial rᵀz, sized on the host (`None`, after `init`)
