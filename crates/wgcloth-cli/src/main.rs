@@ -441,26 +441,21 @@ fn run(args: &RunArgs) -> Result<()> {
         Some(o) => Some(o.prepare(&scene, steps)?),
         None => None,
     };
-    // Frames need a GPU even for a CPU run: the CPU path uploads its state.
-    // Without any adapter the run goes on without drawn frames (the OBJ
-    // frames of --export obj are still written), as the main job goes on
-    // without a GPU.
+    // A CPU run's frames are drawn by any adapter there is (the CPU path
+    // uploads its state), lavapipe included; without one, by the CPU
+    // rasteriser, as the main job goes on without a GPU.
     let own_context;
     let render_context = match (&writer, &chosen) {
         (None, _) => None,
         (Some(_), Chosen::Gpu { ctx, .. }) => Some(&**ctx),
-        (Some(w), Chosen::Cpu) => match GpuContext::headless() {
+        (Some(_), Chosen::Cpu) => match GpuContext::headless() {
             Ok(ctx) => {
                 own_context = ctx;
                 Some(&own_context)
             }
             Err(e) => {
-                let instead = match w.wants_obj() {
-                    true => "Writing the OBJ frames only, no PNG or GIF.",
-                    false => "Running without frames; no image file is written.",
-                };
                 eprintln!(
-                    "notice: no GPU adapter to draw frames ({e}); lavapipe draws them on the CPU (Debian: mesa-vulkan-drivers). {instead}"
+                    "notice: no GPU adapter to draw frames ({e}); drawing them with the CPU rasteriser"
                 );
                 None
             }

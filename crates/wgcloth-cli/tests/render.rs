@@ -16,6 +16,7 @@ use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines};
 use wgcloth::{Config, Scene};
 use wgcloth_cli::frames::obj::write_obj;
 use wgcloth_cli::frames::output::{FrameWriter, frame_name};
+use wgcloth_cli::frames::raster;
 
 const SIZE: u32 = 256;
 
@@ -245,6 +246,107 @@ fn gpu_frame_matches_the_cpu(ctx: &GpuContext, scene: Scene) {
     assert!(
         differing * 100 <= drawn,
         "{differing} of {drawn} drawn pixels differ"
+    );
+}
+
+/// The frame of `steps` steps of the 16² sphere scene in `style`, drawn
+/// by the GPU's renderer (lavapipe here) and by the CPU rasteriser (what
+/// draws frames with no adapter), as RGBA pixels.
+type Pixels = Vec<[u8; 4]>;
+fn both_renderers(ctx: &GpuContext, steps: u32, style: Style) -> (Pixels, Pixels) {
+    let scene = scene(SceneKind::Sphere);
+    let camera = camera(&scene);
+    let mut sim = CpuSim::new(scene.clone());
+    for _ in 0..steps {
+        sim.step();
+    }
+    assert!(!sim.contacts().is_empty(), "the body is in contact");
+    let body = scene.rigid.as_ref().unwrap();
+    let placed = body.placed_vertices(sim.state.time as f32);
+    let lines = lines::force_lines(&sim, scene.metres_per_force());
+    let geometry = raster::Geometry {
+        cloth: &sim.state.x,
+        grid: [scene.cloth.nx, scene.cloth.ny],
+        triangles: &scene.cloth.triangles,
+        body: &placed,
+        body_triangles: &body.mesh.triangles,
+        lines: &lines,
+    };
+    let pixels = |f: Frame| {
+        (f.rgba.chunks_exact(4))
+            .map(|p| [p[0], p[1], p[2], p[3]])
+            .collect()
+    };
+    (
+        pixels(render_cpu(ctx, &sim, &camera, style)),
+        pixels(raster::render(&geometry, &camera, style, [SIZE; 2])),
+    )
+}
+
+/// The surfaces of a cloth folded around the body, where the camera sees
+/// it: the same silhouette (pixels that are not background) to within a
+/// few edge pixels, and the same shading where both draw (the cloth shaded
+/// flat instead of by its vertex normals differs by 2.1 levels on average).
+#[test]
+fn the_cpu_rasteriser_shades_the_frame_the_gpu_draws() {
+    let Some(ctx) = gpu() else { return };
+    let (gpu_frame, cpu_frame) = both_renderers(&ctx, 100, Style::default());
+    let background = |p: &[u8; 4]| *p == [255, 255, 255, 255];
+    let (mut either, mut one, mut both, mut shading) = (0, 0, 0, 0u64);
+    for (g, c) in gpu_frame.iter().zip(&cpu_frame) {
+        match (background(g), background(c)) {
+            (true, true) => {}
+            (false, false) => {
+                either += 1;
+                both += 1;
+                shading += (0..3).map(|k| g[k].abs_diff(c[k]) as u64).max().unwrap();
+            }
+            _ => (either, one) = (either + 1, one + 1),
+        }
+    }
+    let body = cpu_frame.iter().filter(|p| is_body(**p)).count();
+    let cloth = cpu_frame.iter().filter(|p| is_cloth(**p)).count();
+    assert!(
+        body > 1000 && cloth > 5000,
+        "{body} body and {cloth} cloth pixels"
+    );
+    assert!(
+        one * 200 <= either,
+        "{one} of {either} pixels are drawn by one renderer only"
+    );
+    let mean = shading as f64 / both as f64;
+    assert!(
+        mean < 1.0,
+        "the colours both draw differ by {mean:.2} levels on average"
+    );
+}
+
+/// The forces, drawn over everything: green within a pixel wherever the
+/// GPU draws green (a segment's pixels may step differently).
+#[test]
+fn the_cpu_rasteriser_draws_the_forces_the_gpu_draws() {
+    let Some(ctx) = gpu() else { return };
+    let forces = Style {
+        wireframe: false,
+        forces: true,
+    };
+    let (gpu_frame, cpu_frame) = both_renderers(&ctx, 40, forces);
+    let n = SIZE as usize;
+    let green = |x: usize, y: usize| {
+        (y.saturating_sub(1)..(y + 2).min(n))
+            .any(|j| (x.saturating_sub(1)..(x + 2).min(n)).any(|i| is_green(cpu_frame[j * n + i])))
+    };
+    let drawn: Vec<usize> = (0..n * n).filter(|&i| is_green(gpu_frame[i])).collect();
+    let shared = drawn.iter().filter(|&&i| green(i % n, i / n)).count();
+    assert!(
+        drawn.len() > 100,
+        "the GPU draws forces ({} pixels)",
+        drawn.len()
+    );
+    assert!(
+        shared * 100 >= drawn.len() * 95,
+        "{shared} of the GPU's {} force pixels have green within a pixel on the CPU",
+        drawn.len()
     );
 }
 

@@ -2,7 +2,9 @@
 // vertex normals, and the rigid body, flat, both with two-sided Phong, an optional cloth wireframe, and each contact's
 // force as a green segment. Vertices are pulled from the simulator's own
 // storage buffers by index, so nothing is copied to draw a frame. Not a
-// compute stage: src/render owns its pipelines.
+// compute stage: src/render owns its pipelines. The colours and Phong's
+// terms (CLOTH_COLOR, AMBIENT, …) come from src/render/shade.rs, which
+// holds this file's `grid_normal` and `phong` twins for the CPU.
 
 struct Camera {
     view_proj: mat4x4<f32>,
@@ -105,26 +107,26 @@ fn phong(s: Surface, base: vec3<f32>) -> vec4<f32> {
     }
     let l = normalize(camera.light.xyz);
     let diffuse = max(dot(n, l), 0.0);
-    let specular = pow(max(dot(reflect(-l, n), to_eye), 0.0), 32.0);
-    return vec4<f32>(base * (0.3 + 0.65 * diffuse) + vec3<f32>(0.15 * specular), 1.0);
+    let specular = pow(max(dot(reflect(-l, n), to_eye), 0.0), SHININESS);
+    return vec4<f32>(base * (AMBIENT + DIFFUSE * diffuse) + vec3<f32>(SPECULAR * specular), 1.0);
 }
 
 @fragment
 fn fs_cloth(s: Surface) -> @location(0) vec4<f32> {
-    return phong(s, vec3<f32>(0.85, 0.35, 0.25));
+    return phong(s, CLOTH_COLOR);
 }
 
 @fragment
 fn fs_body(s: Surface) -> @location(0) vec4<f32> {
-    return phong(s, vec3<f32>(0.35, 0.45, 0.85));
+    return phong(s, BODY_COLOR);
 }
 
 @fragment
 fn fs_wire() -> @location(0) vec4<f32> {
-    return vec4<f32>(0.1, 0.1, 0.1, 1.0);
+    return vec4<f32>(WIRE_COLOR, 1.0);
 }
 
 @fragment
 fn fs_force() -> @location(0) vec4<f32> {
-    return vec4<f32>(0.0, 1.0, 0.0, 1.0);
+    return vec4<f32>(FORCE_COLOR, 1.0);
 }

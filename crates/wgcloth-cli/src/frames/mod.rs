@@ -1,13 +1,17 @@
 //! What `wgcloth run --out` writes: each frame drawn by the library's
-//! offscreen [`Renderer`] as a PNG, the animated GIF, and with
+//! offscreen [`Renderer`] (or, with no adapter at all, by the CPU
+//! rasteriser of [`raster`]) as a PNG, the animated GIF, and with
 //! `--export obj` each frame's geometry as OBJ.
 
 pub mod obj;
 pub mod output;
+pub mod raster;
 
+use glam::Vec3;
 use wgcloth::cpu::CpuSim;
 use wgcloth::error::{Error, Result};
 use wgcloth::gpu::{GpuContext, GpuSim};
+use wgcloth::render::lines::force_lines;
 use wgcloth::render::{Camera, HostScene, MAX_FRAME_SIZE, Renderer, Source, Style};
 use wgcloth::scene::Scene;
 
@@ -49,42 +53,35 @@ impl RecordOptions {
 }
 
 /// The frames of a run, rendered on a GPU context (for a CPU run too: the
-/// CPU path uploads its state) and written as they come; without one,
-/// only the OBJ frames of `--export obj`.
+/// CPU path uploads its state), or on the CPU where there is none, and
+/// written as they come.
 pub struct Recording<'a> {
-    drawing: Option<Drawing<'a>>,
+    drawing: Drawing<'a>,
+    camera: Camera,
+    style: Style,
+    size: u32,
     every: u64,
     writer: output::FrameWriter,
 }
 
-/// What drawing frames needs.
-struct Drawing<'a> {
+/// Where frames are drawn.
+enum Drawing<'a> {
+    Gpu(Box<OnGpu<'a>>),
+    /// By [`raster::render`], from the host's copy of the state.
+    Cpu,
+}
+
+/// What drawing on a GPU needs.
+struct OnGpu<'a> {
     ctx: &'a GpuContext,
     renderer: Renderer,
-    camera: Camera,
-    style: Style,
     /// The CPU path's state on the GPU (unused by a GPU run).
     host: HostScene,
 }
 
-impl Drawing<'_> {
-    /// Renders `source` and writes the frame.
-    fn draw(&self, source: &Source, writer: &mut output::FrameWriter) -> Result<()> {
-        let frame = self.renderer.render(
-            &self.ctx.device,
-            &self.ctx.queue,
-            source,
-            &self.camera,
-            self.style,
-        )?;
-        self.ctx.finish()?;
-        writer.write(&frame)
-    }
-}
-
 impl<'a> Recording<'a> {
     /// Checks the frame size before any step runs; `writer` comes from
-    /// `options.prepare`. With no context, frames are not drawn.
+    /// `options.prepare`. With no context, frames are drawn on the CPU.
     pub fn new(
         ctx: Option<&'a GpuContext>,
         scene: &Scene,
@@ -92,20 +89,43 @@ impl<'a> Recording<'a> {
         (options, writer): (&RecordOptions, output::FrameWriter),
     ) -> Result<Recording<'a>> {
         let drawing = match ctx {
-            Some(ctx) => Some(Drawing {
+            Some(ctx) => Drawing::Gpu(Box::new(OnGpu {
                 ctx,
                 renderer: Renderer::new(&ctx.device, options.size, options.size)?,
-                camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
-                style: options.style,
                 host: HostScene::new(&ctx.device, scene),
-            }),
-            None => None,
+            })),
+            None => Drawing::Cpu,
         };
         Ok(Recording {
             drawing,
+            camera: Camera::framing(scene, steps as f32 * scene.config.solver.dt),
+            style: options.style,
+            size: options.size,
             every: options.every,
             writer,
         })
+    }
+
+    /// Renders `x` at `time` with force segments `lines` on the CPU and
+    /// writes the frame.
+    fn draw_cpu(
+        &mut self,
+        scene: &Scene,
+        (x, time): (&[Vec3], f32),
+        lines: &[[f32; 4]],
+    ) -> Result<()> {
+        let body = scene.rigid.as_ref();
+        let placed = body.map(|b| b.placed_vertices(time)).unwrap_or_default();
+        let geometry = raster::Geometry {
+            cloth: x,
+            grid: [scene.cloth.nx, scene.cloth.ny],
+            triangles: &scene.cloth.triangles,
+            body: &placed,
+            body_triangles: body.map_or(&[][..], |b| &b.mesh.triangles[..]),
+            lines,
+        };
+        let frame = raster::render(&geometry, &self.camera, self.style, [self.size; 2]);
+        self.writer.write(&frame)
     }
 
     /// Whether the state after step `step` is drawn.
@@ -118,14 +138,17 @@ impl<'a> Recording<'a> {
         if !self.due(step) {
             return Ok(());
         }
-        self.writer
-            .write_obj(&sim.scene, &sim.state.x, sim.state.time as f32)?;
-        let Some(d) = &self.drawing else {
-            return Ok(());
-        };
-        d.host
-            .upload_sim(&d.ctx.queue, sim, sim.scene.metres_per_force());
-        d.draw(&d.host.source(), &mut self.writer)
+        let time = sim.state.time as f32;
+        self.writer.write_obj(&sim.scene, &sim.state.x, time)?;
+        let lines = force_lines(sim, sim.scene.metres_per_force());
+        match &self.drawing {
+            Drawing::Gpu(on) => {
+                (on.host).upload(&on.ctx.queue, &sim.scene, (&sim.state.x, time), &lines);
+                let view = (&self.camera, self.style);
+                draw_gpu(on, &on.host.source(), view, &mut self.writer)
+            }
+            Drawing::Cpu => self.draw_cpu(&sim.scene, (&sim.state.x, time), &lines),
+        }
     }
 
     /// After step `step` of a GPU run: draws from the simulator's buffers,
@@ -142,22 +165,36 @@ impl<'a> Recording<'a> {
             let time = step as f32 * scene.config.solver.dt;
             self.writer.write_obj(scene, &sim.read_positions()?, time)?;
         }
-        let Some(d) = &self.drawing else {
-            return Ok(());
+        let Drawing::Gpu(on) = &self.drawing else {
+            unreachable!("a GPU run draws on its own context");
         };
+        let view = (&self.camera, self.style);
         if step == 0 {
             let start = (&scene.cloth.rest_positions[..], 0.0);
-            d.host.upload(&d.ctx.queue, scene, start, &[]);
-            return d.draw(&d.host.source(), &mut self.writer);
+            on.host.upload(&on.ctx.queue, scene, start, &[]);
+            return draw_gpu(on, &on.host.source(), view, &mut self.writer);
         }
-        let mut encoder = d.ctx.device.create_command_encoder(&Default::default());
+        let mut encoder = on.ctx.device.create_command_encoder(&Default::default());
         sim.record_force_lines(&mut encoder);
-        d.ctx.queue.submit([encoder.finish()]);
-        d.draw(&Source::gpu(sim, scene), &mut self.writer)
+        on.ctx.queue.submit([encoder.finish()]);
+        draw_gpu(on, &Source::gpu(sim, scene), view, &mut self.writer)
     }
 
     /// What the run wrote.
     pub fn finish(self) -> output::Written {
         self.writer.finish()
     }
+}
+
+/// Renders `source` on the GPU and writes the frame.
+fn draw_gpu(
+    on: &OnGpu,
+    source: &Source,
+    (camera, style): (&Camera, Style),
+    writer: &mut output::FrameWriter,
+) -> Result<()> {
+    let (device, queue) = (&on.ctx.device, &on.ctx.queue);
+    let frame = on.renderer.render(device, queue, source, camera, style)?;
+    on.ctx.finish()?;
+    writer.write(&frame)
 }

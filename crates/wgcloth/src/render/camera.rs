@@ -26,6 +26,10 @@ pub struct Camera {
 /// cloth.
 const VIEW: Vec3 = Vec3::new(0.55, 0.35, -1.0);
 
+/// Towards the light: above, and on the camera's side of the cloth, so
+/// that the side the camera sees is lit and its folds shade.
+const LIGHT: Vec3 = Vec3::new(-0.3, 0.8, -0.6);
+
 impl Camera {
     /// Frames everything the scene occupies over `duration` seconds.
     pub fn framing(scene: &Scene, duration: f32) -> Camera {
@@ -53,7 +57,7 @@ impl Camera {
             eye: target + distance * VIEW.normalize(),
             target,
             fov_y,
-            light: Vec3::new(0.3, 0.8, 0.6).normalize(),
+            light: LIGHT.normalize(),
         }
     }
 

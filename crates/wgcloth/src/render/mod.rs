@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod lines;
+pub mod shade;
 
 use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
@@ -21,7 +22,10 @@ use crate::scene::Scene;
 
 pub use camera::Camera;
 
-const SHADER: &str = include_str!("../../wgsl/render.wgsl");
+/// wgsl/render.wgsl with the shading constants in front of it.
+fn shader() -> String {
+    shade::prelude() + include_str!("../../wgsl/render.wgsl")
+}
 #[cfg(not(target_arch = "wasm32"))]
 // The offscreen frames' format ([`Renderer`], native only).
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -278,7 +282,7 @@ impl Pipelines {
     pub fn new(device: &wgpu::Device, format: wgpu::TextureFormat) -> Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+            source: wgpu::ShaderSource::Wgsl(shader().into()),
         });
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
@@ -427,7 +431,12 @@ impl Pipelines {
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: shade::BACKGROUND.x as f64,
+                        g: shade::BACKGROUND.y as f64,
+                        b: shade::BACKGROUND.z as f64,
+                        a: 1.0,
+                    }),
                     store: wgpu::StoreOp::Store,
                 },
             })],
@@ -554,11 +563,11 @@ pub const MAX_FRAME_SIZE: u32 = 16384;
 
 #[cfg(test)]
 mod tests {
-    use super::SHADER;
+    use super::shader;
 
     #[test]
     fn the_render_shader_validates_with_naga() {
-        let module = naga::front::wgsl::parse_str(SHADER).expect("render.wgsl parses");
+        let module = naga::front::wgsl::parse_str(&shader()).expect("render.wgsl parses");
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
             naga::valid::Capabilities::empty(),
