@@ -93,6 +93,16 @@ impl Scene {
             .into_pyarray(py)
     }
 
+    /// Pickled as its configuration, so that a scene travels to another
+    /// process (a Ray task, multiprocessing) and is built again there.
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>,))> {
+        let py = slf.py();
+        let config = pythonize(py, &slf.get().config)?;
+        Ok((py.get_type::<Scene>().into_any(), (config,)))
+    }
+
     fn __repr__(&self) -> String {
         let c = &self.config;
         format!(
@@ -112,9 +122,24 @@ impl Scene {
     }
 }
 
+/// `value` without the None values of its dicts (TOML has no null: a
+/// None leaves a field as it is, as in a configuration's own dict, where
+/// an unset path is None).
+fn without_none<'py>(value: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let Ok(dict) = value.cast::<PyDict>() else {
+        return Ok(value.clone());
+    };
+    let kept = PyDict::new(value.py());
+    for (k, v) in dict.iter().filter(|(_, v)| !v.is_none()) {
+        kept.set_item(k, without_none(&v)?)?;
+    }
+    Ok(kept.into_any())
+}
+
 /// `config` with a dict's values set over it, one key at a time so that a
 /// dotted key and a table of the same section merge.
 fn with(mut config: Config, values: &Bound<'_, PyAny>) -> PyResult<Config> {
+    let values = without_none(values)?;
     let dict = values.cast::<PyDict>()?;
     for (key, value) in dict.iter() {
         let key: String = key.cast::<PyString>()?.to_str()?.to_string();
