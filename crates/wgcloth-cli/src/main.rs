@@ -199,10 +199,12 @@ struct RunArgs {
     /// With --out: leave out the green contact-force segments.
     #[arg(long)]
     no_forces: bool,
-    /// With --out: also write each frame's geometry (`obj`: frame_NNNN.obj,
-    /// objects `cloth` and `body`, for Blender).
-    #[arg(long, value_name = "FORMAT")]
-    export: Option<Export>,
+    /// With --out: also write the geometry (`obj`: each frame's,
+    /// frame_NNNN.obj, objects `cloth` and `body`, for Blender; `usd`: the
+    /// whole run, animation.usda, meshes /World/cloth and /World/body with
+    /// time-sampled points); both: `--export obj,usd`.
+    #[arg(long, value_name = "FORMAT", value_delimiter = ',')]
+    export: Vec<Export>,
     /// With --out: replace frames already in DIR.
     #[arg(long)]
     force: bool,
@@ -240,6 +242,7 @@ fn vector_layout(name: &str) -> std::result::Result<VectorLayout, String> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum Export {
     Obj,
+    Usd,
 }
 
 #[derive(Args)]
@@ -422,6 +425,12 @@ fn run(args: &RunArgs) -> Result<()> {
         }
     }
     let steps = config.solver.steps;
+    if !args.export.is_empty() && args.out.is_none() {
+        return Err(Error::config(
+            "--export",
+            "writes into the frame directory: give --out DIR",
+        ));
+    }
     let options = args
         .out
         .as_ref()
@@ -433,7 +442,10 @@ fn run(args: &RunArgs) -> Result<()> {
                 wireframe: args.wireframe,
                 forces: !args.no_forces,
             },
-            obj: args.export == Some(Export::Obj),
+            exports: wgcloth_cli::frames::output::Exports {
+                obj: args.export.contains(&Export::Obj),
+                usd: args.export.contains(&Export::Usd),
+            },
             force: args.force,
         });
     // The directory first: its errors need no GPU.
@@ -495,7 +507,7 @@ fn run(args: &RunArgs) -> Result<()> {
         println!("{}", monitor.summary());
     }
     if let Some(recording) = recording {
-        let written = recording.finish();
+        let written = recording.finish(&run_scene)?;
         let dir = written.dir.display();
         if written.frames > 0 {
             println!("frames       {} in {dir}", written.frames);
@@ -505,6 +517,9 @@ fn run(args: &RunArgs) -> Result<()> {
         }
         if let Some(gif) = &written.gif {
             println!("animation    {}", gif.display());
+        }
+        if let Some(usd) = &written.usd {
+            println!("usd          {}", usd.display());
         }
     }
     if let Some(path) = &args.report {

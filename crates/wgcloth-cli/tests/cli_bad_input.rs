@@ -859,6 +859,19 @@ fn unknown_export_format_is_a_usage_error() {
     expect_clap_error("--export fbx", &out, "fbx");
 }
 
+#[test]
+fn an_export_without_a_frame_directory_is_refused() {
+    for format in ["obj", "usd", "obj,usd"] {
+        let out = run_tiny(&["--export", format]);
+        expect_error(
+            &format!("--export {format}"),
+            &out,
+            &["--export", "--out"],
+            &[],
+        );
+    }
+}
+
 // ------------------------------------------------- every config field
 
 /// Each field of the configuration with a value its check refuses, in

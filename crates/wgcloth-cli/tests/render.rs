@@ -15,8 +15,9 @@ use wgcloth::gpu::{GpuContext, GpuSim, Kernels};
 use wgcloth::render::{Camera, Frame, HostScene, Renderer, Source, Style, lines};
 use wgcloth::{Config, Scene};
 use wgcloth_cli::frames::obj::write_obj;
-use wgcloth_cli::frames::output::{FrameWriter, frame_name};
+use wgcloth_cli::frames::output::{Exports, FrameWriter, GIF_NAME, frame_name};
 use wgcloth_cli::frames::raster;
+use wgcloth_cli::frames::usd::USD_NAME;
 
 const SIZE: u32 = 256;
 
@@ -372,7 +373,14 @@ fn the_frame_directory_is_checked_before_writing() {
     std::fs::create_dir_all(&root).unwrap();
     let file = root.join("a-file");
     std::fs::write(&file, "keep me").unwrap();
-    let err = FrameWriter::create(&file, 3, (40, false), false)
+    let (none, both) = (
+        Exports::default(),
+        Exports {
+            obj: true,
+            usd: true,
+        },
+    );
+    let err = FrameWriter::create(&file, 3, (40, none), false)
         .err()
         .unwrap()
         .to_string();
@@ -380,16 +388,27 @@ fn the_frame_directory_is_checked_before_writing() {
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "keep me");
 
     let dir = root.join("new/frames");
-    let mut writer = FrameWriter::create(&dir, 3, (40, true), false).unwrap();
+    let mut writer = FrameWriter::create(&dir, 3, (40, both), false).unwrap();
     let frame = Frame {
         width: 2,
         height: 2,
         rgba: vec![255; 16],
     };
     writer.write(&frame).unwrap();
-    writer.finish();
+    writer.finish(&scene(SceneKind::Hang)).unwrap();
     assert!(dir.join(frame_name(0)).is_file());
-    let err = FrameWriter::create(&dir, 3, (40, true), false)
+    // The run's USD file, written at the end, is refused as a frame is.
+    std::fs::remove_file(dir.join(frame_name(0))).unwrap();
+    std::fs::remove_file(dir.join(GIF_NAME)).unwrap();
+    let err = FrameWriter::create(&dir, 3, (40, both), false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains(USD_NAME) && err.contains("--force"), "{err}");
+    writer = FrameWriter::create(&dir, 3, (40, both), true).unwrap();
+    writer.write(&frame).unwrap();
+    writer.finish(&scene(SceneKind::Hang)).unwrap();
+    let err = FrameWriter::create(&dir, 3, (40, both), false)
         .err()
         .unwrap()
         .to_string();
@@ -397,7 +416,7 @@ fn the_frame_directory_is_checked_before_writing() {
         err.contains("frame_0000.png") && err.contains("--force"),
         "{err}"
     );
-    FrameWriter::create(&dir, 3, (40, true), true).unwrap();
+    FrameWriter::create(&dir, 3, (40, both), true).unwrap();
     std::fs::remove_dir_all(&root).unwrap();
 }
 

@@ -2,7 +2,8 @@
 //! from TOML files, dicts or keyword arguments ([`scene`]), simulators of
 //! one or many worlds on the best adapter or the CPU path whose state is
 //! numpy arrays ([`simulator`]), and contact data and weights files for
-//! training a network in Python ([`data`]). Every error is a
+//! training a network in Python ([`data`]), and runs as USD files
+//! ([`export`]). Every error is a
 //! `wgcloth.WgclothError` carrying the library's message.
 
 use pyo3::create_exception;
@@ -10,6 +11,7 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
 mod data;
+mod export;
 mod scene;
 mod simulator;
 
@@ -35,6 +37,7 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(data::gen_data, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_weights, m)?)?;
     m.add_function(wrap_pyfunction!(data::write_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(export::write_usd, m)?)?;
     m.add("NEGATIVE_SLOPE", wgcloth_learn::train::NEGATIVE_SLOPE)?;
     Ok(())
 }

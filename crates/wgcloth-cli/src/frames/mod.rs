@@ -1,11 +1,12 @@
 //! What `wgcloth run --out` writes: each frame drawn by the library's
 //! offscreen [`Renderer`] (or, with no adapter at all, by the CPU
 //! rasteriser of [`raster`]) as a PNG, the animated GIF, and with
-//! `--export obj` each frame's geometry as OBJ.
+//! `--export obj,usd` the geometry as OBJ frames and one USD file.
 
 pub mod obj;
 pub mod output;
 pub mod raster;
+pub mod usd;
 
 use glam::Vec3;
 use wgcloth::cpu::CpuSim;
@@ -23,8 +24,8 @@ pub struct RecordOptions {
     /// A frame every this many steps (and one of the initial state).
     pub every: u64,
     pub style: Style,
-    /// Also each frame's geometry as OBJ (`--export obj`).
-    pub obj: bool,
+    /// The geometry files besides the frames (`--export obj,usd`).
+    pub exports: output::Exports,
     pub force: bool,
 }
 
@@ -48,7 +49,7 @@ impl RecordOptions {
         }
         let frames = 1 + (steps / self.every) as usize;
         let delay_ms = (1e3 * scene.config.solver.dt * self.every as f32) as u32;
-        output::FrameWriter::create(&self.dir, frames, (delay_ms, self.obj), self.force)
+        output::FrameWriter::create(&self.dir, frames, (delay_ms, self.exports), self.force)
     }
 }
 
@@ -139,7 +140,7 @@ impl<'a> Recording<'a> {
             return Ok(());
         }
         let time = sim.state.time as f32;
-        self.writer.write_obj(&sim.scene, &sim.state.x, time)?;
+        self.writer.write_geometry(&sim.scene, &sim.state.x, step)?;
         let lines = force_lines(sim, sim.scene.metres_per_force());
         match &self.drawing {
             Drawing::Gpu(on) => {
@@ -160,10 +161,10 @@ impl<'a> Recording<'a> {
         }
         if step == 0 {
             self.writer
-                .write_obj(scene, &scene.cloth.rest_positions, 0.0)?;
-        } else if self.writer.wants_obj() {
-            let time = step as f32 * scene.config.solver.dt;
-            self.writer.write_obj(scene, &sim.read_positions()?, time)?;
+                .write_geometry(scene, &scene.cloth.rest_positions, 0)?;
+        } else if self.writer.wants_geometry() {
+            self.writer
+                .write_geometry(scene, &sim.read_positions()?, step)?;
         }
         let Drawing::Gpu(on) = &self.drawing else {
             unreachable!("a GPU run draws on its own context");
@@ -181,8 +182,8 @@ impl<'a> Recording<'a> {
     }
 
     /// What the run wrote.
-    pub fn finish(self) -> output::Written {
-        self.writer.finish()
+    pub fn finish(self, scene: &Scene) -> Result<output::Written> {
+        self.writer.finish(scene)
     }
 }
 

@@ -1,5 +1,6 @@
 //! `wgcloth run --out DIR`: the frames as PNG files and one animated GIF,
-//! and with `--export obj` each frame's geometry as OBJ.
+//! with `--export obj` each frame's geometry as OBJ, and with `--export
+//! usd` the whole run as one USD file.
 //! Everything it will write is checked before the run starts, so a bad
 //! directory costs no simulation and nothing is overwritten without
 //! `--force`.
@@ -14,6 +15,7 @@ use image::{Delay, RgbaImage};
 use glam::Vec3;
 
 use crate::frames::obj::{obj_name, write_obj};
+use crate::frames::usd::{USD_NAME, UsdRecording};
 use wgcloth::error::{Error, Result};
 use wgcloth::render::Frame;
 use wgcloth::scene::Scene;
@@ -35,6 +37,17 @@ pub struct FrameWriter {
     written: usize,
     obj: bool,
     objs: usize,
+    /// The run's geometry for its USD file (`--export usd`).
+    usd: Option<UsdRecording>,
+}
+
+/// Which geometry files a run writes besides its frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Exports {
+    /// A Wavefront OBJ file a frame.
+    pub obj: bool,
+    /// One USD file of the run.
+    pub usd: bool,
 }
 
 fn image_error(path: &Path, e: image::ImageError) -> Error {
@@ -42,13 +55,14 @@ fn image_error(path: &Path, e: image::ImageError) -> Error {
 }
 
 impl FrameWriter {
-    /// Prepares `dir` for `frames` frames shown `delay_ms` apart (with an
-    /// OBJ file each if `obj`): creates it if missing, and refuses a file
-    /// in its place, or (without `force`) any output of ours already there.
+    /// Prepares `dir` for `frames` frames shown `delay_ms` apart (and the
+    /// geometry files of `exports`): creates it if missing, and refuses a
+    /// file in its place, or (without `force`) any output of ours already
+    /// there.
     pub fn create(
         dir: &Path,
         frames: usize,
-        (delay_ms, obj): (u32, bool),
+        (delay_ms, exports): (u32, Exports),
         force: bool,
     ) -> Result<FrameWriter> {
         if dir.exists() && !dir.is_dir() {
@@ -58,10 +72,12 @@ impl FrameWriter {
             ));
         }
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let objs = (0..frames).filter(|_| obj).map(obj_name);
+        let objs = (0..frames).filter(|_| exports.obj).map(obj_name);
+        let usd = exports.usd.then(|| USD_NAME.to_string());
         let names = (0..frames)
             .map(frame_name)
             .chain(objs)
+            .chain(usd)
             .chain([GIF_NAME.to_string()]);
         if !force && let Some(taken) = names.map(|n| dir.join(n)).find(|p| p.exists()) {
             return Err(Error::file(
@@ -74,17 +90,22 @@ impl FrameWriter {
             gif: None,
             delay_ms: delay_ms.next_multiple_of(10).max(20),
             written: 0,
-            obj,
+            obj: exports.obj,
             objs: 0,
+            usd: exports.usd.then(UsdRecording::default),
         })
     }
 
-    /// The next frame's geometry, when OBJ export is on: cloth at `x`, the
-    /// body placed at `time`.
-    pub fn write_obj(&mut self, scene: &Scene, x: &[Vec3], time: f32) -> Result<()> {
+    /// The geometry of step `step`'s frame, for the exports asked for: the
+    /// cloth at `x`, the body placed at the step's time.
+    pub fn write_geometry(&mut self, scene: &Scene, x: &[Vec3], step: u64) -> Result<()> {
+        if let Some(usd) = &mut self.usd {
+            usd.push(scene, step, x);
+        }
         if !self.obj {
             return Ok(());
         }
+        let time = step as f32 * scene.config.solver.dt;
         write_obj(&self.dir.join(obj_name(self.objs)), scene, x, time)?;
         self.objs += 1;
         Ok(())
@@ -103,8 +124,9 @@ impl FrameWriter {
         Ok(self.gif.as_mut().expect("created above"))
     }
 
-    pub fn wants_obj(&self) -> bool {
-        self.obj
+    /// Whether frames need their geometry (`--export`).
+    pub fn wants_geometry(&self) -> bool {
+        self.obj || self.usd.is_some()
     }
 
     pub fn write(&mut self, frame: &Frame) -> Result<()> {
@@ -125,20 +147,29 @@ impl FrameWriter {
         self.written
     }
 
-    /// What the run left: the frames drawn, the OBJ files, and the GIF's
-    /// path (none without a drawn frame). The GIF's trailer is written as
-    /// its encoder drops.
-    pub fn finish(self) -> Written {
+    /// What the run left: the frames drawn, the OBJ files, the GIF's path
+    /// (none without a drawn frame) and the USD file's. The GIF's trailer
+    /// is written as its encoder drops; the USD file is written now.
+    pub fn finish(self, scene: &Scene) -> Result<Written> {
         let gif = self.gif.map(|gif| {
             drop(gif);
             self.dir.join(GIF_NAME)
         });
-        Written {
+        let usd = match self.usd {
+            Some(usd) => {
+                let path = self.dir.join(USD_NAME);
+                usd.write(&path, scene)?;
+                Some(path)
+            }
+            None => None,
+        };
+        Ok(Written {
             dir: self.dir,
             frames: self.written,
             objs: self.objs,
             gif,
-        }
+            usd,
+        })
     }
 }
 
@@ -149,4 +180,5 @@ pub struct Written {
     pub frames: usize,
     pub objs: usize,
     pub gif: Option<PathBuf>,
+    pub usd: Option<PathBuf>,
 }

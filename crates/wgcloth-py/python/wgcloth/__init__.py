@@ -22,6 +22,7 @@ from wgcloth._native import (
     gen_data,
     read_weights,
     run,
+    write_usd,
     write_weights,
 )
 
@@ -33,5 +34,6 @@ __all__ = [
     "gen_data",
     "read_weights",
     "run",
+    "write_usd",
     "write_weights",
 ]

@@ -99,3 +99,13 @@ def write_weights(
     force: bool = False,
 ) -> None:
     """Writes a network trained anywhere as the file a scene's contact.weights names."""
+
+def write_usd(
+    path: str | os.PathLike[str],
+    scene: Scene,
+    positions: npt.NDArray[np.float32],
+    steps: Sequence[int],
+    force: bool = False,
+) -> None:
+    """The cloth at each step (positions: frames × vertices × 3) and the body
+    placed at its time, as one USD file (`wgcloth run --export usd`'s)."""
