@@ -42,7 +42,7 @@ if ! python3 -c "import ensurepip, venv" >/dev/null 2>&1; then
 fi
 python3 -m venv target/py
 target/py/bin/pip install --quiet --disable-pip-version-check "./crates/wgcloth-py[test]"
-WGCLOTH_BIN=target/release/wgcloth target/py/bin/python -m pytest -q crates/wgcloth-py/tests
+WGCLOTH_BIN="$PWD/target/release/wgcloth" target/py/bin/python -m pytest -q crates/wgcloth-py/tests
 
 # The interactive viewer (examples/viewer.rs, feature `viewer`, built by
 # the tests above): without a display it must fail with one clear line and

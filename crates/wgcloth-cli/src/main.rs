@@ -542,6 +542,7 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
         (args.last_good.is_some(), "--last-good"),
         (args.vectors.is_some(), "--vectors"),
         (args.no_subgroups, "--no-subgroups"),
+        (!args.export.is_empty(), "--export"),
     ];
     if let Some((_, flag)) = one_world.iter().find(|(given, _)| *given) {
         return Err(Error::config(
@@ -580,30 +581,16 @@ fn run_worlds(args: &RunArgs, config: Config) -> Result<()> {
             .collect::<Result<Vec<_>>>()?,
     };
     let steps = config.solver.steps;
-    if args.backend == Backend::Gpu {
+    // Refused before a device is opened; one world runs alone, as any scene.
+    if args.backend == Backend::Gpu && scenes.len() > 1 {
         GpuSim::batchable(&scenes[0])?;
     }
     let (chosen, notice) = run::choose_backend(args.backend, wgcloth::gpu::OPTIONAL_FEATURES)?;
     if let Some(notice) = notice {
         eprintln!("{notice}");
     }
+    let batch = run::batch_on(&chosen, scenes, &set, |n| eprintln!("{n}"))?;
     let bar = progress_bar(steps);
-    // `auto` runs on the CPU what the GPU batch does not run yet.
-    let gpu = match chosen
-        .context()
-        .map(|ctx| (ctx, GpuSim::batchable(&scenes[0])))
-    {
-        Some((_, Err(e))) => {
-            eprintln!("notice: {e}; running the batch on the CPU reference path");
-            None
-        }
-        Some((ctx, Ok(()))) => Some(ctx),
-        None => None,
-    };
-    let batch = match gpu {
-        Some(ctx) => run::Batch::gpu(ctx, scenes, &set)?,
-        None => run::Batch::cpu(scenes, &set),
-    };
     let report = run::run_batch(batch, steps, |k| bar.set_position(k))?;
     bar.finish_and_clear();
     println!("{}", report.summary());

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use numpy::ndarray::Array2;
 use numpy::{
-    IntoPyArray, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    AllowTypeChange, IntoPyArray, PyArrayLike1, PyArrayLike2, PyArrayMethods, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -96,7 +96,8 @@ pub fn read_weights<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, 
 
 /// Writes a network trained anywhere (PyTorch, JAX, numpy) as a
 /// `wgcloth-mlp/1` weights file that a scene's `contact.weights` names.
-/// `layers` are (weight, bias) pairs, weight of shape outputs × inputs,
+/// `layers` are (weight, bias) pairs of arrays (any float type, or
+/// nested lists), weight of shape outputs × inputs,
 /// LeakyReLU (`negative_slope`) after each but the last; the network maps
 /// inputs scaled to [0, 1] by `input_min` and `input_max` to outputs
 /// standardised by `output_mean` and `output_std`. The file is checked as
@@ -109,7 +110,10 @@ pub fn read_weights<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, 
 pub fn write_weights(
     path: PathBuf,
     model: &str,
-    layers: Vec<(PyReadonlyArray2<'_, f32>, PyReadonlyArray1<'_, f32>)>,
+    layers: Vec<(
+        PyArrayLike2<'_, f32, AllowTypeChange>,
+        PyArrayLike1<'_, f32, AllowTypeChange>,
+    )>,
     input_min: Vec<f32>,
     input_max: Vec<f32>,
     output_mean: Vec<f32>,

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{AllowTypeChange, PyArrayLike3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use wgcloth_cli::frames::usd::UsdRecording;
@@ -11,7 +11,7 @@ use wgcloth_cli::frames::usd::UsdRecording;
 use crate::error;
 use crate::scene::Scene;
 
-/// Writes `positions` (frames × the scene's vertices × 3, float32), the
+/// Writes `positions` (frames × the scene's vertices × 3, cast to float32), the
 /// cloth at each of `steps`, and the body placed at each step's time, as
 /// one USD file: meshes /World/cloth and /World/body with time-sampled
 /// points, time codes the steps, `timeCodesPerSecond` 1 / h. An existing
@@ -21,7 +21,7 @@ use crate::scene::Scene;
 pub fn write_usd(
     path: PathBuf,
     scene: &Scene,
-    positions: PyReadonlyArray3<'_, f32>,
+    positions: PyArrayLike3<'_, f32, AllowTypeChange>,
     steps: Vec<u64>,
     force: bool,
 ) -> PyResult<()> {
@@ -31,6 +31,11 @@ pub fn write_usd(
         return Err(PyValueError::new_err(format!(
             "positions: shape {wanted:?} (a frame a step, the scene's vertices, xyz), not {:?}",
             positions.shape()
+        )));
+    }
+    if steps.is_empty() || steps.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(PyValueError::new_err(format!(
+            "steps: one or more, each after the last, not {steps:?}"
         )));
     }
     if path.exists() && !force {

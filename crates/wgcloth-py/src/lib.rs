@@ -3,8 +3,9 @@
 //! one or many worlds on the best adapter or the CPU path whose state is
 //! numpy arrays ([`simulator`]), and contact data and weights files for
 //! training a network in Python ([`data`]), and runs as USD files
-//! ([`export`]). Every error is a
-//! `wgcloth.WgclothError` carrying the library's message.
+//! ([`export`]). What wgcloth refuses raises `wgcloth.WgclothError`
+//! with the library's message; a wrong Python argument, `TypeError` or
+//! `ValueError`.
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;

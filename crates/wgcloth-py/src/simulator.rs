@@ -8,18 +8,24 @@ use pyo3::prelude::*;
 use pyo3::types::PyList;
 use pythonize::pythonize;
 use wgcloth::GpuSim;
-use wgcloth_cli::run::{self as cli, Backend, Batch, Chosen, Observers, Steps};
+use wgcloth_cli::run::{self as cli, Backend, Batch, Observers, Steps};
 
 use crate::error;
 use crate::scene::Scene;
 
 /// `scenes` (one `Scene` or a sequence of them) as the worlds of a batch:
 /// `worlds` copies of one scene, or the sequence, whose length `worlds`
-/// must then match.
-fn worlds_of(scenes: &Bound<'_, PyAny>, worlds: Option<usize>) -> PyResult<Vec<wgcloth::Scene>> {
-    let given: Vec<wgcloth::Scene> = match scenes.cast::<Scene>() {
-        Ok(one) => vec![one.get().scene.clone(); worlds.unwrap_or(1)],
-        Err(_) => {
+/// must then match; and whether a batch was asked for (`worlds`, or a
+/// sequence), rather than one scene.
+fn worlds_of(
+    scenes: &Bound<'_, PyAny>,
+    worlds: Option<usize>,
+) -> PyResult<(Vec<wgcloth::Scene>, bool)> {
+    let one = scenes.cast::<Scene>().ok();
+    let batch = worlds.is_some() || one.is_none();
+    let given: Vec<wgcloth::Scene> = match one {
+        Some(one) => vec![one.get().scene.clone(); worlds.unwrap_or(1)],
+        None => {
             let list: Vec<Bound<'_, Scene>> = scenes.extract().map_err(|_| {
                 pyo3::exceptions::PyTypeError::new_err("scene: a Scene, or a sequence of Scenes")
             })?;
@@ -42,7 +48,7 @@ fn worlds_of(scenes: &Bound<'_, PyAny>, worlds: Option<usize>) -> PyResult<Vec<w
             given[k].cloth.vertex_count()
         )));
     }
-    Ok(given)
+    Ok((given, batch))
 }
 
 fn backend_of(name: &str) -> PyResult<Backend> {
@@ -64,39 +70,29 @@ fn tell(py: Python<'_>, line: &str) -> PyResult<()> {
     Ok(())
 }
 
-/// The backend a simulator of `scenes` runs on, and the notices the CLI
-/// would print on the way: `auto` takes a hardware GPU and falls back to
-/// the CPU (no adapter, only a software one, or a batch the GPU does not
-/// run yet); `gpu` fails where it cannot.
-fn choose(
+/// The backend a run chooses (`auto`: a hardware GPU, else the CPU), and
+/// the batch of `scenes` on it, with the CLI's notices, told to Python's
+/// `sys.stderr` and returned: `gpu` refuses a batch the GPU does not run
+/// (before a device is opened), `auto` runs it on the CPU.
+fn batch(
     py: Python<'_>,
     backend: Backend,
-    scenes: &[wgcloth::Scene],
-) -> PyResult<(Chosen, Vec<String>)> {
-    let batched = scenes.len() > 1;
-    if backend == Backend::Gpu && batched {
+    scenes: Vec<wgcloth::Scene>,
+) -> PyResult<(Batch, Vec<String>)> {
+    if backend == Backend::Gpu && scenes.len() > 1 {
         GpuSim::batchable(&scenes[0]).map_err(error)?;
     }
     let (chosen, notice) = py
         .detach(|| cli::choose_backend(backend, wgcloth::gpu::OPTIONAL_FEATURES))
         .map_err(error)?;
     let mut notices: Vec<String> = notice.into_iter().collect();
-    let chosen = match chosen {
-        Chosen::Gpu { .. } if batched => match GpuSim::batchable(&scenes[0]) {
-            Ok(()) => chosen,
-            Err(e) => {
-                notices.push(format!(
-                    "notice: {e}; running the batch on the CPU reference path"
-                ));
-                Chosen::Cpu
-            }
-        },
-        chosen => chosen,
-    };
+    let batch = py
+        .detach(|| cli::batch_on(&chosen, scenes, &[], |n| notices.push(n)))
+        .map_err(error)?;
     for n in &notices {
         tell(py, n)?;
     }
-    Ok((chosen, notices))
+    Ok((batch, notices))
 }
 
 /// N worlds of a scene stepped together (one world by default), on the
@@ -119,15 +115,8 @@ impl Simulator {
         worlds: Option<usize>,
         backend: &str,
     ) -> PyResult<Simulator> {
-        let backend = backend_of(backend)?;
-        let scenes = worlds_of(scene, worlds)?;
-        let (chosen, notices) = choose(py, backend, &scenes)?;
-        let batch = py
-            .detach(|| match chosen.context() {
-                Some(ctx) => Batch::gpu(ctx, scenes, &[]),
-                None => Ok(Batch::cpu(scenes, &[])),
-            })
-            .map_err(error)?;
+        let (scenes, _) = worlds_of(scene, worlds)?;
+        let (batch, notices) = batch(py, backend_of(backend)?, scenes)?;
         Ok(Simulator { batch, notices })
     }
 
@@ -220,9 +209,11 @@ impl Simulator {
 }
 
 /// Runs `scene` for its `solver.steps` (or `steps`) steps as the `wgcloth
-/// run` command does, and returns its report as a dict: one scene with
-/// the command's stepping (steps in flight on the GPU, a fault falling
-/// back to the CPU under "auto"), or `worlds` of them as a batch.
+/// run` command does, and returns its report as a dict: one scene with the
+/// command's stepping (steps in flight on the GPU, a fault falling back to
+/// the CPU under "auto") and its report, or, given `worlds` or a sequence
+/// of scenes, a batch and `run --worlds`'s report (`worlds`: one entry a
+/// world).
 #[pyfunction]
 #[pyo3(signature = (scene, steps = None, worlds = None, backend = "auto"))]
 pub fn run<'py>(
@@ -233,23 +224,20 @@ pub fn run<'py>(
     backend: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let backend = backend_of(backend)?;
-    let scenes = worlds_of(scene, worlds)?;
+    let (scenes, batched) = worlds_of(scene, worlds)?;
     let steps = steps.unwrap_or(scenes[0].config.solver.steps);
-    let (chosen, _) = choose(py, backend, &scenes)?;
-    if scenes.len() > 1 {
+    if batched {
+        let (batch, _) = crate::simulator::batch(py, backend, scenes)?;
         let report = py
-            .detach(|| {
-                let batch = match chosen.context() {
-                    Some(ctx) => Batch::gpu(ctx, scenes, &[])?,
-                    None => Batch::cpu(scenes, &[]),
-                };
-                cli::run_batch(batch, steps, |_| {})
-            })
+            .detach(|| cli::run_batch(batch, steps, |_| {}))
             .map_err(error)?;
         return Ok(pythonize(py, &report)?);
     }
+    let (chosen, notice) = py
+        .detach(|| cli::choose_backend(backend, wgcloth::gpu::OPTIONAL_FEATURES))
+        .map_err(error)?;
     let scene = scenes.into_iter().next().expect("one scene");
-    let mut notices = Vec::new();
+    let mut notices: Vec<String> = notice.into_iter().collect();
     let report = py
         .detach(|| {
             let mut notice = |line: &str| notices.push(line.to_string());

@@ -11,6 +11,7 @@ import wgcloth
 
 
 def test_gen_data_is_the_file_the_command_writes(cli, tmp_path):
+    """The plumbing: both sides call `wgcloth_learn::dataset::generate`."""
     data = wgcloth.gen_data("friction", recorded=300, uniform=200, resting=50, seed=3)
     cli("gen-data", "--out", tmp_path / "d.safetensors", "--recorded", 300, "--uniform", 200,
         "--resting", 50, "--seed", 3)
@@ -46,7 +47,8 @@ def test_a_network_trained_in_numpy_scores_in_the_command_as_in_numpy(cli, tmp_p
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)
     layers = [(f32(w0), f32(b0)), (f32(w1), f32(b1))]
     path = tmp_path / "naive.safetensors"
-    wgcloth.write_weights(path, "naive", layers, f32(lo), f32(hi), f32(mean), f32(std))
+    # As numpy made them: float64, w1 a transposed (non-contiguous) view.
+    wgcloth.write_weights(path, "naive", [(w0, b0), (w1, b1)], lo, hi, mean, std)
 
     back = wgcloth.read_weights(path)
     assert back["model"] == "naive" and len(back["layers"]) == 2

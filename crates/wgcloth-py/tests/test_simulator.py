@@ -67,6 +67,8 @@ def test_each_world_of_a_gpu_batch_is_its_scene_alone(gpu):
 
 
 def test_run_returns_the_report_the_command_writes(cli, tmp_path):
+    """The plumbing: both sides run `wgcloth_cli::run::run`, and a batch
+    (`worlds`) returns `run --worlds`'s report."""
     scene = small()
     report = wgcloth.run(scene, steps=STEPS, backend="cpu")
     (tmp_path / "scene.toml").write_text(scene.to_toml())
@@ -76,6 +78,8 @@ def test_run_returns_the_report_the_command_writes(cli, tmp_path):
     for key in ("steps", "energy_final", "cg_iterations_mean", "contacts_mean", "max_penetration"):
         assert report[key] == expected[key], key
     assert report["contacts_mean"] > 0
+    batch = wgcloth.run(scene, steps=2, worlds=1, backend="cpu")
+    assert [w["steps"] for w in batch["worlds"]] == [2]
 
 
 def test_scenes_from_a_file_a_dict_and_keywords_agree(tmp_path):

@@ -5,6 +5,7 @@ directly in this process."""
 import os
 import pathlib
 import secrets
+import socket
 import subprocess
 import sys
 
@@ -17,7 +18,12 @@ import wgcloth.sweep as sweep
 from conftest import ROOT
 
 RAY = str(pathlib.Path(sys.executable).with_name("ray"))
-PORT = 6390
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +32,8 @@ def cluster():
     token authentication (Ray's default) on a token of their own, which
     this process and its children hand the cluster through the environment
     (read when Ray is imported, so it is imported after)."""
-    address = f"127.0.0.1:{PORT}"
+    port = free_port()
+    address = f"127.0.0.1:{port}"
     saved = {k: os.environ.get(k) for k in ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN")}
     os.environ.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(32))
     common = ["--num-cpus=1", "--disable-usage-stats"]
@@ -36,7 +43,7 @@ def cluster():
         assert done.returncode == 0, f"ray start {' '.join(args)}: {done.stdout}{done.stderr}"
 
     try:
-        start("--head", f"--port={PORT}", "--include-dashboard=false")
+        start("--head", f"--port={port}", "--include-dashboard=false")
         start(f"--address={address}")
         import ray
 

@@ -41,6 +41,7 @@ def test_the_commands_usd_file_holds_its_obj_frames(cli, tmp_path):
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y
     assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
     assert stage.GetTimeCodesPerSecond() == pytest.approx(1 / scene.config["solver"]["dt"])
+    assert stage.GetFramesPerSecond() == stage.GetTimeCodesPerSecond()
     assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, STEPS)
     cloth = UsdGeom.Mesh(stage.GetPrimAtPath("/World/cloth"))
     assert cloth.GetPointsAttr().GetTimeSamples() == [0.0, 20.0, 40.0]
@@ -74,6 +75,9 @@ def test_a_python_run_written_as_usd_reads_back_as_its_arrays(tmp_path):
     assert not np.array_equal(points(stage, "/World/body", 0), points(stage, "/World/body", 40))
     with pytest.raises(ValueError, match="shape"):
         wgcloth.write_usd(tmp_path / "bad.usda", scene, np.stack(frames)[:, :10], steps)
+    with pytest.raises(ValueError, match="each after the last"):
+        wgcloth.write_usd(tmp_path / "bad.usda", scene, np.stack(frames), steps[::-1])
+    assert not (tmp_path / "bad.usda").exists()
     before = path.read_bytes()
     with pytest.raises(wgcloth.WgclothError, match="already exists"):
         wgcloth.write_usd(path, scene, np.stack(frames), steps)

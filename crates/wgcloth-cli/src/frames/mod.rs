@@ -167,7 +167,9 @@ impl<'a> Recording<'a> {
                 .write_geometry(scene, &sim.read_positions()?, step)?;
         }
         let Drawing::Gpu(on) = &self.drawing else {
-            unreachable!("a GPU run draws on its own context");
+            return Err(Error::Gpu(
+                "a GPU run's frames are drawn on its context: make the recording with it".into(),
+            ));
         };
         let view = (&self.camera, self.style);
         if step == 0 {

@@ -29,8 +29,8 @@ pub fn frame_name(k: usize) -> String {
 
 pub struct FrameWriter {
     dir: PathBuf,
-    /// Created with the first drawn frame, so a run that draws none (no
-    /// adapter) leaves no empty animation behind.
+    /// Created with the first drawn frame, so a run that stops before it
+    /// leaves no empty animation behind.
     gif: Option<GifEncoder<BufWriter<File>>>,
     /// Display time of each GIF frame, ms (GIF counts in 10 ms).
     delay_ms: u32,

@@ -60,11 +60,6 @@ impl UsdRecording {
         self.steps.push(code);
     }
 
-    /// Frames gathered so far.
-    pub fn frames(&self) -> usize {
-        self.steps.len()
-    }
-
     /// Writes the frames of `scene`'s run to `path` as USD text.
     pub fn write(self, path: &Path, scene: &Scene) -> Result<()> {
         let mut data = sdf::Data::new();
@@ -81,6 +76,8 @@ impl UsdRecording {
         root.add(FieldKey::EndTimeCode, Value::Double(*last.unwrap_or(&0.0)));
         let per_second = (1.0 / scene.config.solver.dt) as f64;
         root.add(FieldKey::TimeCodesPerSecond, Value::Double(per_second));
+        // Played back at the simulation's own rate, not a viewer's 24 fps.
+        root.add("framesPerSecond", Value::Double(per_second));
         let world = prim(&mut data, "/World", "Xform");
         let meshes: &[&str] = match scene.rigid {
             Some(_) => &["cloth", "body"],

@@ -26,7 +26,7 @@ pub use report::{
     DeviceFault, RESIDUAL_GOAL, Report, SelfContactReport, check_diverged, median, solver_name,
 };
 pub use validate::{Validation, validate};
-pub use worlds::{Batch, BatchReport, WorldReport, run_batch};
+pub use worlds::{Batch, BatchReport, WorldReport, batch_on, run_batch};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Backend {

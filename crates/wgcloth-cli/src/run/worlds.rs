@@ -9,11 +9,12 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::Chosen;
 use super::report::{RESIDUAL_GOAL, Tally, median, peak_resident_bytes};
 use glam::Vec3;
 use wgcloth::cpu::worlds::CpuWorlds;
 use wgcloth::cpu::{self, integrate};
-use wgcloth::error::Result;
+use wgcloth::error::{Error, Result};
 use wgcloth::gpu::layout::StepState;
 use wgcloth::gpu::{GpuContext, GpuSim, context::describe};
 use wgcloth::health::{self, Divergence, FailedStep};
@@ -415,6 +416,36 @@ impl Batch {
             divergence: self.diverged[w].clone(),
             ..WorldReport::default()
         }
+    }
+}
+
+/// The batch of `scenes` on `chosen`: on its GPU where the batch runs there
+/// (two or more worlds in one `GpuSim::with_worlds`, one world alone).
+/// Under `auto` (`cpu_fallback`) a batch the GPU does not run (a scene it
+/// does not batch yet, worlds that differ in what a batch shares, or more
+/// than the device holds) runs on the CPU, and `notice` is told why; with
+/// `--backend gpu` that is the error.
+pub fn batch_on(
+    chosen: &Chosen,
+    scenes: Vec<Scene>,
+    set: &[String],
+    mut notice: impl FnMut(String),
+) -> Result<Batch> {
+    let Chosen::Gpu { ctx, cpu_fallback } = chosen else {
+        return Ok(Batch::cpu(scenes, set));
+    };
+    let tried = match scenes.len() > 1 {
+        true => GpuSim::batchable(&scenes[0]).and_then(|()| Batch::gpu(ctx, scenes.clone(), set)),
+        false => Batch::gpu(ctx, scenes.clone(), set),
+    };
+    match tried {
+        Err(e @ (Error::Config { .. } | Error::Limit { .. })) if *cpu_fallback => {
+            notice(format!(
+                "notice: {e}; running the batch on the CPU reference path"
+            ));
+            Ok(Batch::cpu(scenes, set))
+        }
+        tried => tried,
     }
 }
 

@@ -89,11 +89,11 @@ def read_weights(path: str | os.PathLike[str]) -> dict[str, Any]:
 def write_weights(
     path: str | os.PathLike[str],
     model: Literal["friction", "naive", "friction-contact"],
-    layers: Sequence[tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]],
-    input_min: Sequence[float] | npt.NDArray[np.float32],
-    input_max: Sequence[float] | npt.NDArray[np.float32],
-    output_mean: Sequence[float] | npt.NDArray[np.float32],
-    output_std: Sequence[float] | npt.NDArray[np.float32],
+    layers: Sequence[tuple[npt.ArrayLike, npt.ArrayLike]],
+    input_min: npt.ArrayLike,
+    input_max: npt.ArrayLike,
+    output_mean: npt.ArrayLike,
+    output_std: npt.ArrayLike,
     negative_slope: float = ...,
     notes: dict[str, str] | None = None,
     force: bool = False,
@@ -103,7 +103,7 @@ def write_weights(
 def write_usd(
     path: str | os.PathLike[str],
     scene: Scene,
-    positions: npt.NDArray[np.float32],
+    positions: npt.ArrayLike,
     steps: Sequence[int],
     force: bool = False,
 ) -> None:
